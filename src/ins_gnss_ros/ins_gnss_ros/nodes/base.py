@@ -1,0 +1,185 @@
+"""What every ins-gnss-ros node shares: validated parameters, QoS, diagnostics, start-up and shutdown.
+
+A node subclasses :class:`NavNode`, lists its parameters as :class:`Param` specs (each with a
+description and a range, checked once at start so that a bad value is one clear error naming the
+parameter), creates its publishers with :data:`SENSOR_QOS` or :data:`STATE_QOS`, counts what went
+wrong with ``self.diag.count(...)`` and is started by :func:`run`, which turns SIGINT/SIGTERM into a
+clean shutdown and a parameter error into exit status 2 instead of a traceback.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+# Sensor streams: reliable so that our own pipeline never silently drops an IMU increment (a
+# reliable publisher still serves best-effort subscribers such as rviz), deep enough for 1 s of
+# 200 Hz data while a subscriber is busy.
+SENSOR_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=200, reliability=ReliabilityPolicy.RELIABLE
+)
+# Navigation state and status: latest value matters; late joiners get the last one.
+STATE_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=20,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+
+
+class ParameterError(ValueError):
+    """A parameter value outside its documented range or type."""
+
+
+@dataclass(frozen=True)
+class Param:
+    """One declared parameter: name, default, what it means (with unit) and its admissible range.
+
+    ``low``/``high`` bound numbers (and every element of a numeric list), ``choices`` bounds
+    strings, ``length`` fixes the length of a list (e.g. 3 for a lever arm).
+    """
+
+    name: str
+    default: Any
+    description: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple[str, ...] | None = None
+    length: int | None = None
+
+    def descriptor(self) -> ParameterDescriptor:
+        d = ParameterDescriptor(name=self.name, description=self.description)
+        constraints = []
+        if self.low is not None or self.high is not None:
+            constraints.append(f"range [{self.low}, {self.high}]")
+            # ROS enforces scalar ranges itself; lists are checked in validate().
+            if isinstance(self.default, float):
+                d.floating_point_range = [
+                    FloatingPointRange(from_value=float(self.low), to_value=float(self.high))
+                ]
+            elif isinstance(self.default, int) and not isinstance(self.default, bool):
+                d.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high))]
+        if self.choices:
+            constraints.append("one of " + ", ".join(self.choices))
+        if self.length is not None:
+            constraints.append(f"{self.length} elements")
+        d.additional_constraints = "; ".join(constraints)
+        return d
+
+    def validate(self, value: Any) -> Any:
+        """Return ``value`` if admissible, else raise :class:`ParameterError` naming the parameter."""
+        values = list(value) if isinstance(value, (list, tuple)) else [value]
+        if self.length is not None and len(values) != self.length:
+            raise ParameterError(f"parameter '{self.name}': expected {self.length} values, got {value!r}")
+        for v in values:
+            if isinstance(v, (int, float)) and not isinstance(v, bool):
+                if not math.isfinite(v):
+                    raise ParameterError(f"parameter '{self.name}': {value!r} is not finite")
+                if (self.low is not None and v < self.low) or (self.high is not None and v > self.high):
+                    raise ParameterError(
+                        f"parameter '{self.name}' = {value!r} is outside [{self.low}, {self.high}]"
+                        f" ({self.description})"
+                    )
+        if self.choices is not None and value not in self.choices:
+            raise ParameterError(
+                f"parameter '{self.name}' = {value!r} is not one of {', '.join(self.choices)}"
+            )
+        return value
+
+
+class Diagnostics:
+    """Counts events (bad samples, rejected updates, ...) and publishes them on /diagnostics.
+
+    The level is the worst one reported since the last publication, so a transient fault is seen
+    at least once by a monitor sampling at 1 Hz.
+    """
+
+    def __init__(self, node: Node, period_s: float = 1.0):
+        self._node = node
+        self._pub = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.counts: Counter[str] = Counter()
+        self._level = DiagnosticStatus.OK
+        self._message = "ok"
+        self._values: dict[str, str] = {}
+        node.create_timer(period_s, self.publish)
+
+    def count(self, what: str, level: int = DiagnosticStatus.WARN, log: bool = True) -> None:
+        """Record one occurrence of ``what``; log the first one and then every 100th."""
+        self.counts[what] += 1
+        if level > self._level:
+            self._level, self._message = level, what
+        n = self.counts[what]
+        if log and (n == 1 or n % 100 == 0):
+            self._node.get_logger().warning(f"{what} (x{n})")
+
+    def set_value(self, key: str, value: Any) -> None:
+        self._values[key] = str(value)
+
+    def publish(self) -> None:
+        status = DiagnosticStatus(
+            level=self._level,
+            name=f"{self._node.get_namespace().rstrip('/')}/{self._node.get_name()}",
+            message=self._message,
+            hardware_id=self._node.get_name(),
+            values=[KeyValue(key=k, value=str(v)) for k, v in sorted(self.counts.items())]
+            + [KeyValue(key=k, value=v) for k, v in sorted(self._values.items())],
+        )
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self._node.get_clock().now().to_msg()
+        self._pub.publish(msg)
+        self._level, self._message = DiagnosticStatus.OK, "ok"
+
+
+class NavNode(Node):
+    """Base class of the project's nodes.
+
+    Subclasses set ``PARAMS`` (a sequence of :class:`Param`) and read validated values from
+    ``self.p`` (a dict) in their constructor after ``super().__init__``.
+    """
+
+    PARAMS: Sequence[Param] = ()
+
+    def __init__(self, name: str, **kwargs):
+        super().__init__(name, **kwargs)
+        self.p: dict[str, Any] = {}
+        for spec in self.PARAMS:
+            self.declare_parameter(spec.name, spec.default, spec.descriptor())
+            self.p[spec.name] = spec.validate(self.get_parameter(spec.name).value)
+        self.diag = Diagnostics(self)
+
+
+def run(node_factory: Callable[[], Node], args: list[str] | None = None) -> int:
+    """Start a node, spin it until SIGINT/SIGTERM, shut down cleanly. Returns the exit status.
+
+    A :class:`ParameterError` (or ROS' own parameter-range error) at start-up is printed as one
+    line and gives status 2.
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = node_factory()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (ParameterError, ParameterException) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0

@@ -1,0 +1,52 @@
+"""Message <-> core-type conversions shared by the nodes (no behaviour, only field mapping)."""
+
+from __future__ import annotations
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Quaternion, Vector3
+
+from ..nav.strapdown import NavState
+
+
+def stamp_to_sec(stamp: Time) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def sec_to_stamp(t: float) -> Time:
+    sec = int(np.floor(t))
+    nanosec = int(round((t - sec) * 1e9))
+    if nanosec >= 1_000_000_000:  # rounding carried into the next second
+        sec, nanosec = sec + 1, nanosec - 1_000_000_000
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def vec(v: Vector3) -> np.ndarray:
+    return np.array([v.x, v.y, v.z])
+
+
+def to_vector3(a) -> Vector3:
+    return Vector3(x=float(a[0]), y=float(a[1]), z=float(a[2]))
+
+
+def quat(q: Quaternion) -> np.ndarray:
+    """ROS quaternion (x, y, z, w fields) -> project array [w, x, y, z]."""
+    return np.array([q.w, q.x, q.y, q.z])
+
+
+def to_quaternion(q) -> Quaternion:
+    return Quaternion(w=float(q[0]), x=float(q[1]), y=float(q[2]), z=float(q[3]))
+
+
+def nav_state_from_msg(msg) -> NavState:
+    """ins_gnss_msgs/InsState -> NavState."""
+    return NavState(msg.latitude, msg.longitude, msg.altitude, vec(msg.velocity),
+                    quat(msg.orientation), stamp_to_sec(msg.header.stamp))
+
+
+def fill_ins_state(msg, state: NavState) -> None:
+    """Write a NavState into an ins_gnss_msgs/InsState (other fields untouched)."""
+    msg.header.stamp = sec_to_stamp(state.t)
+    msg.latitude, msg.longitude, msg.altitude = float(state.lat), float(state.lon), float(state.h)
+    msg.velocity = to_vector3(state.v_enu)
+    msg.orientation = to_quaternion(state.q_nb)

@@ -1,0 +1,24 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "ins_gnss_ros"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        # config/ is a link to the repository's config/ so that `colcon build` installs the profiles.
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    description="Integrated inertial/satellite navigation nodes and ROS-free core",
+    license="BSD-3-Clause",
+    entry_points={"console_scripts": [
+            "strapdown = ins_gnss_ros.nodes.strapdown_node:main",
+        ]},
+)

@@ -1,0 +1,35 @@
+"""Every node console script starts as a real process with a params file and joins the graph."""
+
+from __future__ import annotations
+
+from importlib.metadata import entry_points
+
+import pytest
+
+from conftest import REPO
+from rosutil import NodeProcess
+
+NODES = sorted(ep.name for ep in entry_points(group="console_scripts")
+               if ep.value.startswith("ins_gnss_ros.nodes."))
+PARAMS = REPO / "config" / "default.yaml"
+
+
+def test_nodes_are_registered():
+    assert "strapdown" in NODES
+
+
+@pytest.mark.parametrize("script", NODES)
+def test_node_starts_with_params_file_and_stops_cleanly(script, probe, executor):
+    with NodeProcess(script, params_file=PARAMS) as proc:
+        proc.wait_on_graph(probe, executor)
+        assert proc.stop() == 0, proc.output()
+
+
+def test_bad_parameter_is_one_clear_error(tmp_path, probe, executor):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("strapdown:\n  ros__parameters:\n    init.latitude_deg: 123.0\n")
+    with NodeProcess("strapdown", params_file=bad) as proc:
+        assert proc.proc.wait(30) == 2
+        out = proc.output()
+    assert "init.latitude_deg" in out
+    assert "Traceback" not in out
