@@ -10,6 +10,8 @@ STAMPS="$VENV/.stamps"
 cd "$ROOT"
 
 say() { printf '[setup] %s\n' "$*"; }
+# pip, without the machine's notes about absent local mirrors (its exit status is kept by pipefail)
+pip() { "$PY" -m pip "$@" 2>&1 | { grep -v "is ignored: it is neither a file nor a directory" || true; }; }
 
 # Build tools for the message package. Installed from Debian only when missing.
 missing=()
@@ -40,8 +42,8 @@ done_stamp() { mv "$STAMPS/$1.new" "$STAMPS/$1"; }
 
 if changed requirements requirements.txt constraints.txt; then
   say "installing pinned requirements"
-  "$PY" -m pip install -q --upgrade "pip==26.3"
-  "$PY" -m pip install -q -r requirements.txt -c constraints.txt
+  pip install -q --upgrade "pip==26.3"
+  pip install -q -r requirements.txt -c constraints.txt
   done_stamp requirements
 fi
 
@@ -49,13 +51,13 @@ fi
 export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH"
 if changed msgs $(find src/ins_gnss_msgs packaging/ins_gnss_msgs -type f | sort) requirements.txt; then
   say "building ins_gnss_msgs"
-  "$PY" -m pip install -q --no-build-isolation --no-deps --force-reinstall ./packaging/ins_gnss_msgs
+  pip install -q --no-build-isolation --no-deps --force-reinstall ./packaging/ins_gnss_msgs
   done_stamp msgs
 fi
 
 if changed ins_gnss_ros src/ins_gnss_ros/setup.py src/ins_gnss_ros/setup.cfg src/ins_gnss_ros/package.xml; then
   say "installing ins_gnss_ros (editable)"
-  "$PY" -m pip install -q --no-build-isolation --no-deps -e src/ins_gnss_ros
+  pip install -q --no-build-isolation --no-deps -e src/ins_gnss_ros
   done_stamp ins_gnss_ros
 fi
 say "ready: $VENV"

@@ -78,3 +78,11 @@ class NodeProcess:
         self.stop()
         self.log.close()
         os.unlink(self.log.name)
+
+
+def wait_for_endpoints(probe, executor, publishes=(), subscribes=(), timeout: float = 20.0) -> None:
+    """Wait until every topic in ``publishes`` has a publisher and in ``subscribes`` a subscriber."""
+    def matched() -> bool:
+        return (all(probe.count_publishers(t) > 0 for t in publishes)
+                and all(probe.count_subscribers(t) > 0 for t in subscribes))
+    spin_until(executor, matched, timeout, f"publishers {publishes} and subscribers {subscribes}")

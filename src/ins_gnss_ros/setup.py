@@ -19,6 +19,11 @@ setup(
     description="Integrated inertial/satellite navigation nodes and ROS-free core",
     license="BSD-3-Clause",
     entry_points={"console_scripts": [
-            "strapdown = ins_gnss_ros.nodes.strapdown_node:main",
-        ]},
+        # nodes (ros2 run ins_gnss_ros <name>)
+        "strapdown = ins_gnss_ros.nodes.strapdown_node:main",
+        # calibration tools
+        "imu_allan = ins_gnss_ros.tools.allan_cli:main",
+        "imu_calibrate = ins_gnss_ros.tools.imu_calibrate_cli:main",
+        "mag_calibrate = ins_gnss_ros.tools.mag_calibrate_cli:main",
+    ]},
 )

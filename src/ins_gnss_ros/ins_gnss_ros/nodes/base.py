@@ -2,20 +2,26 @@
 
 A node subclasses :class:`NavNode`, lists its parameters as :class:`Param` specs (each with a
 description and a range, checked once at start so that a bad value is one clear error naming the
-parameter), creates its publishers with :data:`SENSOR_QOS` or :data:`STATE_QOS`, counts what went
-wrong with ``self.diag.count(...)`` and is started by :func:`run`, which turns SIGINT/SIGTERM into a
-clean shutdown and a parameter error into exit status 2 instead of a traceback.
+parameter), creates its endpoints with ``self.publisher(...)``/``self.subscribe(...)`` and
+:data:`SENSOR_QOS` or :data:`STATE_QOS`, counts what went wrong with ``self.diag.count(...)`` and is
+started by :func:`run`, which turns SIGINT/SIGTERM into a clean shutdown and a parameter error into
+exit status 2 instead of a traceback.
+
+Given ``bus=InProcessBus()``, the same node exchanges messages through that bus instead of DDS:
+deterministic, single-threaded and fast, which is how replays and tests run a whole graph in one
+process. Navigation logic must therefore use message stamps, never the wall clock.
 """
 
 from __future__ import annotations
 
 import math
 import sys
-from collections import Counter
+from collections import Counter, defaultdict, deque
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import rclpy
+import rclpy.time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.exceptions import ParameterException
@@ -105,14 +111,15 @@ class Diagnostics:
     at least once by a monitor sampling at 1 Hz.
     """
 
-    def __init__(self, node: Node, period_s: float = 1.0):
+    def __init__(self, node: "NavNode", period_s: float = 1.0):
         self._node = node
-        self._pub = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._pub = node.publisher(DiagnosticArray, "/diagnostics", 10)
         self.counts: Counter[str] = Counter()
         self._level = DiagnosticStatus.OK
         self._message = "ok"
         self._values: dict[str, str] = {}
-        node.create_timer(period_s, self.publish)
+        if node.bus is None:  # on a bus the replay publishes diagnostics on bag time
+            node.create_timer(period_s, self.publish)
 
     def count(self, what: str, level: int = DiagnosticStatus.WARN, log: bool = True) -> None:
         """Record one occurrence of ``what``; log the first one and then every 100th."""
@@ -136,27 +143,92 @@ class Diagnostics:
             + [KeyValue(key=k, value=v) for k, v in sorted(self._values.items())],
         )
         msg = DiagnosticArray(status=[status])
-        msg.header.stamp = self._node.get_clock().now().to_msg()
+        msg.header.stamp = self._node.now_msg()
         self._pub.publish(msg)
         self._level, self._message = DiagnosticStatus.OK, "ok"
+
+
+class InProcessBus:
+    """Delivers messages between nodes of one process, in a deterministic order.
+
+    ``publish`` only queues; :meth:`drain` delivers queued messages first-in first-out to the
+    subscribers in the order they subscribed, including what their callbacks publish in turn.
+    Every published message is also passed to the ``recorders`` (``f(topic, msg)``).
+    Topics are absolute names: a relative name is taken in the root namespace.
+    """
+
+    def __init__(self):
+        self._subscribers: dict[str, list[Callable[[Any], None]]] = defaultdict(list)
+        self._queue: deque[tuple[str, Any]] = deque()
+        self.recorders: list[Callable[[str, Any], None]] = []
+        self.now_ns = 0  # replay time, set by whoever drives the bus
+
+    @staticmethod
+    def resolve(topic: str) -> str:
+        return topic if topic.startswith("/") else "/" + topic
+
+    def subscribe(self, topic: str, callback: Callable[[Any], None]) -> None:
+        self._subscribers[self.resolve(topic)].append(callback)
+
+    def publish(self, topic: str, msg: Any) -> None:
+        self._queue.append((self.resolve(topic), msg))
+
+    def drain(self) -> None:
+        while self._queue:
+            topic, msg = self._queue.popleft()
+            for record in self.recorders:
+                record(topic, msg)
+            for callback in self._subscribers.get(topic, ()):
+                callback(msg)
+
+
+class _BusPublisher:
+    def __init__(self, bus: InProcessBus, topic: str):
+        self._bus, self.topic = bus, bus.resolve(topic)
+
+    def publish(self, msg: Any) -> None:
+        self._bus.publish(self.topic, msg)
+
+    def get_subscription_count(self) -> int:
+        return len(self._bus._subscribers.get(self.topic, ()))
 
 
 class NavNode(Node):
     """Base class of the project's nodes.
 
     Subclasses set ``PARAMS`` (a sequence of :class:`Param`) and read validated values from
-    ``self.p`` (a dict) in their constructor after ``super().__init__``.
+    ``self.p`` (a dict) in their constructor after ``super().__init__``. ``bus`` (keyword only)
+    runs the node on an :class:`InProcessBus` instead of DDS.
     """
 
     PARAMS: Sequence[Param] = ()
 
-    def __init__(self, name: str, **kwargs):
+    def __init__(self, name: str, *, bus: InProcessBus | None = None, **kwargs):
         super().__init__(name, **kwargs)
+        self.bus = bus
         self.p: dict[str, Any] = {}
         for spec in self.PARAMS:
             self.declare_parameter(spec.name, spec.default, spec.descriptor())
             self.p[spec.name] = spec.validate(self.get_parameter(spec.name).value)
         self.diag = Diagnostics(self)
+
+    def publisher(self, msg_type, topic: str, qos):
+        """A DDS publisher, or the bus' stand-in with the same ``publish``."""
+        if self.bus is not None:
+            return _BusPublisher(self.bus, topic)
+        return self.create_publisher(msg_type, topic, qos)
+
+    def subscribe(self, msg_type, topic: str, callback, qos) -> None:
+        if self.bus is not None:
+            self.bus.subscribe(topic, callback)
+        else:
+            self.create_subscription(msg_type, topic, callback, qos)
+
+    def now_msg(self):
+        """Current time as a message stamp: the bus' replay time or the node clock."""
+        if self.bus is not None:
+            return rclpy.time.Time(nanoseconds=self.bus.now_ns).to_msg()
+        return self.get_clock().now().to_msg()
 
 
 def run(node_factory: Callable[[], Node], args: list[str] | None = None) -> int:

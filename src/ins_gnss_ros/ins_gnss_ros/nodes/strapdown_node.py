@@ -87,9 +87,9 @@ class StrapdownNode(NavNode):
         self.last_correction_t = -np.inf
         self.correction_sequence = 0
         self.count = 0
-        self.pub = self.create_publisher(InsState, "ins/state", SENSOR_QOS)
-        self.create_subscription(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS)
-        self.create_subscription(InsCorrection, "ins/correction", self.on_correction, STATE_QOS)
+        self.pub = self.publisher(InsState, "ins/state", SENSOR_QOS)
+        self.subscribe(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS)
+        self.subscribe(InsCorrection, "ins/correction", self.on_correction, STATE_QOS)
 
     # -- increments ----------------------------------------------------------------------------
     def on_delta(self, msg: ImuDelta) -> None:

@@ -1,0 +1,128 @@
+"""Per-sample sanity checks of a raw IMU stream, before calibration and integration.
+
+The strapdown integration assumes a regular stream of finite, in-range samples on a strictly
+increasing time scale (seed 004 §1.5, §2.11: fixed sensor step dt, stamps tied to PPS). Real
+streams break that: NaN words after a bus error, saturated channels during shocks (ISON-2's
+sensing block is limited to ±150 °/s and ±30 m/s², seed 004 §1.3c), repeated or reordered
+packets, and dropped samples. :class:`SampleChecker` classifies every sample and keeps a count
+per reason; short gaps are bridged so that the integrator keeps its nominal step, longer ones are
+reported so that the caller can restart integration.
+"""
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: Reasons returned by :meth:`SampleChecker.check`; "ok" and the two gap reasons are usable samples.
+REASONS = ("ok", "non_finite", "saturated", "duplicate_stamp", "backwards_stamp",
+           "gap_bridged", "gap")
+
+
+@dataclass
+class CheckResult:
+    """Outcome of checking one sample.
+
+    Attributes
+    ----------
+    ok : bool
+        The sample itself can be used.
+    reason : str
+        One of :data:`REASONS`.
+    fill_stamps, fill_gyro, fill_accel : ndarray, shapes (k,), (k, 3), (k, 3)
+        Samples synthesised to bridge a gap before this one (k = 0 unless reason is
+        "gap_bridged"); they go to the integrator before the current sample.
+    """
+
+    ok: bool
+    reason: str
+    fill_stamps: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    fill_gyro: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    fill_accel: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+
+class SampleChecker:
+    """Classifies raw IMU samples one at a time and bridges short gaps.
+
+    A rejected sample (non-finite, saturated, bad stamp) is treated as missing: the next good
+    sample then sees a gap, which is bridged if it is short. Stamps are compared with the last
+    *accepted* sample.
+
+    Parameters
+    ----------
+    rate_hz : float
+        Nominal sample rate, Hz.
+    gyro_range : float
+        Measurement range of the gyros, rad/s; a reading with |w_i| >= range is saturated.
+    accel_range : float
+        Measurement range of the accelerometers, m/s².
+    max_bridge : int
+        Longest run of missing samples that is bridged; longer gaps are reported.
+    bridge : {"interpolate", "hold"}
+        Linear interpolation between the neighbours, or repetition of the last good sample.
+    gap_factor : float
+        An interval longer than gap_factor / rate_hz counts as a gap (jitter tolerance).
+    """
+
+    def __init__(self, rate_hz: float, gyro_range: float, accel_range: float,
+                 max_bridge: int = 5, bridge: str = "interpolate", gap_factor: float = 1.5):
+        if bridge not in ("interpolate", "hold"):
+            raise ValueError(f"bridge: {bridge!r}, expected 'interpolate' or 'hold'")
+        if not (rate_hz > 0 and gyro_range > 0 and accel_range > 0 and gap_factor > 1):
+            raise ValueError("rate_hz, gyro_range, accel_range must be > 0 and gap_factor > 1")
+        self.rate_hz = float(rate_hz)
+        self.gyro_range = float(gyro_range)
+        self.accel_range = float(accel_range)
+        self.max_bridge = int(max_bridge)
+        self.bridge = bridge
+        self.gap_factor = float(gap_factor)
+        self.counts: Counter = Counter({r: 0 for r in REASONS})
+        self._last = None  # (stamp, gyro, accel) of the last accepted sample
+
+    def _reject(self, reason: str) -> CheckResult:
+        self.counts[reason] += 1
+        return CheckResult(False, reason)
+
+    def check(self, stamp: float, gyro, accel) -> CheckResult:
+        """Classify one sample.
+
+        Parameters
+        ----------
+        stamp : float
+            Sensor time, s.
+        gyro, accel : array_like, shape (3,)
+            Raw angular rate (rad/s) and specific force (m/s²).
+        """
+        gyro = np.asarray(gyro, float)
+        accel = np.asarray(accel, float)
+        if not (np.isfinite(stamp) and np.all(np.isfinite(gyro)) and np.all(np.isfinite(accel))):
+            return self._reject("non_finite")
+        if np.any(np.abs(gyro) >= self.gyro_range) or np.any(np.abs(accel) >= self.accel_range):
+            return self._reject("saturated")
+        result = CheckResult(True, "ok")
+        if self._last is not None:
+            t0, g0, a0 = self._last
+            dt = stamp - t0
+            if dt == 0.0:
+                return self._reject("duplicate_stamp")
+            if dt < 0.0:
+                return self._reject("backwards_stamp")
+            if dt > self.gap_factor / self.rate_hz:
+                missing = int(round(dt * self.rate_hz)) - 1
+                if 0 < missing <= self.max_bridge:
+                    result = self._fill(t0, g0, a0, stamp, gyro, accel, missing)
+                else:
+                    result = CheckResult(True, "gap")
+        self._last = (float(stamp), gyro, accel)
+        self.counts[result.reason] += 1
+        return result
+
+    def _fill(self, t0, g0, a0, t1, g1, a1, missing: int) -> CheckResult:
+        frac = np.arange(1, missing + 1) / (missing + 1)
+        stamps = t0 + frac * (t1 - t0)
+        if self.bridge == "hold":
+            frac = np.zeros_like(frac)
+        gyro = g0 + frac[:, None] * (g1 - g0)
+        accel = a0 + frac[:, None] * (a1 - a0)
+        return CheckResult(True, "gap_bridged", stamps, gyro, accel)

@@ -1,0 +1,147 @@
+"""Tilt-compensated magnetic compass (seed 004 §2.3, eqs. 2.3.1-2.3.3).
+
+Frames. The body frame is FLU; roll and pitch are the ROS angles of C_nb = Rz(yaw) Ry(pitch)
+Rx(roll) from the INS. The heading-aligned level frame L has x along the horizontal projection of
+the forward axis, y to its left and z up, so C_Lb = Ry(pitch) Rx(roll) (C_nb with yaw = 0) and
+C_nL = Rz(yaw). The seed's heading-aligned frame E_k N_k H_k (E_k to starboard, N_k forward,
+H up; its C_{h_k,o} of eq. 2.3.1 for body x-starboard/y-forward axes) is the same plane with
+F_Nk = F_Lx and F_Ek = -F_Ly.
+
+Heading. With the horizontal field pointing to magnetic north and the forward axis at magnetic
+azimuth A (clockwise from magnetic north), F_Lx = H cos A and F_Ly = H sin A, so
+
+    A = atan2(F_Ly, F_Lx) = atan2(-F_Ek, F_Nk)  in [0, 2π)
+
+which is the seed's eq. 2.3.3 with the minus sign its extraction had to reconstruct. True
+azimuth = magnetic azimuth + declination (declination positive east, WMM convention).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ins_gnss_ros.magnetic.disturbance import DisturbanceDetector, DisturbanceStatus
+from ins_gnss_ros.magnetic.ellipsoid_fit import HardSoftIron
+from ins_gnss_ros.nav.conventions import wrap_2pi
+from ins_gnss_ros.nav.rotations import dcm_from_euler, skew
+
+
+def level_field(mag_b, roll, pitch) -> np.ndarray:
+    """Body field rotated into the heading-aligned level frame: F_L = Ry(pitch) Rx(roll) F_b.
+
+    Parameters
+    ----------
+    mag_b : array_like, shape (..., 3)
+        Calibrated magnetic field in body FLU axes, any unit.
+    roll, pitch : float or array_like
+        ROS roll and pitch, rad.
+    """
+    c_lb = dcm_from_euler(roll, pitch, np.zeros_like(np.asarray(roll, float)))
+    return np.einsum("...ij,...j->...i", c_lb, np.asarray(mag_b, float))
+
+
+def magnetic_azimuth(mag_b, roll, pitch):
+    """Magnetic azimuth of the forward axis, clockwise from magnetic north, [0, 2π) rad."""
+    f = level_field(mag_b, roll, pitch)
+    return wrap_2pi(np.arctan2(f[..., 1], f[..., 0]))
+
+
+def azimuth_variance(mag_b, roll, pitch, field_std: float, roll_std: float, pitch_std: float):
+    """Variance of the magnetic azimuth, rad².
+
+    First-order propagation: isotropic white field noise (std ``field_std``, the unit of mag_b)
+    enters through the horizontal component as σ_F² / H²; roll and pitch errors through
+    ∂F_L/∂pitch = [e_y×] F_L and ∂F_L/∂roll = [(C_Ly e_x)×] F_L, projected on
+    ∂A/∂F_L = (-F_Ly, F_Lx, 0) / H².
+    """
+    f = level_field(mag_b, roll, pitch)
+    h2 = f[..., 0] ** 2 + f[..., 1] ** 2
+    grad = np.stack([-f[..., 1], f[..., 0], np.zeros_like(h2)], -1) / h2[..., None]
+    pitch = np.asarray(pitch, float)
+    x_l = np.stack([np.cos(pitch), np.zeros_like(pitch), -np.sin(pitch)], -1)  # Ry(pitch) e_x
+    d_pitch = np.einsum("...ij,...j->...i", skew(np.broadcast_to([0.0, 1.0, 0.0], f.shape)), f)
+    d_roll = np.einsum("...ij,...j->...i", skew(np.broadcast_to(x_l, f.shape)), f)
+    return (field_std ** 2 / h2 + (np.sum(grad * d_roll, -1) * roll_std) ** 2
+            + (np.sum(grad * d_pitch, -1) * pitch_std) ** 2)
+
+
+@dataclass(frozen=True)
+class CompassReading:
+    """One heading measurement (the content of a ``mag/heading`` Heading message).
+
+    Attributes
+    ----------
+    magnetic_azimuth, true_azimuth : float
+        Azimuth of the forward axis from magnetic / true north, clockwise, [0, 2π) rad.
+    variance : float
+        Azimuth variance, rad² (the same for magnetic and true: the declination is treated as
+        exact).
+    declination : float
+        Declination used, rad.
+    """
+
+    magnetic_azimuth: float
+    true_azimuth: float
+    variance: float
+    declination: float
+
+
+class MagneticCompass:
+    """Calibrate, tilt-compensate, gate and convert magnetometer samples into headings.
+
+    Parameters
+    ----------
+    calibration : HardSoftIron, optional
+        Hard/soft-iron correction of the raw readings (identity if omitted).
+    detector : DisturbanceDetector, optional
+        Disturbance gate; while it flags, :meth:`update` returns no reading.
+    heading_bias : float
+        Systematic azimuth error of the installation to remove (ΔK_mk of the turntable
+        calibration), rad.
+    field_std, roll_std, pitch_std : float
+        Noise of the calibrated field (T) and of the INS roll and pitch (rad) for the variance.
+    """
+
+    def __init__(self, calibration: HardSoftIron | None = None,
+                 detector: DisturbanceDetector | None = None, heading_bias: float = 0.0,
+                 field_std: float = 100e-9, roll_std: float = np.radians(0.05),
+                 pitch_std: float = np.radians(0.05)):
+        self.calibration = calibration
+        self.detector = detector
+        self.heading_bias = heading_bias
+        self.field_std, self.roll_std, self.pitch_std = field_std, roll_std, pitch_std
+
+    def update(self, t: float, mag_raw, roll: float, pitch: float, declination: float):
+        """Process one sample.
+
+        Parameters
+        ----------
+        t : float
+            Sample time, s.
+        mag_raw : array_like, shape (3,)
+            Raw magnetometer reading in body FLU axes, T.
+        roll, pitch : float
+            INS roll and pitch, rad.
+        declination : float
+            Declination at the current position, rad (e.g. from
+            :func:`ins_gnss_ros.magnetic.wmm.field_elements`).
+
+        Returns
+        -------
+        reading : CompassReading or None
+            None while a disturbance is flagged.
+        status : DisturbanceStatus or None
+            The detector's verdict (None without a detector).
+        """
+        mag_b = self.calibration.apply(mag_raw) if self.calibration else np.asarray(mag_raw, float)
+        status: DisturbanceStatus | None = None
+        if self.detector is not None:
+            status = self.detector.update(t, level_field(mag_b, roll, pitch))
+            if status.disturbed:
+                return None, status
+        mag_az = float(wrap_2pi(magnetic_azimuth(mag_b, roll, pitch) - self.heading_bias))
+        var = float(azimuth_variance(mag_b, roll, pitch, self.field_std, self.roll_std,
+                                     self.pitch_std))
+        return CompassReading(mag_az, float(wrap_2pi(mag_az + declination)), var,
+                              float(declination)), status

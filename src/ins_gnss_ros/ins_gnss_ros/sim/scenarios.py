@@ -1,0 +1,189 @@
+"""Named simulation scenarios after the laboratory works of seed 004.
+
+* ``car`` — Lab 1 (seed 004 §4, car trials of the MEMS tightly-coupled prototype): town
+  driving in St Petersburg with straights, 90° turns and stops at lights, then circles and
+  figure-eights "of minimal radius at the maximum feasible speed" (cyclic lateral loads), then
+  town driving again; with a satellite-shading schedule that limits the constellation to 6, 4,
+  3 and 2 satellites in turn (the lab's constellation ablation, seed 004 §1.4 and §2.13).
+* ``sea`` — Lab 2 (R/V "Azimut", Lake Ladoga): a vessel at 6–10 m/s changing course every one
+  to two minutes, in a short-fetch lake sea (see :mod:`ins_gnss_ros.sim.waves`), with a water
+  current for the speed log.
+
+Both are seeded: the same seed and duration give the identical trajectory.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ins_gnss_ros.sim import waves
+from ins_gnss_ros.sim.trajectory import CarMotion, Route, ShipMotion, Trajectory, generate
+
+#: Lab 1 start: St Petersburg; ellipsoidal height = ~5 m above sea level + ~17 m geoid.
+CAR_START = (np.deg2rad(59.9), np.deg2rad(30.3), 22.0)
+#: Lab 2 start: Lake Ladoga (surface ~5 m above sea level + ~17 m geoid).
+SEA_START = (np.deg2rad(60.8), np.deg2rad(31.5), 22.0)
+
+#: Peak lateral acceleration of the car's circles and figure-eights, m/s² (≈0.6 g: a dry-road
+#: handling limit of a passenger car, "maximum feasible speed" in seed 004 Lab 1).
+CAR_TEST_LATERAL_ACCEL = 6.0
+
+
+@dataclass(frozen=True)
+class ShadingWindow:
+    """A time window in which the GNSS simulator keeps at most ``max_satellites`` in view.
+
+    Attributes
+    ----------
+    t_start, t_end : float
+        Window, s from the start of the trajectory.
+    max_satellites : int
+    """
+
+    t_start: float
+    t_end: float
+    max_satellites: int
+
+
+@dataclass
+class Scenario:
+    """A simulated trial: truth trajectory plus the environment the sensor simulators need.
+
+    Attributes
+    ----------
+    name : str
+    seed : int
+    trajectory : Trajectory
+    shading : list of ShadingWindow
+        Satellite-count limits for the GNSS simulator (empty: open sky throughout).
+    water_current_enu : ndarray, shape (3,)
+        Mean water current (velocity of the water over ground) in ENU, m/s; zero on land.
+    max_lateral_accel : float
+        Largest commanded centripetal acceleration of the route, m/s².
+    """
+
+    name: str
+    seed: int
+    trajectory: Trajectory
+    shading: list = field(default_factory=list)
+    water_current_enu: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    max_lateral_accel: float = 0.0
+
+
+def shading_schedule(duration: float, counts=(6, 4, 3, 2), first: float = 120.0,
+                     length: float = 45.0, gap: float = 30.0) -> list:
+    """Shading windows of ``length`` s separated by ``gap`` s of open sky, cycling through
+    ``counts`` satellites, from ``first`` s until ``duration``.
+
+    Returns
+    -------
+    list of ShadingWindow
+    """
+    out, t, k = [], float(first), 0
+    while t < duration:
+        out.append(ShadingWindow(t, min(t + length, duration), int(counts[k % len(counts)])))
+        t += length + gap
+        k += 1
+    return out
+
+
+def _town_block(route: Route, rng: np.random.Generator) -> None:
+    """One city block: accelerate, cruise (maybe over a grade), then a 90° turn or a stop."""
+    route.change_speed(rng.uniform(9.0, 14.0), rng.uniform(1.5, 2.5))
+    if rng.uniform() < 0.4:
+        route.set_pitch(rng.uniform(-0.04, 0.04), 4.0)
+    route.hold(rng.uniform(8.0, 18.0))
+    if rng.uniform() < 0.3:
+        route.stop(rng.uniform(5.0, 12.0), decel=rng.uniform(1.5, 3.0))
+        route.change_speed(rng.uniform(8.0, 12.0), 2.0).hold(3.0)
+    route.change_speed(rng.uniform(6.0, 8.0), 2.0)
+    route.turn(np.pi / 2 * rng.choice([-1.0, 1.0]), radius=rng.uniform(12.0, 25.0))
+    route.set_pitch(0.0, 3.0)
+
+
+def _test_area(route: Route) -> None:
+    """Cyclic lateral loads: a left and a right circle, then two figure-eights."""
+    route.change_speed(9.0, 2.0).hold(3.0)
+    route.circle(lateral_accel=CAR_TEST_LATERAL_ACCEL, direction=1)
+    route.hold(3.0)
+    route.circle(lateral_accel=CAR_TEST_LATERAL_ACCEL, direction=-1)
+    route.hold(3.0)
+    route.figure_eight(lateral_accel=CAR_TEST_LATERAL_ACCEL, laps=2)
+    route.hold(3.0)
+
+
+def car(duration: float = 600.0, seed: int = 0, rate: float = 200.0, static: float = 30.0,
+        start=CAR_START, oversample: int = 4) -> Scenario:
+    """Seed 004 Lab 1 car trial: town driving, circles and figure-eights, stops, shading.
+
+    Parameters
+    ----------
+    duration : float
+        Length, s.
+    seed : int
+    rate : float
+        IMU rate, Hz.
+    static : float
+        Initial standstill for alignment, s.
+    start : (lat, lon, h)
+        Start position (rad, rad, m).
+    oversample : int
+        See :func:`ins_gnss_ros.sim.trajectory.generate`.
+
+    Returns
+    -------
+    Scenario
+    """
+    rng = np.random.default_rng(seed)
+    route = Route(yaw0=rng.uniform(-np.pi, np.pi))
+    route.hold(static)
+    for _ in range(3):
+        _town_block(route, rng)
+    _test_area(route)
+    while route.t < duration:
+        _town_block(route, rng)
+    traj = generate(CarMotion(route), *start, duration, rate, oversample)
+    return Scenario("car", seed, traj, shading_schedule(duration),
+                    max_lateral_accel=route.max_lateral_accel)
+
+
+def sea(duration: float = 600.0, seed: int = 0, rate: float = 200.0,
+        sea_state: waves.SeaState = waves.SeaState(),
+        hull: waves.HullResponse = waves.HullResponse(), start=SEA_START,
+        oversample: int = 4) -> Scenario:
+    """Seed 004 Lab 2 sea trial: vessel at 6–10 m/s with course changes, in waves.
+
+    Parameters
+    ----------
+    duration : float
+        Length, s.
+    seed : int
+    rate : float
+        IMU rate, Hz.
+    sea_state : SeaState
+    hull : HullResponse
+    start : (lat, lon, h)
+    oversample : int
+
+    Returns
+    -------
+    Scenario
+    """
+    rng = np.random.default_rng(seed)
+    route = Route(yaw0=rng.uniform(-np.pi, np.pi), speed0=rng.uniform(6.0, 10.0), ramp=10.0)
+    while route.t < duration:
+        route.hold(rng.uniform(40.0, 90.0))
+        route.turn(np.deg2rad(rng.uniform(20.0, 90.0)) * rng.choice([-1.0, 1.0]),
+                   radius=rng.uniform(300.0, 600.0))
+        route.change_speed(rng.uniform(6.0, 10.0), 0.1)
+    motion = ShipMotion(route, waves.wave_motion(sea_state, hull, rng))
+    traj = generate(motion, *start, duration, rate, oversample)
+    current_dir = rng.uniform(0.0, 2.0 * np.pi)
+    current = rng.uniform(0.05, 0.3) * np.array([np.cos(current_dir), np.sin(current_dir), 0.0])
+    return Scenario("sea", seed, traj, water_current_enu=current,
+                    max_lateral_accel=route.max_lateral_accel)
+
+
+#: Scenario factories by name, for ``trial simulate --scenario NAME``.
+SCENARIOS = {"car": car, "sea": sea}

@@ -1,0 +1,1 @@
+"""Command-line tools (calibration and characterisation); each module exposes ``main(argv)``."""

@@ -1,0 +1,116 @@
+"""Simulated GNSS outages: the ``LEN:PERIOD[:FIRST]`` protocol of the trial CLI.
+
+Published INS benchmarks test dead reckoning by withholding GNSS periodically (e.g. the 15 s
+outages every 45 s, the first 40 s into the run, of the rtklibexplorer GNSS_IMU car trial): the
+filter is aided between outages and coasts on the IMU during them, and the position drift at the
+end of each outage measures the inertial quality.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+#: No outage starts within this many seconds of the last GNSS epoch, so that each outage is
+#: followed by GNSS again and its end-of-outage drift is observed.
+DEFAULT_END_MARGIN_S = 30.0
+
+
+@dataclass(frozen=True)
+class OutageSpec:
+    """Outage protocol: `length` s without GNSS every `period` s, the first `first` s in.
+
+    Attributes
+    ----------
+    length : float
+        Duration of each outage, s (> 0).
+    period : float
+        Time from the start of one outage to the start of the next, s (> length).
+    first : float
+        Start of the first outage after the first GNSS epoch, s (>= 0).
+    """
+
+    length: float
+    period: float
+    first: float
+
+    def __str__(self):
+        return f"{self.length:g}:{self.period:g}:{self.first:g}"
+
+
+def parse_outage_spec(spec):
+    """Parse ``"LEN:PERIOD[:FIRST]"`` (seconds) into an `OutageSpec`.
+
+    FIRST defaults to PERIOD - LEN, so that every period ends with its outage and the run starts
+    with PERIOD - LEN seconds of GNSS aiding for the filter to converge.
+
+    Raises
+    ------
+    ValueError
+        With the offending spec in the message, if it is not two or three numbers separated by
+        ':' or if LEN <= 0, PERIOD <= LEN or FIRST < 0.
+    """
+    parts = str(spec).strip().split(":")
+    if len(parts) not in (2, 3):
+        raise ValueError(f"outage spec {spec!r}: expected LEN:PERIOD[:FIRST] in seconds, "
+                         "e.g. '15:45:40'")
+    try:
+        values = [float(part) for part in parts]
+    except ValueError:
+        raise ValueError(f"outage spec {spec!r}: LEN, PERIOD and FIRST must be numbers") from None
+    if not all(np.isfinite(values)):
+        raise ValueError(f"outage spec {spec!r}: values must be finite")
+    length, period = values[:2]
+    first = values[2] if len(values) == 3 else period - length
+    if length <= 0.0:
+        raise ValueError(f"outage spec {spec!r}: LEN must be > 0 s")
+    if period <= length:
+        raise ValueError(f"outage spec {spec!r}: PERIOD must exceed LEN, or GNSS never returns")
+    if first < 0.0:
+        raise ValueError(f"outage spec {spec!r}: FIRST must be >= 0 s")
+    return OutageSpec(length=length, period=period, first=first)
+
+
+def outage_windows(spec, t_start, t_end, end_margin=DEFAULT_END_MARGIN_S):
+    """Outage windows of a protocol over a run.
+
+    Parameters
+    ----------
+    spec : OutageSpec or str
+        The protocol (a string is parsed with `parse_outage_spec`).
+    t_start, t_end : float
+        Times of the first and last GNSS epochs, s (any time scale, e.g. GPS seconds).
+    end_margin : float
+        No outage starts later than `t_end - end_margin`, s.
+
+    Returns
+    -------
+    ndarray, shape (k, 2)
+        [start, end) of each outage, s, on the time scale of `t_start`; an end never exceeds
+        `t_end`.
+    """
+    if isinstance(spec, str):
+        spec = parse_outage_spec(spec)
+    last_start = t_end - end_margin
+    starts = t_start + spec.first + spec.period * np.arange(
+        max(0, int(np.floor((last_start - t_start - spec.first) / spec.period)) + 1))
+    starts = starts[starts <= last_start]
+    return np.column_stack([starts, np.minimum(starts + spec.length, t_end)])
+
+
+def in_outage(t, windows):
+    """True where time(s) `t` fall inside any [start, end) window of `windows`.
+
+    `windows` is (k, 2), sorted by start and not overlapping, as `outage_windows` returns.
+    """
+    shape = np.shape(t)
+    t = np.atleast_1d(np.asarray(t, float)).ravel()
+    windows = np.asarray(windows, float).reshape(-1, 2)
+    # searchsorted finds the last window starting at or before t; windows do not overlap.
+    index = np.searchsorted(windows[:, 0], t, side="right") - 1
+    inside = index >= 0
+    inside[inside] = t[inside] < windows[index[inside], 1]
+    return inside.reshape(shape)
+
+
+def gnss_mask(t, windows):
+    """True for GNSS epochs `t` to keep (outside every outage window), the mask a replay applies."""
+    return ~in_outage(t, windows)

@@ -1,0 +1,87 @@
+"""The node base: parameter validation, diagnostics, sim time and signal handling."""
+
+from __future__ import annotations
+
+import signal
+
+import pytest
+from rclpy.parameter import Parameter
+
+from ins_gnss_ros.nodes.base import NavNode, Param, ParameterError
+from rosutil import NodeProcess, spin_until
+
+
+def test_param_validation_names_the_parameter():
+    lever = Param("lever_arm", [0.0, 0.0, 0.0], "antenna lever arm FLU, m", -50.0, 50.0, length=3)
+    assert lever.validate([1.0, 2.0, 3.0]) == [1.0, 2.0, 3.0]
+    with pytest.raises(ParameterError, match="lever_arm"):
+        lever.validate([1.0, 2.0])
+    with pytest.raises(ParameterError, match="lever_arm.*outside"):
+        lever.validate([1.0, 2.0, 99.0])
+    with pytest.raises(ParameterError, match="not finite"):
+        Param("rate", 1.0, "rate, Hz", 0.0, 10.0).validate(float("nan"))
+    with pytest.raises(ParameterError, match="one of"):
+        Param("mode", "loose", "coupling", choices=("loose", "tight")).validate("medium")
+
+
+class _Counting(NavNode):
+    PARAMS = (Param("gain", 0.5, "a gain, -", 0.0, 1.0),)
+
+    def __init__(self, **kwargs):
+        super().__init__("counting", **kwargs)
+
+
+def test_diagnostics_report_counts_and_use_sim_time(executor, probe, ros_context):
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from rosgraph_msgs.msg import Clock
+
+    node = _Counting(context=ros_context, parameter_overrides=[Parameter("use_sim_time", value=True)])
+    executor.add_node(node)
+    assert node.p["gain"] == 0.5
+    arrays: list[DiagnosticArray] = []
+    probe.create_subscription(DiagnosticArray, "/diagnostics", arrays.append, 10)
+    clock = probe.create_publisher(Clock, "/clock", 10)
+    spin_until(executor, lambda: clock.get_subscription_count() > 0, what="/clock subscriber")
+    msg = Clock()
+    msg.clock.sec = 1234
+    clock.publish(msg)
+    spin_until(executor, lambda: node.get_clock().now().nanoseconds == 1234 * 10**9, what="sim time")
+    node.diag.count("bad sample: NaN")
+    node.diag.publish()
+    spin_until(executor, lambda: any(a.status[0].values for a in arrays), what="diagnostics")
+    status = [a for a in arrays if a.status[0].values][-1].status[0]
+    assert status.level == DiagnosticStatus.WARN
+    assert {kv.key: kv.value for kv in status.values} == {"bad sample: NaN": "1"}
+    assert [a for a in arrays if a.status[0].values][-1].header.stamp.sec == 1234
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_node_process_shuts_down_cleanly_on_signal(sig, probe, executor):
+    with NodeProcess("strapdown") as proc:
+        proc.wait_on_graph(probe, executor)
+        assert proc.stop(sig) == 0, proc.output()
+
+
+def test_in_process_bus_delivers_in_order_and_records(ros_context):
+    from ins_gnss_msgs.msg import ImuDelta, InsState
+
+    from ins_gnss_ros.nodes.base import InProcessBus
+    from ins_gnss_ros.nodes.convert import sec_to_stamp
+    from ins_gnss_ros.nodes.strapdown_node import StrapdownNode
+
+    bus = InProcessBus()
+    recorded = []
+    bus.recorders.append(lambda topic, msg: recorded.append((topic, type(msg).__name__)))
+    node = StrapdownNode(context=ros_context, bus=bus)
+    states = []
+    bus.subscribe("ins/state", states.append)
+    for k in range(1, 4):
+        delta = ImuDelta(dt=0.01)
+        delta.header.stamp = sec_to_stamp(k * 0.01)
+        delta.delta_velocity.z = 9.81 * 0.01
+        bus.publish("imu/delta", delta)
+        bus.drain()  # a replay drains after every input message
+    node.destroy_node()
+    assert [type(s) for s in states] == [InsState] * 3
+    assert [s.header.stamp for s in states] == [sec_to_stamp(k * 0.01) for k in range(1, 4)]
+    assert recorded == [("/imu/delta", "ImuDelta"), ("/ins/state", "InsState")] * 3
