@@ -30,7 +30,7 @@ def stationary(lat: float, h: float, q_nb, dt: float, n: int, ell: Ellipsoid = W
 
 def coning_attitude(beta: float, omega: float, t):
     """True attitude (reference <- body) of classic coning: the rotation vector
-    beta [0, cos(omega t), sin(omega t)] (Savage, "Strapdown Analytics", section 7.1.1.1)."""
+    beta [0, cos(omega t), sin(omega t)] (Savage, "Strapdown Analytics", ch. 7)."""
     t = np.asarray(t, float)
     rv = beta * np.stack([np.zeros_like(t), np.cos(omega * t), np.sin(omega * t)], -1)
     return quat_from_rotvec(rv)

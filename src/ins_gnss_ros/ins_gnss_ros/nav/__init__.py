@@ -1,0 +1,1 @@
+"""ROS-free navigation core: Earth model, rotations, strapdown, error model, filter."""
