@@ -1,0 +1,332 @@
+"""Initial alignment: static levelling and gyrocompassing, in-motion heading, and the
+iterative steepest-descent alignment of seed 002 (Naumchenko).
+
+Frames: navigation ENU, body FLU, ROS Euler angles C_nb = Rz(yaw) Ry(pitch) Rx(roll).
+Attitude-error covariances are for φ of :mod:`ins_gnss_ros.nav.error_model`
+(C̃_nb = (I - [φ×]) C_nb).
+
+Static alignment (Groves §5.6; Titterton & Weston, Strapdown Inertial Navigation
+Technology, ch. 10).  At rest the accelerometers
+sense f_b = C_nb^T [0, 0, g] and the gyros ω_b = C_nb^T ω_ie, so
+
+    roll  = atan2(f_y, f_z),   pitch = atan2(-f_x, √(f_y² + f_z²))
+    yaw   = atan2(w_x, w_y),   w = Ry(pitch) Rx(roll) ω_b  (ω_ie in the levelled body axes)
+
+Error theory (derived from C̃ f̃_b = g e_z and (C̃ ω̃_b)_E = 0 to first order):
+
+    φ_E = -b_N / g,   φ_N = b_E / g,   φ_U = -ε_E / (Ω cos L) + φ_N tan L
+
+with b and ε the accelerometer and gyro errors resolved in ENU.  When ε ≳ Ω cos L (MEMS),
+heading is unobservable from the gyros: the covariance then reports a uniform heading.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .conventions import wrap_pi, yaw_from_azimuth
+from .earth import WGS84, normal_gravity
+from .rotations import quat_from_euler, quat_to_dcm
+
+#: Variance of a heading uniformly distributed on [-π, π) [rad²].
+UNIFORM_HEADING_VAR = np.pi ** 2 / 3.0
+
+
+def level(f_b):
+    """Roll and pitch from the mean specific force of a static IMU.
+
+    Parameters
+    ----------
+    f_b : array_like, shape (3,)
+        Mean specific force in body (FLU) axes [m/s²].
+
+    Returns
+    -------
+    roll, pitch : float [rad]
+    """
+    fx, fy, fz = f_b
+    return float(np.arctan2(fy, fz)), float(np.arctan2(-fx, np.hypot(fy, fz)))
+
+
+def gyrocompass(w_ib_b, roll, pitch):
+    """Yaw from the mean angular rate of a static, levelled IMU.
+
+    Parameters
+    ----------
+    w_ib_b : array_like, shape (3,)
+        Mean angular rate in body axes [rad/s] (the Earth rate plus sensor errors).
+    roll, pitch : float
+        From :func:`level` [rad].
+
+    Returns
+    -------
+    float
+        Yaw [rad], counter-clockwise from East.
+    """
+    w = quat_to_dcm(quat_from_euler(roll, pitch, 0.0)) @ np.asarray(w_ib_b, float)
+    # In the levelled axes ω_ie = Ω cos L (sin yaw, cos yaw, ·).
+    return float(np.arctan2(w[0], w[1]))
+
+
+def coarse_alignment_covariance(lat, accel_sigma, gyro_sigma, ell=WGS84):
+    """Covariance of φ after static levelling and gyrocompassing (module docstring).
+
+    Parameters
+    ----------
+    lat : float
+        Latitude [rad].
+    accel_sigma : float
+        1σ of the horizontal accelerometer error averaged over the alignment [m/s²].
+    gyro_sigma : float
+        1σ of the east gyro error averaged over the alignment [rad/s].
+
+    Returns
+    -------
+    (3, 3) ndarray [rad²]
+    """
+    g = normal_gravity(lat, 0.0, ell)
+    var_tilt = (accel_sigma / g) ** 2
+    P = np.diag([var_tilt, var_tilt, 0.0])
+    horizontal_rate = ell.omega * np.cos(lat)
+    var_u = (gyro_sigma / horizontal_rate) ** 2 + np.tan(lat) ** 2 * var_tilt
+    if var_u < UNIFORM_HEADING_VAR:
+        P[2, 2] = var_u
+        P[1, 2] = P[2, 1] = np.tan(lat) * var_tilt
+    else:
+        P[2, 2] = UNIFORM_HEADING_VAR
+    return P
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """Result of an alignment.
+
+    Attributes
+    ----------
+    q_nb : (4,) ndarray
+        Attitude, ENU <- FLU.
+    cov_phi : (3, 3) ndarray
+        Covariance of the attitude error φ [rad²].
+    iterations : int
+        Iterations used (0 for closed-form methods).
+    """
+
+    q_nb: np.ndarray
+    cov_phi: np.ndarray
+    iterations: int = 0
+
+
+def coarse_alignment(dthetas, dvs, dt, lat, grade=None, ell=WGS84):
+    """Static levelling and gyrocompassing from increments recorded at rest.
+
+    Parameters
+    ----------
+    dthetas, dvs : array_like, shape (N, 3)
+        Angle [rad] and velocity [m/s] increments in body axes.
+    dt : float
+        Increment interval [s].
+    lat : float
+        Latitude [rad].
+    grade : ImuGrade, optional
+        Sensor budget for the covariance (turn-on + Gauss-Markov bias, white noise averaged
+        over the N dt seconds, gravity through non-orthogonality and g-sensitivity); without
+        it cov_phi is NaN.
+
+    Returns
+    -------
+    Alignment
+    """
+    duration = len(dthetas) * dt
+    f_b = np.sum(dvs, axis=0) / duration
+    w_b = np.sum(dthetas, axis=0) / duration
+    roll, pitch = level(f_b)
+    yaw = gyrocompass(w_b, roll, pitch)
+    if grade is None:
+        cov = np.full((3, 3), np.nan)
+    else:
+        g = normal_gravity(lat, 0.0, ell)
+
+        def averaged(t, gravity_term):
+            return np.sqrt(t.bias_sigma ** 2 + t.gm_sigma ** 2 + t.white_density ** 2 / duration
+                           + gravity_term ** 2)
+        # A level horizontal sensor also sees g through its non-orthogonality (accelerometer)
+        # or g-sensitivity (gyro).
+        cov = coarse_alignment_covariance(
+            lat, averaged(grade.accel, grade.accel.misalign_sigma * g),
+            averaged(grade.gyro, grade.g_sensitivity_sigma * g), ell)
+    return Alignment(quat_from_euler(roll, pitch, yaw), cov)
+
+
+def yaw_from_velocity(v_enu, sigma_v):
+    """Yaw from the course over ground of a vehicle moving forward without side-slip.
+
+    Parameters
+    ----------
+    v_enu : array_like, shape (3,)
+        GNSS velocity [m/s].
+    sigma_v : float
+        1σ of each horizontal velocity component [m/s].
+
+    Returns
+    -------
+    yaw, sigma_yaw : float [rad]
+        sigma_yaw = σ_v / |v_h| (the cross-track velocity error over the speed).
+    """
+    ve, vn = v_enu[0], v_enu[1]
+    return float(np.arctan2(vn, ve)), float(sigma_v / np.hypot(ve, vn))
+
+
+def yaw_from_heading(azimuth, sigma_azimuth, baseline_yaw_b=0.0):
+    """Body yaw from a heading (azimuth) measurement, e.g. a dual-antenna GNSS baseline.
+
+    Parameters
+    ----------
+    azimuth : float
+        Clockwise from North [rad] (ins_gnss_msgs/Heading).
+    sigma_azimuth : float [rad]
+    baseline_yaw_b : float
+        Direction of the measured axis in body axes, counter-clockwise from body x [rad]
+        (0 for a baseline along the forward axis).
+
+    Returns
+    -------
+    yaw, sigma_yaw : float [rad]
+    """
+    return float(wrap_pi(yaw_from_azimuth(azimuth) - baseline_yaw_b)), float(sigma_azimuth)
+
+
+def initial_attitude(roll, pitch, yaw, sigma_tilt, sigma_yaw):
+    """Attitude and φ covariance from separately determined tilt and yaw.
+
+    For small tilts a yaw error δψ is φ_U = -δψ and roll/pitch errors are horizontal φ.
+
+    Returns
+    -------
+    Alignment
+    """
+    return Alignment(quat_from_euler(roll, pitch, yaw),
+                     np.diag([sigma_tilt ** 2, sigma_tilt ** 2, sigma_yaw ** 2]))
+
+
+def _readings(angles, f_b, w_b):
+    """Virtual-platform readings of the three channels (dimensionless), and the up checks.
+
+    roll : y-accelerometer of the roll-rotated axes, pitch : x-accelerometer of the levelled
+    axes, yaw : east gyro of the platform.  Each is divided by the magnitude of the signal in
+    its plane of rotation (a reading, not a model value) and signed so that
+    A = sin(α - α*) exactly, given the other channels' current angles.
+
+    Returns
+    -------
+    A : (3,) ndarray
+    upright : (2,) ndarray
+        z-accelerometer of the levelled axes and north gyro: positive at the right solution,
+        negative at the 180°-off zero of the same reading.
+    """
+    roll, pitch, yaw = angles
+    cr, sr, cp, sp, cy, sy = (np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch),
+                              np.cos(yaw), np.sin(yaw))
+    fy_r = cr * f_b[1] - sr * f_b[2]
+    fz_r = sr * f_b[1] + cr * f_b[2]
+    fx_l = cp * f_b[0] + sp * fz_r
+    fz_l = -sp * f_b[0] + cp * fz_r
+    w = quat_to_dcm(quat_from_euler(roll, pitch, 0.0)) @ w_b
+    w_east = cy * w[0] - sy * w[1]
+    w_north = sy * w[0] + cy * w[1]
+    A = np.array([-fy_r / np.hypot(f_b[1], f_b[2]), fx_l / np.hypot(f_b[0], fz_r),
+                  -w_east / np.hypot(w[0], w[1])])
+    return A, np.array([fz_l, w_north])
+
+
+def steepest_descent_alignment(dthetas, dvs, dt, initial=(0.0, 0.0, 0.0), method="mp",
+                               gains=(1.0, 1.0, 1.0), trial_step=np.radians(1.0),
+                               gyro_gate=1e-3, tol=1e-9, max_iter=100):
+    """Iterative alignment of a virtual platform (seed 002, Naumchenko, eq. 2 and Table 1).
+
+    The platform angles α = (roll, pitch, yaw) are rotated until the channel readings
+    A(α) = sin(α - α*) (horizontal accelerometers for levelling, east gyro for
+    gyrocompassing; see :func:`_readings`) vanish, all three channels at once:
+
+    * "cp" (classical): α_k = α_{k-1} - h A / (∂A/∂α), the anti-gradient step computed with
+      the measurement model and the current angles; h = 1 is Newton's step and |h| - 1 is
+      the relative overshoot near the solution (seed 002 Table 3).
+    * "mp" (modified): only readings of the current and previous cycle are used, i.e. the
+      secant step α_k = α_{k-1} - h A_{k-1} (α_{k-1} - α_{k-2}) / (A_{k-1} - A_{k-2}),
+      started by a trial rotation of ``trial_step`` towards smaller |A|.
+
+    Speed regulation (our reading of the paper's ov/dc/dg blocks, whose exact role is not
+    stated): a step never exceeds (π/2)|A|, the largest distance to the solution that a
+    reading |sin(α - α*)| allows; where the slope is wrong (past the reading's extremum,
+    seed 002 §A3.1) the channel steps (π/2)|A| downhill instead; gyrocompassing waits until
+    both levelling readings are below ``gyro_gate``.  A solution 180° off (same zero reading)
+    is turned round by the sign of the levelled z-accelerometer and of the north gyro (seed
+    002 §A4.4).
+
+    Parameters
+    ----------
+    dthetas, dvs : array_like, shape (N, 3)
+        Static increments [rad], [m/s] in body axes.
+    dt : float
+        Interval [s].
+    initial : sequence of 3 float
+        Starting roll, pitch, yaw [rad].
+    method : {"mp", "cp"}
+    gains : sequence of 3 float
+        h per channel (roll, pitch, yaw).
+    trial_step : float
+        First rotation of the "mp" method [rad].
+    gyro_gate : float
+        The yaw channel moves only once both levelling readings are below this (≈ rad).
+    tol : float
+        Stop when every |A| < tol (≈ the residual angle in rad).
+    max_iter : int
+
+    Returns
+    -------
+    Alignment
+        cov_phi is NaN (use :func:`coarse_alignment_covariance`: the fixed point is the
+        closed-form solution); iterations is the number of cycles.
+    """
+    duration = len(dthetas) * dt
+    f_b = np.sum(dvs, axis=0) / duration
+    w_b = np.sum(dthetas, axis=0) / duration
+    h = np.asarray(gains, float)
+    alpha = np.asarray(initial, float).copy()
+    A, _ = _readings(alpha, f_b, w_b)
+    prev_alpha, prev_A = alpha.copy(), np.full(3, np.nan)
+    iterations = 0
+    while np.any(np.abs(A) >= tol) and iterations < max_iter:
+        active = np.array([True, True, np.all(np.abs(A[:2]) < gyro_gate)])
+        downhill = -np.sign(A) * 0.5 * np.pi * np.abs(A)
+        if method == "cp":
+            eps = 1e-6
+            slope = np.array([(_readings(alpha + eps * e, f_b, w_b)[0][i]
+                               - _readings(alpha - eps * e, f_b, w_b)[0][i]) / (2 * eps)
+                              for i, e in enumerate(np.eye(3))])
+            ok = slope > 0.1
+            step = np.where(ok, -h * A / np.where(ok, slope, 1.0), downhill)
+        elif method == "mp":
+            dA = A - prev_A
+            da = alpha - prev_alpha
+            ok = np.isfinite(dA) & (dA * da > 0.0)
+            step = np.where(ok, -h * A * da / np.where(ok, dA, 1.0), downhill)
+            # First active cycle of a channel: the trial rotation.
+            step = np.where(np.isnan(dA), -np.sign(A) * trial_step, step)
+        else:
+            raise ValueError(f"unknown method {method!r}")
+        limit = 0.5 * np.pi * np.abs(A) * np.maximum(np.abs(h), 1.0)
+        step = np.where(active, np.clip(step, -limit, limit), 0.0)
+        prev_alpha, prev_A = alpha, np.where(active, A, np.nan)
+        alpha = alpha + step
+        A, _ = _readings(alpha, f_b, w_b)
+        iterations += 1
+    _, upright = _readings(alpha, f_b, w_b)
+    if upright[0] < 0.0:
+        alpha[0] += np.pi
+        alpha[1] = -alpha[1]
+        alpha[2] += np.pi
+        _, upright = _readings(alpha, f_b, w_b)
+    if upright[1] < 0.0:
+        alpha[2] += np.pi
+    alpha = wrap_pi(alpha)
+    return Alignment(quat_from_euler(*alpha), np.full((3, 3), np.nan), iterations)

@@ -1,0 +1,167 @@
+"""Alignment on simulated static sensors (sensor_errors presets) against the error theory."""
+
+import numpy as np
+import pytest
+
+from ins_gnss_ros.nav import alignment as al
+from ins_gnss_ros.nav import sensor_errors as se
+from ins_gnss_ros.nav.earth import WGS84, earth_rate_enu, normal_gravity
+from ins_gnss_ros.nav.rotations import (quat_conj, quat_from_euler, quat_mul, quat_to_dcm,
+                                        quat_to_euler, quat_to_rotvec)
+
+DEG = np.pi / 180.0
+LAT = 50.0 * DEG
+TRUE_RPY = (2.0 * DEG, -3.0 * DEG, 40.0 * DEG)
+
+
+def static_increments(duration, dt, rpy=TRUE_RPY, lat=LAT):
+    """Ideal increments of an IMU at rest: f_b = C^T [0,0,g], ω_b = C^T ω_ie."""
+    C = quat_to_dcm(quat_from_euler(*rpy))
+    n = int(round(duration / dt))
+    f_b = C.T @ np.array([0.0, 0.0, normal_gravity(lat, 0.0)])
+    w_b = C.T @ earth_rate_enu(lat)
+    return np.tile(w_b * dt, (n, 1)), np.tile(f_b * dt, (n, 1)), C
+
+
+def heading_theory(eps_n, b_n, lat=LAT):
+    """Yaw error predicted geometrically from the realised mean sensor errors (ENU).
+
+    The computed up axis is the measured specific force g e_z + b_n, the computed North the
+    measured rate ω_ie + ε_n made horizontal w.r.t. that up axis; the yaw error is the
+    clockwise angle of the computed North from the true North (yaw counts anticlockwise).
+    """
+    up = np.array([0.0, 0.0, normal_gravity(lat, 0.0)]) + b_n
+    up /= np.linalg.norm(up)
+    w = earth_rate_enu(lat) + eps_n
+    north = w - (w @ up) * up
+    return np.arctan2(north[0], north[1])
+
+
+def yaw_error(q_est, q_true):
+    """Clockwise angle of the computed North axis from the true North (Euler-free)."""
+    north = quat_to_dcm(q_true) @ quat_to_dcm(q_est).T @ np.array([0.0, 1.0, 0.0])
+    return np.arctan2(north[0], north[1])
+
+
+def phi_of(q_est, q_true):
+    """Attitude error φ with C̃ = (I - [φ×]) C (error_model convention)."""
+    return -quat_to_rotvec(quat_mul(q_est, quat_conj(q_true)))
+
+
+def realised(grade, duration, dt, runs, seed):
+    dth, dvs, C = static_increments(duration, dt)
+    sim = se.ImuErrorSimulator(grade, dt, np.random.default_rng(seed), runs)
+    dth_m, dv_m = sim.corrupt(dth, dvs)
+    # Realised mean sensor errors in ENU (everything the theory needs to know).
+    eps_n = (dth_m - dth).sum(axis=1) / duration @ C.T
+    b_n = (dv_m - dvs).sum(axis=1) / duration @ C.T
+    return dth_m, dv_m, eps_n, b_n
+
+
+@pytest.mark.parametrize("grade,duration", [(se.TACTICAL, 600.0), (se.MEMS_ADIS16405, 120.0)],
+                         ids=["tactical", "mems"])
+def test_levelling_error_is_accel_error_over_g(grade, duration):
+    dt, runs = 0.1, 12
+    dth_m, dv_m, eps_n, b_n = realised(grade, duration, dt, runs, 11)
+    g = normal_gravity(LAT, 0.0)
+    q_true = quat_from_euler(*TRUE_RPY)
+    for r in range(runs):
+        res = al.coarse_alignment(dth_m[r], dv_m[r], dt, LAT, grade)
+        roll, pitch, _ = quat_to_euler(res.q_nb)
+        bound = np.linalg.norm(b_n[r, :2]) / g
+        assert abs(roll - TRUE_RPY[0]) <= 1.5 * bound
+        assert abs(pitch - TRUE_RPY[1]) <= 1.5 * bound
+        # Theory: the computed up axis is f̃/|f̃|, tilted by the horizontal b_n / g (i.e.
+        # φ_E = -b_N/g, φ_N = b_E/g); compared heading-independently through the up axis.
+        C_est, C_true = quat_to_dcm(res.q_nb), quat_to_dcm(q_true)
+        tilt_n = C_true @ (C_est[2] - C_true[2])
+        np.testing.assert_allclose(tilt_n[:2], b_n[r, :2] / g, rtol=0.02, atol=1e-7)
+
+
+def test_gyrocompass_tactical_within_theory():
+    dt, runs, duration = 0.1, 12, 600.0
+    dth_m, dv_m, eps_n, b_n = realised(se.TACTICAL, duration, dt, runs, 5)
+    rate = WGS84.omega * np.cos(LAT)
+    g = normal_gravity(LAT, 0.0)
+    q_true = quat_from_euler(*TRUE_RPY)
+    for r in range(runs):
+        res = al.coarse_alignment(dth_m[r], dv_m[r], dt, LAT, se.TACTICAL)
+        yaw_err = quat_to_euler(res.q_nb)[2] - TRUE_RPY[2]
+        tilt_term = abs(b_n[r, 0] / g * np.tan(LAT))
+        assert abs(yaw_err) <= 1.5 * abs(eps_n[r, 0]) / rate + tilt_term
+        assert yaw_error(res.q_nb, q_true) == pytest.approx(heading_theory(eps_n[r], b_n[r]),
+                                                            rel=1e-6, abs=1e-9)
+
+
+def test_gyrocompass_mems_fails_as_theory_predicts():
+    """MEMS bias (≈180 °/h) exceeds the Earth rate: heading is the direction of ω_ie + ε."""
+    dt, runs, duration = 0.1, 12, 120.0
+    dth_m, dv_m, eps_n, b_n = realised(se.MEMS_ADIS16405, duration, dt, runs, 7)
+    rate = WGS84.omega * np.cos(LAT)
+    errs = []
+    for r in range(runs):
+        res = al.coarse_alignment(dth_m[r], dv_m[r], dt, LAT, se.MEMS_ADIS16405)
+        yaw_err = yaw_error(res.q_nb, quat_from_euler(*TRUE_RPY))
+        assert yaw_err == pytest.approx(heading_theory(eps_n[r], b_n[r]), rel=1e-6, abs=1e-9)
+        errs.append(yaw_err)
+        assert res.cov_phi[2, 2] == pytest.approx(al.UNIFORM_HEADING_VAR)
+    assert np.sqrt(np.mean(np.square(errs))) > 30 * DEG
+    # The linear bound ε_E/(Ω cos L) is far beyond one radian: no heading information.
+    assert se.MEMS_ADIS16405.gyro.bias_sigma / rate > 10
+
+
+def test_covariance_matches_monte_carlo_spread():
+    """Tactical: RMS of φ over runs vs the predicted σ (χ² 99 % band for 40 runs)."""
+    dt, runs, duration = 0.2, 40, 600.0
+    dth_m, dv_m, _, _ = realised(se.TACTICAL, duration, dt, runs, 3)
+    q_true = quat_from_euler(*TRUE_RPY)
+    phis = []
+    for r in range(runs):
+        res = al.coarse_alignment(dth_m[r], dv_m[r], dt, LAT, se.TACTICAL)
+        phis.append(phi_of(res.q_nb, q_true))
+    ratio = np.mean(np.square(phis), axis=0) / np.diag(res.cov_phi)
+    # χ²(40) 0.5 % and 99.5 % quantiles / 40.
+    assert np.all(ratio > 20.7 / 40) and np.all(ratio < 66.8 / 40), ratio
+
+
+def test_in_motion_heading_sources():
+    yaw, sig = al.yaw_from_velocity([10.0, 10.0, 0.2], 0.1)
+    assert yaw == pytest.approx(45 * DEG) and sig == pytest.approx(0.1 / np.sqrt(200))
+    # Azimuth 30° (clockwise from North) is yaw 60°; a baseline pointing left (+90° in
+    # body axes) means the body points 90° clockwise of it.
+    yaw, sig = al.yaw_from_heading(30 * DEG, 0.01)
+    assert yaw == pytest.approx(60 * DEG) and sig == 0.01
+    yaw, _ = al.yaw_from_heading(30 * DEG, 0.01, baseline_yaw_b=90 * DEG)
+    assert yaw == pytest.approx(-30 * DEG)
+    res = al.initial_attitude(0.01, -0.02, yaw, 1e-3, 0.01)
+    np.testing.assert_allclose(quat_to_euler(res.q_nb), [0.01, -0.02, -30 * DEG], atol=1e-12)
+    np.testing.assert_allclose(np.sqrt(np.diag(res.cov_phi)), [1e-3, 1e-3, 0.01])
+
+
+@pytest.mark.parametrize("method,max_iter", [("cp", 22), ("mp", 18)])
+def test_steepest_descent_converges_to_closed_form(method, max_iter):
+    """Seed 002 start (60°, 60°, 45° from the truth): converge within the paper's counts."""
+    dth, dvs, _ = static_increments(10.0, 0.1)
+    init = np.array(TRUE_RPY) + np.array([60.0, 60.0, 45.0]) * DEG
+    res = al.steepest_descent_alignment(dth, dvs, 0.1, init, method=method,
+                                        tol=np.radians(0.01))
+    assert res.iterations <= max_iter
+    err = phi_of(res.q_nb, quat_from_euler(*TRUE_RPY))
+    assert np.abs(err).max() < np.radians(0.01)
+    exact = al.steepest_descent_alignment(dth, dvs, 0.1, init, method=method, tol=1e-12)
+    assert np.abs(phi_of(exact.q_nb, quat_from_euler(*TRUE_RPY))).max() < 1e-9
+
+
+def test_steepest_descent_fixes_180_degree_heading():
+    dth, dvs, _ = static_increments(10.0, 0.1)
+    init = np.array(TRUE_RPY) + np.array([0.0, 0.0, 170.0]) * DEG
+    res = al.steepest_descent_alignment(dth, dvs, 0.1, init, method="cp", tol=1e-10)
+    assert quat_to_euler(res.q_nb)[2] == pytest.approx(TRUE_RPY[2], abs=1e-8)
+
+
+def test_steepest_descent_equals_coarse_with_sensor_errors():
+    dt = 0.1
+    dth_m, dv_m, _, _ = realised(se.TACTICAL, 300.0, dt, 1, 2)
+    coarse = al.coarse_alignment(dth_m[0], dv_m[0], dt, LAT)
+    it = al.steepest_descent_alignment(dth_m[0], dv_m[0], dt, (0.3, -0.3, 1.0), tol=1e-12)
+    assert np.abs(phi_of(it.q_nb, coarse.q_nb)).max() < 1e-9
