@@ -16,8 +16,8 @@ import sys
 
 import numpy as np
 import pandas as pd
-import yaml
 
+from ins_gnss_ros.tools import write_yaml
 from ins_gnss_ros.imu.allan import characterise, noise_section
 
 GYRO_UNITS = {"rad/s": 1.0, "deg/s": np.pi / 180.0}
@@ -63,12 +63,7 @@ def main(argv=None) -> int:
     section = noise_section(g, a)
     if args.ros_node:
         section = {args.ros_node: {"ros__parameters": section}}
-    text = yaml.safe_dump(section, sort_keys=False)
-    if args.out:
-        with open(args.out, "w") as f:
-            f.write(text)
-    else:
-        sys.stdout.write(text)
+    write_yaml(section, args.out)
     return 0
 
 

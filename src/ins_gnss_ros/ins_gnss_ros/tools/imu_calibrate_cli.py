@@ -18,8 +18,8 @@ import sys
 
 import numpy as np
 import pandas as pd
-import yaml
 
+from ins_gnss_ros.tools import write_yaml
 from ins_gnss_ros.imu.calibration import ImuCalibration, TriadCalibration
 from ins_gnss_ros.imu.six_position import (FACES, face_attitude, fit_accel_known_faces,
                                            fit_gyro_bias, static_specific_force)
@@ -63,12 +63,7 @@ def main(argv=None) -> int:
     print(f"accel bias {np.round(accel.bias[0], 5)} m/s², scale {np.round(accel.scale[0] * 1e6)} ppm")
     print(f"gyro bias {np.round(np.degrees(gyro_bias) * 3600, 2)} deg/h")
     print(f"residual RMS {np.sqrt(np.mean(resid ** 2)):.2e} m/s²")
-    text = yaml.safe_dump({"imu_calibration": cal.to_dict()}, sort_keys=False)
-    if args.out:
-        with open(args.out, "w") as f:
-            f.write(text)
-    else:
-        sys.stdout.write(text)
+    write_yaml({"imu_calibration": cal.to_dict()}, args.out)
     return 0
 
 

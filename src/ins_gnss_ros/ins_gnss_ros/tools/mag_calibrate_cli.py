@@ -21,8 +21,8 @@ import sys
 
 import numpy as np
 import pandas as pd
-import yaml
 
+from ins_gnss_ros.tools import write_yaml
 from ins_gnss_ros.magnetic.ellipsoid_fit import HardSoftIron, calibrate
 from ins_gnss_ros.magnetic.turntable_kf import TurntableCalibrationKF
 from ins_gnss_ros.magnetic.wmm import field_elements
@@ -83,12 +83,7 @@ def main(argv=None) -> int:
               f"(σ {np.round(kf.std[3:6] * 1e9, 1)}), heading correction {np.degrees(bias):.3f} deg")
         out = {"mag_calibration": {**cal.to_dict(), "heading_bias": bias}}
 
-    text = yaml.safe_dump(out, sort_keys=False)
-    if args.out:
-        with open(args.out, "w") as f:
-            f.write(text)
-    else:
-        sys.stdout.write(text)
+    write_yaml(out, args.out)
     return 0
 
 
