@@ -20,7 +20,9 @@ setup(
     license="BSD-3-Clause",
     entry_points={"console_scripts": [
         # nodes (ros2 run ins_gnss_ros <name>)
+        "imu_preprocessor = ins_gnss_ros.nodes.imu_preprocessor_node:main",
         "strapdown = ins_gnss_ros.nodes.strapdown_node:main",
+        "mag_compass = ins_gnss_ros.nodes.mag_compass_node:main",
         # calibration tools
         "imu_allan = ins_gnss_ros.tools.allan_cli:main",
         "imu_calibrate = ins_gnss_ros.tools.imu_calibrate_cli:main",

@@ -15,7 +15,9 @@ PARAMS = REPO / "config" / "default.yaml"
 # (publishes, subscribes) of each node, as ../shared/design/CONTRACT.md fixes them (relative names
 # resolve in the root namespace here).
 CONTRACT = {
+    "imu_preprocessor": (["/imu/data", "/imu/delta", "/imu/mag"], ["/imu/data_raw", "/imu/mag_raw"]),
     "strapdown": (["/ins/state"], ["/imu/delta", "/ins/correction"]),
+    "mag_compass": (["/mag/heading"], ["/imu/mag", "/ins/state", "/gnss/fix"]),
 }
 
 

@@ -35,6 +35,11 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 SENSOR_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST, depth=200, reliability=ReliabilityPolicy.RELIABLE
 )
+# Inputs from third-party sensor drivers, which publish best effort (REP-2003 SensorDataQoS): a
+# best-effort subscription matches both best-effort and reliable publishers.
+DRIVER_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=200, reliability=ReliabilityPolicy.BEST_EFFORT
+)
 # Navigation state and status: latest value matters; late joiners get the last one.
 STATE_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,

@@ -8,7 +8,9 @@ from __future__ import annotations
 from importlib import import_module
 
 NODES = {
+    "imu_preprocessor": "ins_gnss_ros.nodes.imu_preprocessor_node:ImuPreprocessorNode",
     "strapdown": "ins_gnss_ros.nodes.strapdown_node:StrapdownNode",
+    "mag_compass": "ins_gnss_ros.nodes.mag_compass_node:MagCompassNode",
 }
 
 

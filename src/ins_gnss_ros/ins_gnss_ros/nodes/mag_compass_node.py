@@ -1,0 +1,227 @@
+"""``mag_compass`` node: calibrated magnetometer + roll/pitch -> ``mag/heading`` (seed 004 §2.3).
+
+Per ``imu/mag`` sample (base_link axes, from the ``imu_preprocessor``) the
+:class:`~ins_gnss_ros.magnetic.compass.MagneticCompass` removes the vehicle's hard and soft iron
+(``mag_calibrate_cli`` output or inline parameters), tilt-compensates with the latest roll and
+pitch (from ``ins/state``, or levelled from the accelerometer on ``imu/data`` where no INS runs)
+and gates the sample with the :class:`~ins_gnss_ros.magnetic.disturbance.DisturbanceDetector`:
+while a disturbance is flagged nothing is published and /diagnostics says why. The WMM
+(:mod:`ins_gnss_ros.magnetic.wmm`) at the position (``gnss/fix``, else ``ins/state``, else the
+``position.*`` parameters) and at the decimal year of the sample's stamp gives the declination and
+the expected field the detector checks against.
+
+The published ``ins_gnss_msgs/Heading`` is the azimuth of the body x axis, clockwise from true
+north (or magnetic north with ``reference: magnetic``), with ``declination`` filled in either
+case (true = magnetic + declination); pitch and roll are not observed by a compass: NaN.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import yaml
+from ins_gnss_msgs.msg import Heading, InsState
+from sensor_msgs.msg import Imu, MagneticField, NavSatFix, NavSatStatus
+
+from ..magnetic.compass import MagneticCompass
+from ..magnetic.disturbance import DisturbanceDetector
+from ..magnetic.ellipsoid_fit import HardSoftIron
+from ..magnetic.wmm import decimal_year, field_elements
+from ..nav.alignment import level
+from ..nav.rotations import quat_to_euler
+from .base import SENSOR_QOS, NavNode, Param, ParameterError, run
+from .convert import quat, stamp_to_sec, vec
+
+_IDENTITY = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+
+
+class MagCompassNode(NavNode):
+    PARAMS = (
+        Param("calibration_file", "",
+              "YAML hard/soft-iron calibration (mag_calibrate_cli output: key mag_calibration with "
+              "hard_iron, soft_iron, optional heading_bias); empty: the calibration.* parameters"),
+        Param("calibration.hard_iron", [0.0, 0.0, 0.0],
+              "hard-iron offset c in base_link (b = W (m - c)), T", -1e-3, 1e-3, length=3),
+        Param("calibration.soft_iron", _IDENTITY,
+              "soft-iron correction W, 3x3 row-major, dimensionless", -10.0, 10.0, length=9),
+        Param("calibration.heading_bias_deg", 0.0,
+              "installation azimuth error to subtract (turntable calibration), deg", -180.0, 180.0),
+        Param("reference", "true", "north reference of the published azimuth",
+              choices=("true", "magnetic")),
+        Param("attitude_source", "ins_state",
+              "roll/pitch from ins/state, or levelled from the accelerometer on imu/data (only "
+              "right when the vehicle does not accelerate)", choices=("ins_state", "imu_data")),
+        Param("max_attitude_age_s", 0.5,
+              "largest stamp difference between a field sample and the roll/pitch used, s",
+              0.0, 60.0),
+        Param("level_time_constant_s", 1.0,
+              "low-pass time constant of the specific force for imu_data levelling, s", 0.0, 600.0),
+        Param("position.latitude_deg", 59.9, "latitude until gnss/fix or ins/state gives one, deg",
+              -90.0, 90.0),
+        Param("position.longitude_deg", 30.3, "longitude until a fix, deg", -180.0, 360.0),
+        Param("position.altitude_m", 0.0, "ellipsoidal height until a fix, m", -1000.0, 100000.0),
+        Param("decimal_year", 0.0,
+              "date for the WMM, decimal year; 0: the date of each sample's stamp (set it when "
+              "replaying data whose stamps are not dates)", 0.0, 2100.0),
+        Param("field_std_nT", 100.0, "noise of the calibrated field per axis, nT", 0.0, 1e5),
+        Param("roll_std_deg", 0.05, "roll error of the attitude source, deg", 0.0, 90.0),
+        Param("pitch_std_deg", 0.05, "pitch error of the attitude source, deg", 0.0, 90.0),
+        Param("disturbance.model_total_tol", 0.08,
+              "relative tolerance of |F| against the WMM, -", 0.0, 10.0),
+        Param("disturbance.model_inclination_deg", 4.0,
+              "tolerance of the inclination against the WMM, deg", 0.0, 90.0),
+        Param("disturbance.running_total_tol", 0.01,
+              "relative tolerance of |F| against its running mean, -", 0.0, 10.0),
+        Param("disturbance.running_inclination_deg", 0.5,
+              "tolerance of the inclination against its running mean, deg", 0.0, 90.0),
+        Param("disturbance.release", 0.5,
+              "fraction of every tolerance below which the flag may drop, -", 0.0, 1.0),
+        Param("disturbance.clear_time_s", 2.0,
+              "time below the release level before the flag drops, s", 0.0, 3600.0),
+        Param("disturbance.time_constant_s", 60.0, "time constant of the running means, s",
+              0.1, 1e5),
+        Param("frame_id", "base_link", "frame_id of mag/heading"),
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__("mag_compass", **kwargs)
+        p = self.p
+        calibration, heading_bias = self._calibration()
+        self.position = (math.radians(p["position.latitude_deg"]),
+                         math.radians(p["position.longitude_deg"]), p["position.altitude_m"])
+        self._fix_seen = False
+        self.attitude: tuple[float, float, float] | None = None  # (t, roll, pitch)
+        self._f_lp: np.ndarray | None = None                     # low-passed specific force
+        self._last_imu_t: float | None = None
+        self._last_mag_t: float | None = None
+        # The detector's reference field is replaced from the WMM at every sample.
+        detector = DisturbanceDetector(
+            1.0, 0.0, p["disturbance.model_total_tol"],
+            math.radians(p["disturbance.model_inclination_deg"]),
+            p["disturbance.running_total_tol"],
+            math.radians(p["disturbance.running_inclination_deg"]), p["disturbance.release"],
+            p["disturbance.clear_time_s"], p["disturbance.time_constant_s"])
+        self.compass = MagneticCompass(calibration, detector, heading_bias,
+                                       p["field_std_nT"] * 1e-9, math.radians(p["roll_std_deg"]),
+                                       math.radians(p["pitch_std_deg"]))
+        self.pub = self.publisher(Heading, "mag/heading", SENSOR_QOS)
+        self.subscribe(MagneticField, "imu/mag", self.on_mag, SENSOR_QOS)
+        self.subscribe(NavSatFix, "gnss/fix", self.on_fix, SENSOR_QOS)
+        self.subscribe(InsState, "ins/state", self.on_ins_state, SENSOR_QOS)
+        if p["attitude_source"] == "imu_data":
+            self.subscribe(Imu, "imu/data", self.on_imu, SENSOR_QOS)
+
+    def _calibration(self) -> tuple[HardSoftIron, float]:
+        """Hard/soft iron and heading bias (rad) from the file or the inline parameters."""
+        p = self.p
+        inline = {"hard_iron": list(p["calibration.hard_iron"]),
+                  "soft_iron": np.reshape(p["calibration.soft_iron"], (3, 3)).tolist()}
+        bias = math.radians(p["calibration.heading_bias_deg"])
+        source = "calibration.*"
+        if p["calibration_file"]:
+            defaults = {s.name: s.default for s in self.PARAMS if s.name.startswith("calibration.")}
+            if any(p[k] != v for k, v in defaults.items()):
+                raise ParameterError("parameter 'calibration_file': give the calibration either as "
+                                     "a file or as calibration.* parameters, not both")
+            path = Path(p["calibration_file"])
+            try:
+                d = yaml.safe_load(path.read_text())
+            except (OSError, yaml.YAMLError) as err:
+                raise ParameterError(f"parameter 'calibration_file': cannot read {path}: {err}") \
+                    from None
+            d = d.get("mag_calibration", d) if isinstance(d, dict) else d
+            if not isinstance(d, dict) or set(d) - {"hard_iron", "soft_iron", "heading_bias"}:
+                raise ParameterError(f"parameter 'calibration_file': {path} is not a dict of "
+                                     "hard_iron, soft_iron, heading_bias")
+            inline, bias, source = d, d.get("heading_bias", 0.0), f"calibration_file {path}"
+        try:
+            return HardSoftIron.from_dict(inline), float(bias)
+        except (ValueError, TypeError) as err:
+            raise ParameterError(f"{source}: {err}") from None
+
+    # -- inputs other than the field -------------------------------------------------------------
+    def on_fix(self, msg: NavSatFix) -> None:
+        pos = (msg.latitude, msg.longitude, msg.altitude)
+        if msg.status.status < NavSatStatus.STATUS_FIX or not all(map(math.isfinite, pos)):
+            self.diag.count("gnss/fix without a valid position ignored", log=False)
+            return
+        self.position = (math.radians(pos[0]), math.radians(pos[1]), pos[2])
+        self._fix_seen = True
+
+    def on_ins_state(self, msg: InsState) -> None:
+        q = quat(msg.orientation)
+        if msg.mode == InsState.MODE_INVALID or not np.all(np.isfinite(q)) or \
+                abs(np.linalg.norm(q) - 1.0) > 1e-3:
+            self.diag.count("invalid ins/state ignored")
+            return
+        pos = (msg.latitude, msg.longitude, msg.altitude)
+        if not self._fix_seen and all(map(math.isfinite, pos)):
+            self.position = pos
+        if self.p["attitude_source"] == "ins_state":
+            roll, pitch, _ = quat_to_euler(q)
+            self.attitude = (stamp_to_sec(msg.header.stamp), float(roll), float(pitch))
+
+    def on_imu(self, msg: Imu) -> None:
+        f = vec(msg.linear_acceleration)
+        t = stamp_to_sec(msg.header.stamp)
+        if not np.all(np.isfinite(f)) or (self._last_imu_t is not None and t <= self._last_imu_t):
+            self.diag.count("imu/data sample for levelling rejected")
+            return
+        tau = self.p["level_time_constant_s"]
+        if self._f_lp is None or tau == 0.0:
+            self._f_lp = f
+        else:
+            gain = 1.0 - math.exp(-(t - self._last_imu_t) / tau)
+            self._f_lp = self._f_lp + gain * (f - self._f_lp)
+        self._last_imu_t = t
+        self.attitude = (t, *level(self._f_lp))
+
+    # -- the field ------------------------------------------------------------------------------
+    def on_mag(self, msg: MagneticField) -> None:
+        t = stamp_to_sec(msg.header.stamp)
+        m = vec(msg.magnetic_field)
+        if not np.all(np.isfinite(m)):
+            self.diag.count("magnetometer sample rejected: non_finite")
+            return
+        if self._last_mag_t is not None and t <= self._last_mag_t:
+            self.diag.count("magnetometer sample rejected: stamp not after the previous one")
+            return
+        self._last_mag_t = t
+        if self.attitude is None or abs(t - self.attitude[0]) > self.p["max_attitude_age_s"]:
+            self.diag.count("no roll/pitch within max_attitude_age_s: heading withheld")
+            return
+        year = self.p["decimal_year"] or decimal_year(t)
+        try:
+            wmm = field_elements(*self.position, year)
+        except ValueError as err:
+            self.diag.count(f"WMM unavailable: heading withheld ({err})")
+            return
+        self.compass.detector.set_reference(wmm.total, wmm.inclination)
+        reading, status = self.compass.update(t, m, self.attitude[1], self.attitude[2],
+                                              wmm.declination)
+        if reading is None:
+            self.diag.count("magnetic disturbance: heading withheld")
+            if status.reasons:
+                self.diag.set_value("last disturbance", ", ".join(status.reasons))
+            return
+        true_ref = self.p["reference"] == "true"
+        out = Heading(azimuth=reading.true_azimuth if true_ref else reading.magnetic_azimuth,
+                      pitch=math.nan, roll=math.nan, azimuth_variance=reading.variance,
+                      pitch_variance=math.nan, roll_variance=math.nan,
+                      reference=Heading.REFERENCE_TRUE if true_ref else Heading.REFERENCE_MAGNETIC,
+                      source=Heading.SOURCE_MAGNETIC, declination=reading.declination,
+                      status=Heading.STATUS_NONE)
+        out.header.stamp = msg.header.stamp
+        out.header.frame_id = self.p["frame_id"]
+        self.pub.publish(out)
+
+
+def main(args=None) -> int:
+    return run(MagCompassNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

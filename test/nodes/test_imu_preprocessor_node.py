@@ -1,0 +1,390 @@
+"""imu_preprocessor node: calibration recovered from simulated raw data, coning/sculling increments
+against the core, every kind of bad sample handled without a crash, parameters validated."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+from rclpy.parameter import Parameter
+
+from ins_gnss_ros.imu.calibration import ImuCalibration
+from ins_gnss_ros.nav.coning import to_navigation_rate
+from ins_gnss_ros.nav.rotations import dcm_from_euler
+from ins_gnss_ros.nav.sensor_errors import ImuGrade, TriadErrors
+from ins_gnss_ros.sim.imu_sim import ImuSpec, simulate_imu
+from ins_gnss_ros.sim.trajectory import CarMotion, Route, generate
+
+DEG = np.pi / 180
+NS = 1_000_000_000
+T0_NS = 1_780_000_000 * NS  # a 2026 POSIX stamp: float seconds would resolve only ~0.2 µs
+G_UP = np.array([0.0, 0.0, 9.81])
+
+# A deliberately bad sensor: biases, scale factors and non-orthogonality with temperature drift,
+# g-sensitivity, mounted upside down and turned 90 deg in yaw (sensor -> base_link).
+CAL = ImuCalibration.from_dict({
+    "gyro": {"bias": [[0.02, -0.01, 0.015], [1e-4, -2e-4, 5e-5]], "scale": [0.01, -0.02, 0.005],
+             "nonorthogonality": [[0, 1e-3, -2e-3], [5e-4, 0, 1e-3], [-1e-3, 2e-3, 0]]},
+    "accel": {"bias": [[0.3, -0.2, 0.1], [2e-3, 1e-3, -1e-3]], "scale": [[0.02, 0.01, -0.01]],
+              "nonorthogonality": [[0, 2e-3, 0], [0, 0, -1e-3], [1e-3, 0, 0]]},
+    "gyro_g_sensitivity": (1e-4 * np.arange(9).reshape(3, 3)).tolist(),
+    "mounting_rpy": [np.pi, 0.0, np.pi / 2],
+    "temperature_ref": 25.0,
+})
+TEMPERATURE = 40.0
+
+
+def _params(**over) -> list[Parameter]:
+    """The CAL calibration as node parameters, plus overrides."""
+    d = CAL.to_dict()
+    values = {"calibration.temperature_ref": d["temperature_ref"],
+              "calibration.gyro_g_sensitivity": np.ravel(d["gyro_g_sensitivity"]).tolist(),
+              "mounting_rpy_deg": np.degrees(d["mounting_rpy"]).tolist()}
+    for triad in ("gyro", "accel"):
+        for k in ("bias", "scale", "nonorthogonality"):
+            values[f"calibration.{triad}.{k}"] = np.ravel(d[triad][k]).tolist()
+    values.update(over)
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+def _imu_msg(t_ns: int, gyro, accel):
+    from sensor_msgs.msg import Imu
+
+    from ins_gnss_ros.nodes.convert import to_vector3
+    from ins_gnss_ros.nodes.imu_preprocessor_node import ns_to_stamp
+
+    msg = Imu(angular_velocity=to_vector3(gyro), linear_acceleration=to_vector3(accel))
+    msg.header.stamp = ns_to_stamp(t_ns)
+    msg.header.frame_id = "imu_link"
+    return msg
+
+
+class _Graph:
+    """The node on an InProcessBus with every output recorded."""
+
+    def __init__(self, ros_context, params):
+        from ins_gnss_ros.nodes.base import InProcessBus
+        from ins_gnss_ros.nodes.imu_preprocessor_node import ImuPreprocessorNode
+
+        self.bus = InProcessBus()
+        self.out = {"/imu/data": [], "/imu/delta": [], "/imu/mag": []}
+        self.bus.recorders.append(
+            lambda topic, msg: self.out[topic].append(msg) if topic in self.out else None)
+        self.node = ImuPreprocessorNode(context=ros_context, bus=self.bus,
+                                        parameter_overrides=params)
+
+    def send(self, topic, msg):
+        self.bus.publish(topic, msg)
+        self.bus.drain()
+
+    def imu(self, t_ns, gyro, accel):
+        self.send("imu/data_raw", _imu_msg(t_ns, gyro, accel))
+
+    def close(self):
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def graph(ros_context):
+    graphs = []
+
+    def make(*params):
+        g = _Graph(ros_context, list(params))
+        graphs.append(g)
+        return g
+    yield make
+    for g in graphs:
+        g.close()
+
+
+def _white_noise_imu(rate, duration, gyro_sigma, accel_sigma, seed=7):
+    """A car pulling away into a banked left turn, measured by an IMU with white noise only."""
+    route = Route(yaw0=0.3).hold(1.0).change_speed(10.0, 2.5).set_bank(0.05, 2.0)
+    route.turn(np.pi / 2, radius=25.0).hold(30.0)
+    traj = generate(CarMotion(route), 60 * DEG, 30 * DEG, 20.0, duration, rate, oversample=2)
+    grade = ImuGrade("white", TriadErrors(gyro_sigma / np.sqrt(rate), 0.0),
+                     TriadErrors(accel_sigma / np.sqrt(rate), 0.0))
+    return traj, simulate_imu(traj, ImuSpec(grade, rate=rate), seed)
+
+
+def _stamps_ns(meas):
+    return T0_NS + np.round(meas.t * NS).astype(np.int64)
+
+
+def test_recovers_rates_and_forces_within_noise(graph):
+    """Raw = calibration model applied to a simulated IMU; the node must undo it exactly and leave
+    only the simulated white noise around the true rates and forces."""
+    from sensor_msgs.msg import Temperature
+
+    rate, sg, sa = 200.0, 0.2 * DEG, 0.02
+    traj, meas = _white_noise_imu(rate, 12.0, sg, sa)
+    gyro_raw, accel_raw = CAL.simulate_raw(meas.gyro, meas.accel, TEMPERATURE)
+    g = graph(*_params(use_temperature=True))
+    g.send("imu/temperature", Temperature(temperature=TEMPERATURE))
+    stamps = _stamps_ns(meas)
+    for k in range(len(stamps)):
+        g.imu(int(stamps[k]), gyro_raw[k], accel_raw[k])
+    data = g.out["/imu/data"]
+    assert len(data) == len(stamps) and sum(g.node.diag.counts.values()) == 0
+    assert {m.header.frame_id for m in data} == {"base_link"}
+    w = np.array([[m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z] for m in data])
+    f = np.array([[m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z]
+                  for m in data])
+    np.testing.assert_allclose(w, meas.gyro, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(f, meas.accel, rtol=0, atol=1e-11)
+    # Against the truth (interval means of the trajectory): zero mean, the simulated sigma.
+    err_w, err_f = w - traj.dtheta / meas.dt, f - traj.dv / meas.dt
+    n = len(err_w)
+    assert np.all(np.abs(err_w.mean(0)) < 4 * sg / np.sqrt(n))
+    assert np.all(np.abs(err_f.mean(0)) < 4 * sa / np.sqrt(n))
+    print(f"\nraw 200 Hz IMU through the node: |recovered - simulated sensor| max "
+          f"{abs(w - meas.gyro).max():.1e} rad/s, {abs(f - meas.accel).max():.1e} m/s^2; error "
+          f"against truth: mean {np.degrees(err_w.mean(0)) * 3600} deg/h, "
+          f"{err_f.mean(0) * 1e3} mm/s^2, std {np.degrees(err_w.std(0))} deg/s (simulated "
+          f"{np.degrees(sg):.3f}), {err_f.std(0)} m/s^2 (simulated {sa})")
+    np.testing.assert_allclose(err_w.std(0), sg, rtol=0.05)
+    np.testing.assert_allclose(err_f.std(0), sa, rtol=0.05)
+    # Without the compensation the same raw data would be off by far more than the noise.
+    assert np.sqrt(np.mean((gyro_raw - traj.dtheta / meas.dt) ** 2)) > 10 * sg
+
+
+@pytest.mark.parametrize("method", ["two_sample", "one_sample"])
+def test_delta_equals_core_coning_sculling_at_1200_hz(graph, method):
+    rate, n_sub = 1200.0, 12
+    traj, meas = _white_noise_imu(rate, 4.0, 0.1 * DEG, 0.01)
+    gyro_raw, accel_raw = CAL.simulate_raw(meas.gyro, meas.accel)
+    g = graph(*_params(rate_hz=rate, nav_rate_hz=100.0, coning_method=method))
+    stamps = _stamps_ns(meas)
+    for k in range(len(stamps)):
+        g.imu(int(stamps[k]), gyro_raw[k], accel_raw[k])
+    deltas = g.out["/imu/delta"]
+    m = len(stamps) // n_sub
+    assert len(deltas) == m
+    # The core on the same samples: rate x interval, the interval from the (integer ns) stamps.
+    dt = np.diff(stamps) / NS
+    dt = np.concatenate([[1.0 / rate], dt])  # the first sample: the nominal interval
+    phi, dv = to_navigation_rate(meas.gyro * dt[:, None], meas.accel * dt[:, None], n_sub, method)
+    got_phi = np.array([[d.delta_angle.x, d.delta_angle.y, d.delta_angle.z] for d in deltas])
+    got_dv = np.array([[d.delta_velocity.x, d.delta_velocity.y, d.delta_velocity.z]
+                       for d in deltas])
+    print(f"\n{method}, 1200 Hz -> 100 Hz: node - core max |d phi| {abs(got_phi - phi).max():.1e}"
+          f" rad, |d dv| {abs(got_dv - dv).max():.1e} m/s over {m} increments")
+    np.testing.assert_allclose(got_phi, phi, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got_dv, dv, rtol=0, atol=1e-12)
+    ends = stamps[n_sub - 1::n_sub][:m]
+    assert [d.header.stamp.sec * NS + d.header.stamp.nanosec for d in deltas] == ends.tolist()
+    np.testing.assert_allclose([d.dt for d in deltas],
+                               np.add.reduceat(dt, np.arange(0, m * n_sub, n_sub)), rtol=1e-12)
+    # And the increments are the motion's: the attitude change over each interval.
+    true_dtheta = traj.dtheta[:m * n_sub].reshape(m, n_sub, 3).sum(1)
+    # (white rate noise 0.1 deg/s per sample: sqrt(n_sub) / rate of it per increment)
+    noise = 0.1 * DEG * np.sqrt(n_sub) / rate
+    assert np.sqrt(np.mean((got_phi - true_dtheta) ** 2)) < 1.2 * noise
+
+
+# -- bad samples: one case each; the node stays up, says why, passes nothing non-finite on ------
+DT_NS = NS // 200
+GOOD_W = np.array([0.01, -0.02, 0.03])
+
+
+def _run_stream(g, n, bad_at=None, bad=None):
+    """n samples at 200 Hz; at index ``bad_at`` call ``bad(g, t_ns)`` instead of a good sample."""
+    for k in range(n):
+        t = T0_NS + (k + 1) * DT_NS
+        if k == bad_at:
+            bad(g, t)
+        else:
+            g.imu(t, GOOD_W, G_UP)
+
+
+def _finite_outputs(g):
+    for m in g.out["/imu/data"]:
+        assert np.isfinite([m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z,
+                            m.linear_acceleration.x, m.linear_acceleration.y,
+                            m.linear_acceleration.z]).all()
+    for d in g.out["/imu/delta"]:
+        assert np.isfinite([d.delta_angle.x, d.delta_angle.y, d.delta_angle.z, d.delta_velocity.x,
+                            d.delta_velocity.y, d.delta_velocity.z, d.dt]).all()
+
+
+BAD_SAMPLES = {
+    "nan": (lambda g, t: g.imu(t, [np.nan, 0, 0], G_UP), "imu sample rejected: non_finite"),
+    "inf": (lambda g, t: g.imu(t, GOOD_W, [0, np.inf, 9.8]), "imu sample rejected: non_finite"),
+    "gyro saturated": (lambda g, t: g.imu(t, [0, 0, 40.0], G_UP), "imu sample rejected: saturated"),
+    "accel saturated": (lambda g, t: g.imu(t, GOOD_W, [0, 0, 160.0]),
+                        "imu sample rejected: saturated"),
+    "duplicate stamp": (lambda g, t: (g.imu(t - DT_NS, GOOD_W, G_UP), g.imu(t, GOOD_W, G_UP)),
+                        "imu sample rejected: duplicate_stamp"),
+    "backwards stamp": (lambda g, t: (g.imu(t - 3 * DT_NS, GOOD_W, G_UP), g.imu(t, GOOD_W, G_UP)),
+                        "imu sample rejected: backwards_stamp"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_SAMPLES))
+def test_bad_sample_is_counted_and_never_passed_on(graph, case):
+    bad, reason = BAD_SAMPLES[case]
+    g = graph()
+    _run_stream(g, 40, bad_at=20, bad=bad)
+    assert g.node.diag.counts[reason] == 1
+    _finite_outputs(g)
+    assert all(m.header.stamp.nanosec != 0 or m.header.stamp.sec != 0 for m in g.out["/imu/data"])
+    deltas = g.out["/imu/delta"]
+    # A lost sample is bridged: the increments keep their 100 Hz step and see the true rate.
+    assert len(deltas) == 20
+    np.testing.assert_allclose([d.dt for d in deltas], 0.01, rtol=1e-9)
+    np.testing.assert_allclose([d.delta_angle.z for d in deltas], GOOD_W[2] * 0.01, rtol=1e-9)
+    if case in ("nan", "inf") or "saturated" in case:
+        assert g.node.diag.counts["imu gap bridged"] == 1
+        assert len(g.out["/imu/data"]) == 39  # the bridged sample is not a measurement
+
+
+def test_short_gap_is_bridged_long_gap_restarts(graph):
+    g = graph(Parameter("max_bridge_samples", value=3))
+    t = T0_NS
+    for k in range(10):
+        t += DT_NS
+        g.imu(t, GOOD_W, G_UP)
+    t += 3 * DT_NS                                  # 2 samples lost: bridged
+    g.imu(t, GOOD_W, G_UP)
+    assert g.node.diag.counts["imu gap bridged"] == 1 and g.node.synthesised == 2
+    assert len(g.out["/imu/delta"]) == 6            # 12 samples of 2
+    t += 50 * DT_NS                                 # 49 lost: reported, integration restarts
+    for k in range(4):
+        g.imu(t, GOOD_W, G_UP)
+        t += DT_NS
+    assert g.node.diag.counts["imu gap longer than max_bridge_samples: integration restarted"] == 1
+    deltas = g.out["/imu/delta"]
+    assert len(deltas) == 8
+    np.testing.assert_allclose([d.dt for d in deltas], 0.01, rtol=1e-9)  # no 0.25 s increment
+    _finite_outputs(g)
+
+
+def test_magnetometer_rotated_and_bad_samples_dropped(graph):
+    from sensor_msgs.msg import MagneticField
+
+    from ins_gnss_ros.nodes.convert import to_vector3
+    from ins_gnss_ros.nodes.imu_preprocessor_node import ns_to_stamp
+
+    g = graph(Parameter("mounting_rpy_deg", value=[180.0, 0.0, 90.0]))
+    c_bs = dcm_from_euler(np.pi, 0.0, np.pi / 2)
+    m_s = np.array([10e-6, -5e-6, 40e-6])
+
+    def mag(t_ns, m, cov0=-1.0):
+        msg = MagneticField(magnetic_field=to_vector3(m))
+        msg.header.stamp = ns_to_stamp(t_ns)
+        msg.magnetic_field_covariance[0] = cov0
+        return msg
+    g.send("imu/mag_raw", mag(T0_NS, m_s, cov0=1e-14))
+    g.send("imu/mag_raw", mag(T0_NS + 10 * DT_NS, [np.nan, 0, 0]))
+    g.send("imu/mag_raw", mag(T0_NS, m_s))         # duplicate stamp
+    g.send("imu/mag_raw", mag(T0_NS + 20 * DT_NS, m_s))
+    out = g.out["/imu/mag"]
+    assert len(out) == 2
+    # Rx(180) flips y and z, then Rz(90) turns x to y and y to -x: sensor (x, y, z) is
+    # base_link (-y, x, -z) read the other way round.
+    np.testing.assert_allclose([out[0].magnetic_field.x, out[0].magnetic_field.y,
+                                out[0].magnetic_field.z], [-5e-6, 10e-6, -40e-6], atol=1e-18)
+    np.testing.assert_allclose(np.reshape(out[0].magnetic_field_covariance, (3, 3)),
+                               c_bs @ np.diag([1e-14, 0, 0]) @ c_bs.T, atol=1e-30)
+    assert out[1].magnetic_field_covariance[0] == -1.0
+    counts = g.node.diag.counts
+    assert counts["magnetometer sample rejected: non_finite"] == 1
+    assert counts["magnetometer sample rejected: stamp not after the previous one"] == 1
+
+
+@pytest.mark.parametrize("enabled", [False, True])
+def test_filter_corrections_only_when_enabled(graph, enabled):
+    from ins_gnss_msgs.msg import InsCorrection
+
+    g = graph(Parameter("apply_filter_corrections", value=enabled))
+    corr = InsCorrection(sequence=1)
+    corr.gyro_bias.z = 0.01
+    corr.accel_scale_factor.z = 0.01
+    g.send("ins/correction", corr)
+    bad = InsCorrection(sequence=2)
+    bad.gyro_bias.x = np.nan
+    g.send("ins/correction", bad)
+    g.imu(T0_NS, GOOD_W, G_UP)
+    out = g.out["/imu/data"][0]
+    if enabled:
+        # Residual model x_cal = (1 + s) x + b: the filter says 0.01 rad/s and 1 % too much.
+        assert out.angular_velocity.z == pytest.approx(GOOD_W[2] - 0.01, abs=1e-15)
+        assert out.linear_acceleration.z == pytest.approx(9.81 / 1.01, abs=1e-12)
+        assert g.node.diag.counts["non-finite sensor correction rejected"] == 1
+    else:  # not subscribed: the strapdown applies them
+        assert out.angular_velocity.z == GOOD_W[2] and out.linear_acceleration.z == 9.81
+
+
+def test_calibration_file_and_temperature(graph, tmp_path):
+    from sensor_msgs.msg import Temperature
+
+    path = tmp_path / "imu_calibration.yaml"
+    path.write_text(yaml.safe_dump({"imu_calibration": CAL.to_dict()}))
+    g = graph(Parameter("calibration_file", value=str(path)),
+              Parameter("use_temperature", value=True))
+    w_true, f_true = np.array([0.1, -0.2, 0.3]), np.array([1.0, -2.0, 9.0])
+    for k, temp in enumerate([25.0, np.nan, 55.0]):
+        g.send("imu/temperature", Temperature(temperature=temp))
+        g.imu(T0_NS + k * DT_NS, *CAL.simulate_raw(w_true, f_true, 55.0))
+    assert g.node.diag.counts["non-finite temperature ignored"] == 1
+    first, last = g.out["/imu/data"][0], g.out["/imu/data"][-1]
+    np.testing.assert_allclose([last.angular_velocity.x, last.angular_velocity.y,
+                                last.angular_velocity.z], w_true, atol=1e-12)
+    # Read at the reference temperature the drift of 30 degC is not removed.
+    assert abs(first.angular_velocity.x - w_true[0]) > 1e-3
+
+
+@pytest.mark.parametrize("params, match", [
+    ({"rate_hz": 250.0, "nav_rate_hz": 100.0}, "integer multiple"),
+    ({"rate_hz": 300.0, "nav_rate_hz": 100.0}, "coning_method.*one_sample"),
+    ({"calibration.gyro.bias": [0.1, 0.2]}, "calibration.gyro.bias.*multiple of 3"),
+    ({"calibration.accel.nonorthogonality": [0.1] * 9}, "accel.nonorthogonality.*diagonal"),
+    ({"calibration_file": "/nonexistent/cal.yaml"}, "calibration_file.*cannot read"),
+    ({"calibration_file": "/tmp/x.yaml", "calibration.gyro.bias": [0.1, 0.0, 0.0]}, "not both"),
+])
+def test_bad_parameters_are_one_clear_error(ros_context, params, match):
+    from ins_gnss_ros.nodes.base import ParameterError
+    from ins_gnss_ros.nodes.imu_preprocessor_node import ImuPreprocessorNode
+
+    with pytest.raises(ParameterError, match=match):
+        ImuPreprocessorNode(context=ros_context,
+                            parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+
+
+def test_bad_calibration_file_content(ros_context, tmp_path):
+    from ins_gnss_ros.nodes.base import ParameterError
+    from ins_gnss_ros.nodes.imu_preprocessor_node import ImuPreprocessorNode
+
+    path = tmp_path / "cal.yaml"
+    path.write_text(yaml.safe_dump({"imu_calibration": {"gyro": {"bias": [1.0, 2.0]}}}))
+    with pytest.raises(ParameterError, match="gyro.bias"):
+        ImuPreprocessorNode(context=ros_context,
+                            parameter_overrides=[Parameter("calibration_file", value=str(path))])
+    path.write_text(yaml.safe_dump({"imu_calibration": {"mounting_rpy": [0, 0, 1.0]}}))
+    with pytest.raises(ParameterError, match="mounting_rpy_deg.*one place"):
+        ImuPreprocessorNode(context=ros_context, parameter_overrides=[
+            Parameter("calibration_file", value=str(path)),
+            Parameter("mounting_rpy_deg", value=[0.0, 0.0, 90.0])])
+
+
+def test_publishes_over_ros(executor, ros_context, probe):
+    from ins_gnss_msgs.msg import ImuDelta
+    from sensor_msgs.msg import Imu
+
+    from ins_gnss_ros.nodes.base import SENSOR_QOS
+    from ins_gnss_ros.nodes.imu_preprocessor_node import ImuPreprocessorNode
+    from rosutil import spin_until
+
+    node = ImuPreprocessorNode(context=ros_context)
+    executor.add_node(node)
+    data, deltas = [], []
+    probe.create_subscription(Imu, "imu/data", data.append, SENSOR_QOS)
+    probe.create_subscription(ImuDelta, "imu/delta", deltas.append, SENSOR_QOS)
+    pub = probe.create_publisher(Imu, "imu/data_raw", SENSOR_QOS)
+    spin_until(executor, lambda: pub.get_subscription_count() > 0, what="imu/data_raw subscriber")
+    for k in range(1, 5):
+        pub.publish(_imu_msg(T0_NS + k * DT_NS, GOOD_W, G_UP))
+    spin_until(executor, lambda: len(data) == 4 and len(deltas) == 2,
+               what="4 imu/data, 2 imu/delta")
+    assert deltas[-1].header.stamp.sec * NS + deltas[-1].header.stamp.nanosec == T0_NS + 4 * DT_NS
+    assert deltas[-1].dt == pytest.approx(0.01)
