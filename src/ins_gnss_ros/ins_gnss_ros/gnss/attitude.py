@@ -1,0 +1,449 @@
+"""Attitude from GNSS antenna baselines (interferometric / phase-difference attitude).
+
+* One baseline (ISON-1: two antennas 1.5 m apart, extract_004 §1.3b, §2.7): the baseline's
+  azimuth (clockwise from North) and elevation, and the vehicle heading and pitch with roll
+  unobservable (taken as zero). σ_azimuth ≈ σ(b ⟂ horizontal) / L_horizontal.
+* Two or more non-collinear baselines (ISON-2: four antennas, 0.05° 1σ, §1.3c): the rotation
+  C_nb that best maps the body-frame (FLU) antenna baselines onto the measured ENU ones, i.e.
+  Wahba's problem, solved by SVD (Markley 1988, "Attitude determination using vector
+  observations and the singular value decomposition") and refined by Gauss-Newton with the full
+  baseline covariance, which also gives the attitude covariance.
+* Mounting calibration: the body-frame direction of a baseline from a period with a reference
+  attitude.
+* :class:`AttitudeSolver`: the per-epoch pipeline (slip detection, double differences, float,
+  length-constrained LAMBDA fix, held ambiguities, attitude) that a ROS node calls.
+
+Angles: azimuth clockwise from North in [0, 2π); pitch and roll ROS-style (C_nb = Rz(yaw)
+Ry(pitch) Rx(roll), pitch positive nose-down), all in radians.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..nav.conventions import azimuth_from_yaw, wrap_pi
+from ..nav.rotations import dcm_from_euler, dcm_to_quat, quat_from_rotvec, quat_to_dcm, \
+    quat_to_euler, skew
+from .baseline import AmbiguityStore, fix_ambiguities, fixed_baselines, float_solution
+from .cycle_slip import detect_slips_dd, detect_slips_doppler
+from .differences import NoiseModel, form_double_differences, select_references
+
+
+def baseline_azimuth_elevation(b_enu, cov=None):
+    """Azimuth (clockwise from North, [0, 2π)) and elevation of an ENU baseline, rad.
+
+    Parameters
+    ----------
+    b_enu : array_like, shape (3,)
+        Baseline master → remote, ENU (m).
+    cov : array_like, shape (3, 3), optional
+        Its covariance (m²).
+
+    Returns
+    -------
+    azimuth, elevation : float
+    cov_ae : ndarray, shape (2, 2)
+        Covariance of (azimuth, elevation) (rad²), only if ``cov`` is given: first-order
+        propagation, σ_az = σ(horizontal, across) / L_h and σ_el = σ(vertical-ish) / L.
+    """
+    e, n, u = np.asarray(b_enu, float)
+    h2 = e * e + n * n
+    az = float(np.arctan2(e, n) % (2 * np.pi))
+    el = float(np.arctan2(u, np.sqrt(h2)))
+    if cov is None:
+        return az, el
+    L2 = h2 + u * u
+    h = np.sqrt(h2)
+    J = np.array([[n / h2, -e / h2, 0.0],
+                  [-e * u / (L2 * h), -n * u / (L2 * h), h / L2]])
+    return az, el, J @ np.asarray(cov, float) @ J.T
+
+
+def _heading_pitch_one_baseline(b_enu, b_body):
+    """Yaw and pitch (rad) with roll = 0 such that Rz(yaw) Ry(pitch) b_body ∥ b_enu."""
+    x, y, z = b_body / np.linalg.norm(b_body)
+    u = b_enu / np.linalg.norm(b_enu)
+    # Ry(p) b_body has up component ρ sin(α - p), ρ = √(x² + z²), α = atan2(z, x).
+    rho, alpha = np.hypot(x, z), np.arctan2(z, x)
+    p = alpha - np.arcsin(np.clip(u[2] / rho, -1.0, 1.0))
+    beta = np.arctan2(y, x * np.cos(p) + z * np.sin(p))
+    return wrap_pi(np.arctan2(u[1], u[0]) - beta), p
+
+
+def _euler_rates_matrix(roll, pitch, yaw):
+    """M with δθ_n = M [δroll, δpitch, δyaw] for C = Rz(yaw) Ry(pitch) Rx(roll)."""
+    cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
+    return np.array([[cy * cp, -sy, 0.0],
+                     [sy * cp, cy, 0.0],
+                     [-sp, 0.0, 1.0]])
+
+
+def wahba_svd(body, nav, weights):
+    """Rotation C_nb minimising Σ w_k |nav_k - C body_k|² (Markley 1988).
+
+    Parameters
+    ----------
+    body, nav : array_like, shape (K, 3)
+        Vector pairs in body (FLU) and navigation (ENU) axes.
+    weights : array_like, shape (K,)
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+    """
+    B = np.einsum("k,ki,kj->ij", np.asarray(weights, float), np.asarray(nav, float),
+                  np.asarray(body, float))
+    U, _, Vt = np.linalg.svd(B)
+    return U @ np.diag([1.0, 1.0, np.linalg.det(U) * np.linalg.det(Vt)]) @ Vt
+
+
+@dataclass
+class AttitudeEstimate:
+    """Attitude from baselines.
+
+    Attributes
+    ----------
+    roll, pitch, yaw : float
+        ROS-style Euler angles (rad); roll NaN when not observed.
+    azimuth : float
+        Heading clockwise from North (rad, [0, 2π)).
+    cov : ndarray, shape (3, 3)
+        Covariance of (roll, pitch, yaw) (rad²); NaN row/column for unobserved roll.
+    q_nb : ndarray, shape (4,)
+        Quaternion [w, x, y, z] (with roll = 0 if not observed).
+    """
+
+    roll: float
+    pitch: float
+    yaw: float
+    azimuth: float
+    cov: np.ndarray
+    q_nb: np.ndarray
+
+
+def solve_attitude(b_enu, cov, b_body, iterations=3) -> AttitudeEstimate:
+    """Attitude from K measured baselines and their body-frame coordinates.
+
+    Parameters
+    ----------
+    b_enu : array_like, shape (K, 3)
+        Measured baselines (ENU, m).
+    cov : array_like, shape (3K, 3K)
+        Their joint covariance (m²).
+    b_body : array_like, shape (K, 3)
+        The same baselines in the body frame (FLU, m), from the antenna positions.
+    iterations : int
+        Gauss-Newton iterations after the SVD start.
+
+    Returns
+    -------
+    AttitudeEstimate
+        With one baseline, or collinear ones, roll is unobservable: it is set to 0 for the
+        solution and reported NaN, and yaw/pitch come from the longest baseline.
+    """
+    b_enu = np.atleast_2d(np.asarray(b_enu, float))
+    b_body = np.atleast_2d(np.asarray(b_body, float))
+    cov = np.asarray(cov, float)
+    sv = np.linalg.svd(b_body / np.linalg.norm(b_body, axis=1, keepdims=True),
+                       compute_uv=False)
+    if len(b_body) < 2 or sv[1] < 0.1 * sv[0]:
+        k = int(np.argmax(np.linalg.norm(b_body, axis=1)))
+        Pk = cov[3 * k:3 * k + 3, 3 * k:3 * k + 3]
+        yaw, pitch = _heading_pitch_one_baseline(b_enu[k], b_body[k])
+        # First-order covariance by central differences of the closed form (it is smooth).
+        J = np.zeros((2, 3))
+        h = 1e-6 * np.linalg.norm(b_enu[k])
+        for i in range(3):
+            d = np.zeros(3)
+            d[i] = h
+            yp, pp = _heading_pitch_one_baseline(b_enu[k] + d, b_body[k])
+            ym, pm = _heading_pitch_one_baseline(b_enu[k] - d, b_body[k])
+            J[:, i] = [wrap_pi(yp - ym) / (2 * h), (pp - pm) / (2 * h)]
+        C2 = J @ Pk @ J.T
+        C = np.full((3, 3), np.nan)
+        C[1:, 1:] = C2[::-1, ::-1]
+        q = dcm_to_quat(dcm_from_euler(0.0, pitch, yaw))
+        return AttitudeEstimate(np.nan, float(pitch), float(yaw), float(azimuth_from_yaw(yaw)),
+                                C, q)
+    P_inv = np.linalg.inv(cov)
+    w = 1.0 / np.array([np.trace(cov[3 * k:3 * k + 3, 3 * k:3 * k + 3])
+                        for k in range(len(b_body))])
+    C_nb = wahba_svd(b_body, b_enu, w)
+    for _ in range(iterations):
+        pred = b_body @ C_nb.T
+        r = (b_enu - pred).ravel()
+        # b_enu = (I + [δθ×]) C b + v, so r = δθ × (C b) + v = -[(C b)×] δθ + v.
+        H = np.vstack([-skew(p) for p in pred])
+        N = H.T @ P_inv @ H
+        dtheta = np.linalg.solve(N, H.T @ P_inv @ r)
+        C_nb = quat_to_dcm(quat_from_rotvec(dtheta)) @ C_nb
+    P_theta = np.linalg.inv(N)
+    q = dcm_to_quat(C_nb)
+    roll, pitch, yaw = (float(a) for a in quat_to_euler(q))
+    Minv = np.linalg.inv(_euler_rates_matrix(roll, pitch, yaw))
+    return AttitudeEstimate(roll, pitch, yaw, float(azimuth_from_yaw(yaw)),
+                            Minv @ P_theta @ Minv.T, q)
+
+
+@dataclass
+class MountingCalibration:
+    """Body-frame direction of a baseline estimated against a reference attitude.
+
+    Attributes
+    ----------
+    direction_flu : ndarray, shape (3,)
+        Unit baseline direction in the body frame.
+    azimuth_offset : float
+        Its angle in the body x-y plane, counter-clockwise from x (rad): the heading offset
+        to subtract from the baseline yaw.
+    elevation_offset : float
+        Its elevation above the body x-y plane (rad).
+    std : ndarray, shape (2,)
+        Standard errors of the two offsets (rad), from the scatter over the epochs.
+    """
+
+    direction_flu: np.ndarray
+    azimuth_offset: float
+    elevation_offset: float
+    std: np.ndarray
+
+
+def estimate_mounting(b_enu, C_nb) -> MountingCalibration:
+    """Baseline mounting (heading and pitch offset) from epochs with a reference attitude.
+
+    Each epoch gives the body-frame direction C_nbᵀ b / |b|; their mean, renormalised, is the
+    least-squares direction on the sphere.
+
+    Parameters
+    ----------
+    b_enu : array_like, shape (T, 3)
+        Measured (fixed) baselines, ENU (m).
+    C_nb : array_like, shape (T, 3, 3)
+        Reference attitude at the same epochs (e.g. a navigation-grade INS).
+    """
+    b_enu = np.asarray(b_enu, float)
+    u_body = np.einsum("tji,tj->ti", np.asarray(C_nb, float), b_enu)
+    u_body /= np.linalg.norm(u_body, axis=1, keepdims=True)
+    u = u_body.mean(axis=0)
+    u /= np.linalg.norm(u)
+    az = np.arctan2(u_body[:, 1], u_body[:, 0])
+    el = np.arcsin(np.clip(u_body[:, 2], -1, 1))
+    az0 = float(np.arctan2(u[1], u[0]))
+    std = np.array([np.std(wrap_pi(az - az0)), np.std(el)]) / np.sqrt(len(b_enu))
+    return MountingCalibration(u, az0, float(np.arcsin(u[2])), std)
+
+
+@dataclass
+class AttitudeSolution:
+    """Output of :meth:`AttitudeSolver.process` (fields of ins_gnss_msgs/Heading).
+
+    Attributes
+    ----------
+    status : str
+        "NONE", "FLOAT" or "FIXED".
+    azimuth, pitch, roll : float
+        rad (azimuth clockwise from North, ROS pitch/roll); NaN where not observed.
+    var_azimuth, var_pitch, var_roll : float
+        rad²; NaN where not observed.
+    ratio : float
+        Smallest ratio-test statistic of the fixes in use (NaN if none).
+    satellites : tuple of str
+        Signals in the double differences.
+    baselines : ndarray, shape (K, 3)
+        ENU baselines used (m), NaN if none.
+    slipped : set of str
+        Signals detected as slipped at this epoch.
+    """
+
+    status: str
+    azimuth: float = np.nan
+    pitch: float = np.nan
+    roll: float = np.nan
+    var_azimuth: float = np.nan
+    var_pitch: float = np.nan
+    var_roll: float = np.nan
+    ratio: float = np.nan
+    satellites: tuple = ()
+    baselines: np.ndarray = field(default_factory=lambda: np.full((1, 3), np.nan))
+    slipped: set = field(default_factory=set)
+
+
+class AttitudeSolver:
+    """Per-epoch GNSS phase-difference attitude for 2-4 antennas on a rigid body.
+
+    Parameters
+    ----------
+    antennas_flu : array_like, shape (K+1, 3)
+        Antenna phase-centre positions in the body frame (FLU, m); row 0 is the master.
+    noise : NoiseModel
+        Undifferenced phase and code noise.
+    ratio_threshold : float
+        Ratio-test threshold for accepting a fix.
+    sigma_length : float
+        Uncertainty of the known baseline lengths (m).
+    elevation_mask : float
+        Satellites below are ignored (rad).
+    slip_threshold : float
+        Doppler test threshold (cycles).
+    w_critical : float
+        Critical value of the DD w-test for slips.
+    max_gap : float
+        Longest interval between epochs for the time-difference tests (s).
+    window : int
+        Epochs accumulated in the float solution while ambiguities are unfixed (1 = single
+        epoch); emptied at every detected slip or gap.
+    """
+
+    def __init__(self, antennas_flu, noise=NoiseModel(), ratio_threshold=3.0,
+                 sigma_length=0.002, elevation_mask=np.radians(10.0), slip_threshold=1.0,
+                 w_critical=4.0, max_gap=5.0, window=5):
+        ant = np.asarray(antennas_flu, float)
+        self.b_body = ant[1:] - ant[0]
+        self.lengths = np.linalg.norm(self.b_body, axis=1)
+        self.noise = noise
+        self.ratio_threshold = ratio_threshold
+        self.sigma_length = sigma_length
+        self.elevation_mask = elevation_mask
+        self.slip_threshold = slip_threshold
+        self.w_critical = w_critical
+        self.max_gap = max_gap
+        self.store = AmbiguityStore()
+        self._refs: dict = {}
+        self._ratio = {}
+        self._prev = None   # (t, epochs, dd, baselines)
+        self._window = deque(maxlen=max(window - 1, 0))   # earlier epochs' DDs
+
+    @property
+    def references(self) -> dict:
+        """Reference signal of each (system, wavelength) group at the last epoch."""
+        return dict(self._refs)
+
+    def reset(self):
+        """Forget the held ambiguities and the previous epoch."""
+        self.store.forget()
+        self._refs, self._ratio, self._prev = {}, {}, None
+        self._window.clear()
+
+    def process(self, epochs, los_enu, t, attitude_prior=None) -> AttitudeSolution:
+        """Attitude of one epoch.
+
+        Parameters
+        ----------
+        epochs : sequence of AntennaEpoch
+            Observations of every antenna at time t, in the order of ``antennas_flu``.
+        los_enu : mapping signal id -> ndarray (3,)
+            Unit line of sight to each satellite (ENU), e.g. from the ephemeris and the
+            master antenna position.
+        t : float
+            Epoch time (s).
+        attitude_prior : (ndarray (3, 3), ndarray (3, 3)), optional
+            Predicted C_nb and the covariance of its small-angle error (rad², ENU), e.g. from
+            the INS: it becomes an a-priori baseline in the float solution.
+
+        Returns
+        -------
+        AttitudeSolution
+        """
+        K = len(self.b_body)
+        los = {s: np.asarray(e, float) / np.linalg.norm(e) for s, e in los_enu.items()
+               if np.arcsin(e[2] / np.linalg.norm(e)) >= self.elevation_mask}
+        slipped = self._detect_doppler(epochs, t)
+        ids = sorted(los)
+        lam0 = dict(zip(epochs[0].signal_ids, epochs[0].wavelength))
+        ids = [s for s in ids if s in lam0]
+        el = [np.arcsin(los[s][2]) for s in ids]
+        self.store.forget(signals=slipped)
+        preferred = set().union(*(self.store.known_signals(r) for r in self._refs.values())) \
+            if self._refs else set()
+        refs = select_references(ids, el, [lam0[s] for s in ids], self._refs, slipped, preferred)
+        for g, r in refs.items():
+            old = self._refs.get(g)
+            if old is not None and old != r:
+                self.store.rereference(old, r, keep_old=old not in slipped)
+        self._refs = refs
+        dd = form_double_differences(epochs, los, refs, self.noise)
+        self.store.retain({s for p in dd.pairs for s in p})
+        if dd.phase.size == 0:
+            self._prev = None
+            return AttitudeSolution("NONE", slipped=slipped)
+        prev = self._prev
+        if prev is not None and t - prev[0] <= self.max_gap:
+            dd_slips = detect_slips_dd(prev[2], dd, prev[3], self.w_critical)
+            self.store.forget(signals=dd_slips)
+            slipped |= dd_slips
+        if slipped or prev is None or t - prev[0] > self.max_gap:
+            self._window.clear()
+        history = list(self._window)
+        self._window.append(dd)
+        priors = self._priors(attitude_prior)
+        held = self.store.lookup(dd)
+        for k in range(1, K + 1):
+            if np.all(np.isfinite(held[dd.rows(k)])):
+                continue            # nothing to fix: the held ambiguities cover this baseline
+            fs = float_solution(dd, k, held, priors[k - 1], history=history)
+            if fs is None:
+                continue
+            fix = fix_ambiguities(fs, self.lengths[k - 1], self.sigma_length,
+                                  enough_ratio=max(10.0, self.ratio_threshold))
+            if fix is not None and fix.ratio >= self.ratio_threshold:
+                self.store.hold(dd, fs.rows, fix.ambiguities)
+                self._ratio[k] = fix.ratio
+        fixed = fixed_baselines(dd, self.store.lookup(dd), K)
+        if fixed is not None and not (fixed.consistent() and self._lengths_ok(fixed)):
+            # A wrong fix or an undetected slip: start the ambiguities afresh.
+            self.store.forget()
+            self._ratio = {}
+            fixed = None
+        sats = tuple(sorted({s for p in dd.pairs for s in p}))
+        if fixed is not None:
+            self._prev = (t, epochs, dd, fixed.baselines)
+            return self._solution("FIXED", fixed.baselines, fixed.cov, sats, slipped,
+                                  min(self._ratio.values()) if self._ratio else np.nan)
+        held = self.store.lookup(dd)
+        floats = [float_solution(dd, k, held, priors[k - 1]) for k in range(1, K + 1)]
+        if any(f is None for f in floats):
+            self._prev = None
+            return AttitudeSolution("NONE", satellites=sats, slipped=slipped)
+        b = np.array([f.baseline for f in floats])
+        cov = np.zeros((3 * K, 3 * K))
+        for k, f in enumerate(floats):
+            cov[3 * k:3 * k + 3, 3 * k:3 * k + 3] = f.cov[:3, :3]
+        self._prev = (t, epochs, dd, b)
+        return self._solution("FLOAT", b, cov, sats, slipped, np.nan)
+
+    def _detect_doppler(self, epochs, t) -> set:
+        slipped = set()
+        prev = self._prev
+        for a, ep in enumerate(epochs):
+            if prev is not None and t - prev[0] <= self.max_gap:
+                slipped |= detect_slips_doppler(prev[1][a], ep, t - prev[0],
+                                                self.slip_threshold)
+            elif ep.loss_of_lock is not None:
+                slipped |= {s for s, f in zip(ep.signal_ids, ep.loss_of_lock) if f}
+        return slipped
+
+    def _priors(self, attitude_prior):
+        if attitude_prior is None:
+            return [None] * len(self.b_body)
+        C, P_theta = attitude_prior
+        out = []
+        for bb in self.b_body:
+            p = C @ bb
+            S = skew(p)       # δb = δθ × (C b) = -[(C b)×] δθ
+            out.append((p, S @ P_theta @ S.T + 1e-6 * np.eye(3)))
+        return out
+
+    def _lengths_ok(self, fixed, k_sigma=6.0) -> bool:
+        for k, b in enumerate(fixed.baselines):
+            u = b / np.linalg.norm(b)
+            s2 = u @ fixed.cov[3 * k:3 * k + 3, 3 * k:3 * k + 3] @ u + self.sigma_length ** 2
+            if abs(np.linalg.norm(b) - self.lengths[k]) > k_sigma * np.sqrt(s2):
+                return False
+        return True
+
+    def _solution(self, status, b, cov, sats, slipped, ratio) -> AttitudeSolution:
+        att = solve_attitude(b, cov, self.b_body)
+        return AttitudeSolution(status, att.azimuth, att.pitch, att.roll, att.cov[2, 2],
+                                att.cov[1, 1], att.cov[0, 0], ratio, sats, b, slipped)
