@@ -8,6 +8,8 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test"]),
+    # the real broadcast ephemeris set the GNSS simulator flies (with its source and licence)
+    package_data={"ins_gnss_ros.gnss.ephemeris_data": ["*.json", "SOURCE.md"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -23,6 +25,7 @@ setup(
         "imu_preprocessor = ins_gnss_ros.nodes.imu_preprocessor_node:main",
         "strapdown = ins_gnss_ros.nodes.strapdown_node:main",
         "mag_compass = ins_gnss_ros.nodes.mag_compass_node:main",
+        "gnss_simulator = ins_gnss_ros.nodes.gnss_simulator_node:main",
         # calibration tools
         "imu_allan = ins_gnss_ros.tools.allan_cli:main",
         "imu_calibrate = ins_gnss_ros.tools.imu_calibrate_cli:main",

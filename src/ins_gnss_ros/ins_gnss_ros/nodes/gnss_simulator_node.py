@@ -1,0 +1,381 @@
+"""``gnss_simulator`` node: raw GNSS measurements from real orbits along a truth trajectory, on the
+same topics as ``gnss_driver``.
+
+The truth comes from ``sim/truth`` (ins_gnss_msgs/InsState, ``source: truth``) or from an internal
+seed 004 scenario (``source: scenario``, :mod:`ins_gnss_ros.sim.scenarios`). Every
+``1 / rate_hz`` s of truth time, :class:`~ins_gnss_ros.gnss.simulator.GnssSimulator` produces one
+epoch per antenna and the node publishes
+
+* ``gnss/observations``: one GnssObservations per antenna (``antenna_id`` = index in
+  ``lever_arms``), GPS L1 C/A and Galileo E1 (u-blox gnssId/sigId numbering);
+* ``gnss/fix`` and ``gnss/vel``: the single-point solution of antenna 0's simulated pseudoranges
+  and Dopplers (:func:`~ins_gnss_ros.gnss.simulator.solve_fix`, the project's SPP), not truth
+  plus noise, so shading below 5 satellites leaves no fix, as on a real receiver;
+* ``gnss/ephemeris``: the broadcast set in use, at the first epoch and every
+  ``ephemeris_period_s``;
+* ``gnss/time_reference``: the PPS of every whole GPS second (time_ref = GNSS time as UTC).
+
+Stamps: with ``source: truth`` the truth's stamp of the epoch (the sensor time axis), and the GNSS
+time of the first epoch is ``start_gps_time_s``; with ``source: scenario`` the GNSS time itself
+on the ROS (UTC) axis. ``time_of_week`` is the receiver's time tag (true GNSS time plus its clock
+offset), as a receiver reports it. A carrier phase whose half-cycle ambiguity is not yet resolved
+is published as NaN (GnssObservations has no half-cycle flag); the epoch it becomes valid is
+flagged ``loss_of_lock``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import TwistWithCovarianceStamped
+from rclpy._rclpy_pybind11 import RCLError
+from ins_gnss_msgs.msg import GnssEphemeris, GnssObservations, InsState
+from sensor_msgs.msg import NavSatFix, NavSatStatus, TimeReference
+
+from ..gnss import ephemeris_data
+from ..gnss.clock_model import OCXO, TCXO
+from ..gnss.constants import GALILEO, GPS, SECONDS_PER_WEEK
+from ..gnss.differences import NoiseModel
+from ..gnss.multipath import MultipathModel
+from ..gnss.simulator import (GnssSimulator, SimulatorConfig, default_start, solve_fix,
+                               time_reference)
+from ..gnss.time import GPS_EPOCH, GST_WEEK_OFFSET
+from ..sim import scenarios
+from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
+from .convert import quat, sec_to_stamp, stamp_to_sec, vec
+
+NS = 1_000_000_000
+#: u-blox gnssId of each simulated system (GnssObservations.SYSTEM_*), and the sigId of its
+#: simulated signal (GPS L1 C/A = 0, Galileo E1 C = 0).
+GNSS_ID = {GPS: GnssObservations.SYSTEM_GPS, GALILEO: GnssObservations.SYSTEM_GALILEO}
+SIG_ID = {GPS: 0, GALILEO: 0}
+#: GPS time minus POSIX time at the GPS epoch, without leap seconds [s].
+GPS_EPOCH_POSIX = (GPS_EPOCH - GPS_EPOCH.replace(year=1970, month=1, day=1)).total_seconds()
+#: URA index -> metres (IS-GPS-200 §20.3.3.3.1.3, upper bounds).
+_URA_M = (2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0, 1536.0,
+          3072.0, 6144.0)
+
+
+def accuracy_m(system: str, index: int) -> float:
+    """Broadcast accuracy [m]: GPS URA index, Galileo SISA index (OS SIS ICD §5.1.12); NaN when
+    the index means 'no accuracy prediction'."""
+    if system == GALILEO:
+        if index < 50:
+            return index * 0.01
+        if index < 75:
+            return 0.5 + (index - 50) * 0.02
+        if index < 100:
+            return 1.0 + (index - 75) * 0.04
+        if index < 126:
+            return 2.0 + (index - 100) * 0.16
+        return math.nan
+    return _URA_M[index] if 0 <= index < len(_URA_M) else math.nan
+
+
+def gps_to_posix(t_gps: float, leap_s: int) -> float:
+    """POSIX (UTC) seconds of a GPS time, with GPST - UTC = ``leap_s``."""
+    return t_gps + GPS_EPOCH_POSIX - leap_s
+
+
+def ephemeris_msg(eph, stamp: Time) -> GnssEphemeris:
+    """GnssEphemeris of a KeplerEphemeris. ``tgd`` carries the group delay of the simulated E1 /
+    L1 signal (Galileo: BGD(E1, E5b) of I/NAV); ``iodc`` repeats IODE (not kept by the decoder)."""
+    week, toe = divmod(eph.toe, SECONDS_PER_WEEK)
+    if eph.system == GALILEO:
+        week -= GST_WEEK_OFFSET
+    return GnssEphemeris(
+        header=_header(stamp, "earth"), system=GNSS_ID[eph.system], prn=eph.prn,
+        week=int(week), iode=int(eph.iode), iodc=int(eph.iode), health=int(eph.health),
+        ura=accuracy_m(eph.system, eph.accuracy_index), toe=float(toe),
+        toc=float(eph.toc % SECONDS_PER_WEEK), af0=eph.af0, af1=eph.af1, af2=eph.af2,
+        tgd=eph.tgd, sqrt_a=eph.sqrt_a, eccentricity=eph.e, i0=eph.i0, omega0=eph.omega0,
+        omega=eph.omega, m0=eph.m0, delta_n=eph.delta_n, idot=eph.idot,
+        omega_dot=eph.omega_dot, cuc=eph.cuc, cus=eph.cus, crc=eph.crc, crs=eph.crs,
+        cic=eph.cic, cis=eph.cis)
+
+
+def observations_msg(epoch, stamp: Time, newly_valid) -> GnssObservations:
+    """GnssObservations of one antenna's SimEpoch; ``newly_valid`` flags (per observation) a phase
+    whose half-cycle ambiguity was resolved at this epoch."""
+    raw = epoch.raw
+    msg = GnssObservations(header=_header(stamp, f"gnss_antenna_{epoch.antenna}"),
+                           antenna_id=epoch.antenna, gps_week=raw.week,
+                           time_of_week=float(raw.tow), leap_seconds=raw.leap_s,
+                           clock_reset=raw.clock_reset)
+    msg.system = [GNSS_ID[o.system] for o in raw.obs]
+    msg.prn = [o.prn for o in raw.obs]
+    msg.frequency_slot = [o.freq_slot for o in raw.obs]
+    msg.signal = [SIG_ID[o.system] for o in raw.obs]
+    msg.pseudorange = [float(o.pseudorange_m) for o in raw.obs]
+    msg.doppler = [float(o.doppler_hz) for o in raw.obs]
+    msg.carrier_phase = [float(o.carrier_cycles) if o.half_cycle_valid else math.nan
+                         for o in raw.obs]
+    msg.cn0 = [float(o.cn0_dbhz) for o in raw.obs]
+    msg.lock_time = [o.lock_ms / 1000.0 for o in raw.obs]
+    msg.loss_of_lock = [bool(a or b) for a, b in zip(epoch.loss_of_lock, newly_valid)]
+    msg.pseudorange_std = [float(o.pr_std_m) for o in raw.obs]
+    msg.carrier_phase_std = [float(o.cp_std_cycles) for o in raw.obs]
+    return msg
+
+
+def fix_msgs(fix, stamp: Time, systems) -> tuple[NavSatFix, TwistWithCovarianceStamped]:
+    """NavSatFix (degrees, ENU covariance as REP-145/NavSatFix define) and the ENU velocity."""
+    service = (NavSatStatus.SERVICE_GPS if GPS in systems else 0) | (
+        NavSatStatus.SERVICE_GALILEO if GALILEO in systems else 0)
+    nav = NavSatFix(header=_header(stamp, "gnss"), latitude=math.degrees(fix.lat),
+                    longitude=math.degrees(fix.lon), altitude=float(fix.h))
+    nav.status = NavSatStatus(status=NavSatStatus.STATUS_FIX, service=service)
+    nav.position_covariance = [float(v) for v in np.asarray(fix.covariance_enu).ravel()]
+    nav.position_covariance_type = NavSatFix.COVARIANCE_TYPE_KNOWN
+    twist = TwistWithCovarianceStamped(header=_header(stamp, "gnss"))
+    twist.twist.twist.linear.x, twist.twist.twist.linear.y, twist.twist.twist.linear.z = (
+        float(v) for v in fix.vel_enu)
+    cov = np.full((6, 6), 0.0)
+    cov[:3, :3] = fix.vel_covariance_enu
+    cov[3, 3] = cov[4, 4] = cov[5, 5] = -1.0   # angular rate not measured
+    twist.twist.covariance = [float(v) for v in cov.ravel()]
+    return nav, twist
+
+
+def _header(stamp: Time, frame_id: str):
+    from std_msgs.msg import Header
+
+    return Header(stamp=stamp, frame_id=frame_id)
+
+
+class GnssSimulatorNode(NavNode):
+    PARAMS = (
+        Param("source", "truth", "truth input: 'truth' subscribes sim/truth (InsState), "
+              "'scenario' runs an internal seed 004 scenario", choices=("truth", "scenario")),
+        Param("scenario.name", "car", "internal scenario (source: scenario)",
+              choices=tuple(scenarios.SCENARIOS)),
+        Param("scenario.duration_s", 600.0, "internal scenario length, s", 1.0, 86400.0),
+        Param("scenario.seed", 0, "internal scenario seed", 0, 2 ** 31 - 1),
+        Param("scenario.realtime_factor", 1.0,
+              "internal scenario: simulated seconds per wall-clock second", 0.01, 1000.0),
+        Param("rate_hz", 5.0, "raw observation epoch rate, Hz (seed 004: 1-10 Hz)", 0.1, 20.0),
+        Param("fix_every", 1, "publish gnss/fix and gnss/vel every n-th epoch", 1, 100),
+        Param("lever_arms", [0.75, 0.0, 1.0, -0.75, 0.0, 1.0],
+              "antenna phase centres in base_link FLU, m, 3 values per antenna, 1-4 antennas "
+              "(antenna 0 gives gnss/fix)", -100.0, 100.0),
+        Param("shared_clock", True, "antennas on one receiver (one clock); false: one each"),
+        Param("gps", True, "simulate GPS L1 C/A"),
+        Param("galileo", True, "simulate Galileo E1"),
+        Param("elevation_mask_deg", 10.0, "elevation mask, deg", 0.0, 60.0),
+        Param("noise.code_m", 0.3, "code white noise a = b in sigma^2 = a^2 + b^2/sin^2(E), m",
+              0.0, 100.0),
+        Param("noise.phase_m", 0.002, "carrier-phase white noise a = b, m", 0.0, 0.05),
+        Param("noise.doppler_hz", 0.02, "Doppler white noise a = b, Hz", 0.0, 10.0),
+        Param("multipath.enabled", True, "Gauss-Markov multipath on code and phase"),
+        Param("multipath.code_m", 1.0, "code multipath sigma at 0 deg elevation, m", 0.0, 50.0),
+        Param("multipath.phase_m", 0.01, "phase multipath sigma at 0 deg elevation, m", 0.0, 0.05),
+        Param("multipath.elevation_scale_deg", 20.0,
+              "elevation over which multipath sigma falls by e, deg", 1.0, 90.0),
+        Param("multipath.tau_s", 30.0, "multipath correlation time, s", 0.1, 3600.0),
+        Param("ionosphere", True, "apply the Klobuchar ionosphere"),
+        Param("troposphere", True, "apply the Saastamoinen troposphere"),
+        Param("oscillator", "tcxo", "receiver oscillator class (Allan h0, h-2)",
+              choices=("tcxo", "ocxo")),
+        Param("slip_rate_per_s", 0.0, "random cycle slips per satellite and antenna, 1/s",
+              0.0, 1.0),
+        Param("half_cycle_resolve_s", 6.0,
+              "lock time before the half-cycle ambiguity is resolved (phase NaN before), s",
+              0.0, 600.0),
+        Param("shading.enabled", False,
+              "limit the satellites in view by the seed 004 Lab 1 schedule (times from the "
+              "first epoch)"),
+        Param("shading.first_s", 120.0, "first shading window start, s", 0.0, 86400.0),
+        Param("shading.length_s", 45.0, "shading window length, s", 1.0, 86400.0),
+        Param("shading.gap_s", 30.0, "open sky between windows, s", 0.0, 86400.0),
+        Param("shading.counts", [6, 4, 3, 2], "satellites kept in successive windows", 0, 64),
+        Param("start_gps_time_s", 0.0,
+              "GNSS time of the first epoch, s since 1980-01-06 (0: one hour before the "
+              "stored recording, inside the broadcast fit interval)", 0.0, 1.0e10),
+        Param("rotate_orbits_to_site", True,
+              "rotate the stored orbits about the Earth's axis so that the recorded sky "
+              "appears at the first truth longitude"),
+        Param("ephemeris_period_s", 30.0, "republish gnss/ephemeris every, s", 1.0, 86400.0),
+        Param("pps_sigma_s", 20e-9, "time-pulse noise, s (seed 004: 20 ns static)", 0.0, 1e-3),
+        Param("seed", 0, "random seed of the measurement errors", 0, 2 ** 31 - 1),
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__("gnss_simulator", **kwargs)
+        p = self.p
+        arms = p["lever_arms"]
+        if len(arms) % 3 or not 1 <= len(arms) // 3 <= 4:
+            raise ParameterError("parameter 'lever_arms': 3, 6, 9 or 12 values (1-4 antennas) "
+                                 f"expected, got {len(arms)}")
+        systems = tuple(s for s, on in ((GPS, p["gps"]), (GALILEO, p["galileo"])) if on)
+        if not systems:
+            raise ParameterError("parameters 'gps' and 'galileo': enable at least one system")
+        multipath = (MultipathModel(p["multipath.code_m"], p["multipath.phase_m"],
+                                    math.radians(p["multipath.elevation_scale_deg"]),
+                                    p["multipath.tau_s"], p["multipath.tau_s"])
+                     if p["multipath.enabled"] else None)
+        self.config = SimulatorConfig(
+            lever_arms=tuple(tuple(arms[i:i + 3]) for i in range(0, len(arms), 3)),
+            shared_clock=p["shared_clock"], systems=systems,
+            elevation_mask=math.radians(p["elevation_mask_deg"]),
+            noise=NoiseModel(p["noise.phase_m"], p["noise.phase_m"], p["noise.code_m"],
+                             p["noise.code_m"]),
+            doppler_sigma=(p["noise.doppler_hz"], p["noise.doppler_hz"]), multipath=multipath,
+            ionosphere=p["ionosphere"], troposphere=p["troposphere"],
+            oscillator=TCXO if p["oscillator"] == "tcxo" else OCXO,
+            slip_rate=p["slip_rate_per_s"], half_cycle_resolve_s=p["half_cycle_resolve_s"],
+            seed=p["seed"])
+        self.sim: GnssSimulator | None = None
+        self.rng_pps = np.random.default_rng(np.random.SeedSequence(p["seed"]).spawn(5)[4])
+        self.next_epoch_ns = None
+        self.last_truth_ns = None
+        self.last_ephemeris_t = -math.inf
+        self.last_second = None
+        self.epochs = 0
+        self.x0 = None
+        self.valid_phase: dict = {}
+        self.pub_obs = self.publisher(GnssObservations, "gnss/observations", SENSOR_QOS)
+        self.pub_fix = self.publisher(NavSatFix, "gnss/fix", SENSOR_QOS)
+        self.pub_vel = self.publisher(TwistWithCovarianceStamped, "gnss/vel", SENSOR_QOS)
+        self.pub_eph = self.publisher(GnssEphemeris, "gnss/ephemeris", STATE_QOS)
+        self.pub_time = self.publisher(TimeReference, "gnss/time_reference", SENSOR_QOS)
+        if p["source"] == "truth":
+            self.subscribe(InsState, "sim/truth", self.on_truth, SENSOR_QOS)
+        else:
+            sc = scenarios.SCENARIOS[p["scenario.name"]](
+                duration=p["scenario.duration_s"], seed=p["scenario.seed"],
+                rate=2.0 * p["rate_hz"], oversample=2)
+            self.scenario_traj = sc.trajectory
+            self.scenario_k = 0
+            self._start(sc.trajectory.lon[0], 0.0)
+            if self.bus is None:
+                self.timer = self.create_timer(
+                    1.0 / (p["rate_hz"] * p["scenario.realtime_factor"]), self._on_timer)
+
+    def _on_timer(self) -> None:
+        if not self.step_scenario():
+            self.get_logger().info("internal scenario ended")
+            self.timer.cancel()
+
+    # -- set-up -----------------------------------------------------------------------------
+    def _start(self, lon: float, t0: float) -> None:
+        """Create the simulator at the first truth: orbits for its longitude, time axis at t0."""
+        p = self.p
+        broadcast = ephemeris_data.load(lon if p["rotate_orbits_to_site"] else None)
+        start = p["start_gps_time_s"] or default_start(broadcast)
+        shading = ()
+        if p["shading.enabled"]:
+            windows = scenarios.shading_schedule(
+                p["scenario.duration_s"] if p["source"] == "scenario" else 86400.0,
+                counts=tuple(p["shading.counts"]), first=p["shading.first_s"],
+                length=p["shading.length_s"], gap=p["shading.gap_s"])
+            shading = tuple(scenarios.ShadingWindow(w.t_start + t0, w.t_end + t0,
+                                                    w.max_satellites) for w in windows)
+        config = dataclasses.replace(self.config, shading=shading)
+        self.sim = GnssSimulator(broadcast, config, start_gps=start, t0=t0)
+        self.validity = broadcast.validity()
+
+    # -- inputs -----------------------------------------------------------------------------
+    def on_truth(self, msg: InsState) -> None:
+        t_ns = msg.header.stamp.sec * NS + msg.header.stamp.nanosec
+        values = [msg.latitude, msg.longitude, msg.altitude, *vec(msg.velocity),
+                  *quat(msg.orientation), *vec(msg.angular_velocity)]
+        if not all(math.isfinite(v) for v in values) or np.linalg.norm(quat(msg.orientation)) < 0.5:
+            self.diag.count("non-finite or invalid truth dropped")
+            return
+        if self.last_truth_ns is not None and t_ns <= self.last_truth_ns:
+            self.diag.count("truth stamp not after the previous one: dropped")
+            return
+        self.last_truth_ns = t_ns
+        if self.sim is None:
+            self._start(msg.longitude, stamp_to_sec(msg.header.stamp))
+            self.next_epoch_ns = t_ns
+        if t_ns < self.next_epoch_ns:
+            return
+        period_ns = int(round(NS / self.p["rate_hz"]))
+        while self.next_epoch_ns <= t_ns:
+            self.next_epoch_ns += period_ns
+        q = quat(msg.orientation)
+        self.simulate(stamp_to_sec(msg.header.stamp), msg.latitude, msg.longitude, msg.altitude,
+                      vec(msg.velocity), q / np.linalg.norm(q), vec(msg.angular_velocity),
+                      msg.header.stamp)
+
+    def step_scenario(self) -> bool:
+        """Publish the next epoch of the internal scenario; False when it has ended."""
+        traj = self.scenario_traj
+        k = self.scenario_k
+        if k >= len(traj):
+            return False
+        self.scenario_k += 2   # the trajectory runs at twice the epoch rate
+        t_gps = self.sim.gps_time(traj.t[k])
+        stamp = sec_to_stamp(gps_to_posix(t_gps, 18))
+        self.simulate(traj.t[k], traj.lat[k], traj.lon[k], traj.h[k], traj.v_enu[k],
+                      traj.q_nb[k], traj.omega_ib_b[k], stamp)
+        return True
+
+    # -- one epoch --------------------------------------------------------------------------
+    def simulate(self, t, lat, lon, h, v_enu, q_nb, omega_ib_b, stamp: Time) -> None:
+        """Simulate one epoch at truth time ``t`` [s] and publish it stamped ``stamp``."""
+        try:
+            epochs = self.sim.epoch(t, lat, lon, h, v_enu, q_nb, omega_ib_b)
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError) as err:
+            self.diag.count(f"epoch not simulated: {err}")
+            return
+        try:
+            self._publish_epoch(epochs, stamp)
+        except RCLError:
+            # An epoch takes tens of ms: a shutdown (SIGINT) can invalidate the context while
+            # it is being published. Anything else is a real fault.
+            if self.context.ok():
+                raise
+
+    def _publish_epoch(self, epochs, stamp: Time) -> None:
+        t_gps = epochs[0].t_gps
+        if not self.validity[0] <= t_gps <= self.validity[1]:
+            self.diag.count("epoch outside the broadcast fit interval: orbits extrapolated",
+                            log=False)
+        if t_gps - self.last_ephemeris_t >= self.p["ephemeris_period_s"]:
+            for eph in self.sim.ephemerides.values():
+                self.pub_eph.publish(ephemeris_msg(eph, stamp))
+            self.last_ephemeris_t = t_gps
+        for epoch in epochs:
+            newly_valid = []
+            for o in epoch.raw.obs:
+                key = (epoch.antenna, o.sat_id)
+                newly_valid.append(o.half_cycle_valid and not self.valid_phase.get(key, False))
+                self.valid_phase[key] = o.half_cycle_valid
+            for key in [k for k in self.valid_phase if k[0] == epoch.antenna and
+                        k[1] not in {o.sat_id for o in epoch.raw.obs}]:
+                del self.valid_phase[key]
+            self.pub_obs.publish(observations_msg(epoch, stamp, newly_valid))
+        second = math.floor(t_gps + 1e-6)
+        if second != self.last_second and abs(t_gps - second) < 1e-6:
+            _, t_pulse = time_reference(epochs[0], self.p["pps_sigma_s"], self.rng_pps)
+            leap = epochs[0].raw.leap_s
+            self.pub_time.publish(TimeReference(header=_header(stamp, "gnss"),
+                                                time_ref=sec_to_stamp(gps_to_posix(t_pulse, leap)),
+                                                source="gps"))
+        self.last_second = second
+        if self.epochs % self.p["fix_every"] == 0:
+            fix = solve_fix(epochs[0], self.sim, self.x0)
+            if fix is None:
+                self.diag.count("no fix: fewer satellites than unknowns", log=False)
+                self.x0 = None
+            else:
+                self.x0 = fix.xyz   # the next solution starts from this one
+                nav, twist = fix_msgs(fix, stamp, self.config.systems)
+                self.pub_fix.publish(nav)
+                if np.all(np.isfinite(fix.vel_enu)):
+                    self.pub_vel.publish(twist)
+        self.epochs += 1
+
+
+def main(args=None) -> int:
+    return run(GnssSimulatorNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
