@@ -30,7 +30,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import yaml
 from builtin_interfaces.msg import Time
 from ins_gnss_msgs.msg import ImuDelta, InsCorrection
 from sensor_msgs.msg import Imu, MagneticField, Temperature
@@ -38,6 +37,7 @@ from sensor_msgs.msg import Imu, MagneticField, Temperature
 from ..imu.calibration import ImuCalibration, ResidualErrors
 from ..imu.sample_checks import SampleChecker
 from ..nav.coning import METHODS, Integrator
+from ..params_io import ParamsFileError, load_yaml_file
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import to_vector3, vec
 
@@ -191,10 +191,9 @@ class ImuPreprocessorNode(NavNode):
     @staticmethod
     def _read_calibration_file(path: Path) -> dict:
         try:
-            d = yaml.safe_load(path.read_text())
-        except (OSError, yaml.YAMLError) as err:
-            raise ParameterError(f"parameter 'calibration_file': cannot read {path}: {err}") \
-                from None
+            d = load_yaml_file(path)
+        except ParamsFileError as err:
+            raise ParameterError(f"parameter 'calibration_file': {err}") from None
         if isinstance(d, dict) and "imu_calibration" in d:
             d = d["imu_calibration"]
         if not isinstance(d, dict):

@@ -22,7 +22,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import yaml
 from ins_gnss_msgs.msg import Heading, InsState
 from sensor_msgs.msg import Imu, MagneticField, NavSatFix, NavSatStatus
 
@@ -32,6 +31,7 @@ from ..magnetic.ellipsoid_fit import HardSoftIron
 from ..magnetic.wmm import decimal_year, field_elements
 from ..nav.alignment import level
 from ..nav.rotations import quat_to_euler
+from ..params_io import ParamsFileError, load_yaml_file
 from .base import SENSOR_QOS, NavNode, Param, ParameterError, run
 from .convert import quat, stamp_to_sec, vec
 
@@ -128,10 +128,9 @@ class MagCompassNode(NavNode):
                                      "a file or as calibration.* parameters, not both")
             path = Path(p["calibration_file"])
             try:
-                d = yaml.safe_load(path.read_text())
-            except (OSError, yaml.YAMLError) as err:
-                raise ParameterError(f"parameter 'calibration_file': cannot read {path}: {err}") \
-                    from None
+                d = load_yaml_file(path)
+            except ParamsFileError as err:
+                raise ParameterError(f"parameter 'calibration_file': {err}") from None
             d = d.get("mag_calibration", d) if isinstance(d, dict) else d
             if not isinstance(d, dict) or set(d) - {"hard_iron", "soft_iron", "heading_bias"}:
                 raise ParameterError(f"parameter 'calibration_file': {path} is not a dict of "
