@@ -27,6 +27,7 @@ setup(
         "strapdown = ins_gnss_ros.nodes.strapdown_node:main",
         "mag_compass = ins_gnss_ros.nodes.mag_compass_node:main",
         "gnss_simulator = ins_gnss_ros.nodes.gnss_simulator_node:main",
+        "ekf = ins_gnss_ros.nodes.ekf_node:main",
         # calibration tools
         "imu_allan = ins_gnss_ros.tools.allan_cli:main",
         "imu_calibrate = ins_gnss_ros.tools.imu_calibrate_cli:main",

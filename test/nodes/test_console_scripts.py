@@ -20,6 +20,8 @@ CONTRACT = {
     "mag_compass": (["/mag/heading"], ["/imu/mag", "/ins/state", "/gnss/fix"]),
     "gnss_simulator": (["/gnss/fix", "/gnss/vel", "/gnss/observations", "/gnss/ephemeris",
                         "/gnss/time_reference"], ["/sim/truth"]),
+    "ekf": (["/ins/correction", "/nav/odom", "/nav/fix", "/nav/status"],
+            ["/imu/delta", "/ins/state", "/gnss/fix", "/gnss/vel", "/gnss/heading"]),
 }
 
 

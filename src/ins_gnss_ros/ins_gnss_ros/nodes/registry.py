@@ -12,6 +12,7 @@ NODES = {
     "strapdown": "ins_gnss_ros.nodes.strapdown_node:StrapdownNode",
     "mag_compass": "ins_gnss_ros.nodes.mag_compass_node:MagCompassNode",
     "gnss_simulator": "ins_gnss_ros.nodes.gnss_simulator_node:GnssSimulatorNode",
+    "ekf": "ins_gnss_ros.nodes.ekf_node:EkfNode",
 }
 
 

@@ -1,0 +1,277 @@
+"""Error-state (indirect, feedback) Kalman filter closed around the strapdown mechanisation.
+
+The filter estimates the errors of the navigation solution and of the inertial sensors, in the
+state order of a :class:`~ins_gnss_ros.nav.error_model.StateLayout` followed by optional extra
+blocks (:class:`ExtraState`: IMU-GNSS time offset, magnetic-heading bias, ...). Conventions are
+those of :mod:`ins_gnss_ros.nav.strapdown` and :mod:`ins_gnss_ros.nav.error_model`:
+
+* navigation errors (pos, vel, att) are "computed minus true"; they are removed from the
+  strapdown with :func:`~ins_gnss_ros.nav.strapdown.apply_correction`;
+* every other state (sensor errors, clock, extra blocks) is the residual "true minus current
+  estimate" of a quantity whose running estimate lives outside the filter; feedback ADDS the
+  state to that estimate (for the IMU errors "true" means the sensor's measured-minus-true error,
+  error_model.py).
+
+Generalised Kalman filter of seed 004 section 2.5 (eqs. 2.1.10-2.1.15): covariance prediction
+P- = Phi P Phi^T + Q with Phi and Q from the Picard series of seed 001 (Babich, equal orders of
+Phi and Q, :mod:`ins_gnss_ros.nav.discretize`), Joseph-form update (seed 004 eq. 2.1.13), and
+the closed-loop estimation channel x = C Phi x + K z with C zeroing the fed-back states: here all
+states are fed back after each update, so the prediction of x is always zero and the innovation
+is z itself (seed 004 section 2.5, "the innovation equals z").
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .discretize import DEFAULT_ORDER, picard_predict, picard_transition
+from .error_model import DEFAULT_CLOCK_PSD, StateLayout, noise_input, system_matrix
+from .gating import DEFAULT_GATE_PROB, UpdateResult, chi2_gate, normalised_innovation
+
+#: Smallest variance kept on the diagonal after an update (state units squared); guards the
+#: Joseph form against round-off driving a variance negative on perfectly observed states.
+MIN_VARIANCE = 1e-18
+
+
+@dataclass(frozen=True)
+class ExtraState:
+    """A block of states outside error_model.py: random constant, random walk or Gauss-Markov.
+
+    Attributes
+    ----------
+    size : int
+        Number of states.
+    sigma0 : float or array_like of `size` floats
+        Initial standard deviation (state unit), one for the block or one per state.
+    psd : float
+        Driving white-noise spectral density (unit^2 / s); 0 for a random constant.
+    tau : float
+        Gauss-Markov correlation time, s; inf for a random constant / walk.
+    """
+
+    size: int = 1
+    sigma0: float = 0.0
+    psd: float = 0.0
+    tau: float = np.inf
+
+
+#: Extra blocks the measurement models know: "td" IMU-to-measurement time offset (s, a measurement
+#: stamped t refers to the navigation epoch t - td), "mag" magnetic-heading bias (rad), "nhc"
+#: pitch and yaw of the vehicle axes relative to the IMU axes for the non-holonomic
+#: constraint (2, rad), "log" water current E, N (m/s) and speed-log scale error (3).
+KNOWN_EXTRAS = ("td", "mag", "nhc", "log")
+
+
+@dataclass(frozen=True)
+class StateSpace:
+    """Error-state vector: an error_model layout followed by extra blocks.
+
+    Attributes
+    ----------
+    layout : StateLayout
+    extras : dict of str to ExtraState
+    """
+
+    layout: StateLayout
+    extras: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        unknown = [name for name in self.extras if name not in KNOWN_EXTRAS]
+        if unknown:
+            raise ValueError(f"extra blocks {unknown}: the measurement models know {KNOWN_EXTRAS}")
+        slices = dict(self.layout.slices)
+        n = self.layout.size
+        for name, block in self.extras.items():
+            slices[name] = slice(n, n + block.size)
+            n += block.size
+        object.__setattr__(self, "_slices", slices)
+        object.__setattr__(self, "_size", n)
+
+    @property
+    def slices(self):
+        """dict block name -> slice into the state vector."""
+        return self._slices
+
+    @property
+    def size(self):
+        """Number of states."""
+        return self._size
+
+    @property
+    def blocks(self):
+        """Block names in state order."""
+        return tuple(self.layout.blocks) + tuple(self.extras)
+
+    def __getitem__(self, name):
+        return self._slices[name]
+
+    def __contains__(self, name):
+        return name in self._slices
+
+
+class ErrorStateEKF:
+    """Covariance and error-state estimate of the closed-loop filter.
+
+    Parameters
+    ----------
+    space : StateSpace
+    noise : FilterNoise
+        IMU noise model (:func:`ins_gnss_ros.nav.sensor_errors.filter_noise`).
+    P0 : (n, n) array_like
+        Initial covariance.
+    clock_psd : sequence of 3 float
+        Receiver clock noise densities (layouts with a "clock" block).
+    order : int
+        Picard order of the discretisation (>= 3 keeps Q positive semi-definite).
+    joseph : bool
+        Joseph-form covariance update (default) or the standard (I - K H) P.
+    """
+
+    def __init__(self, space, noise, P0, clock_psd=DEFAULT_CLOCK_PSD, order=DEFAULT_ORDER,
+                 joseph=True):
+        self.space = space
+        self.noise = noise
+        self.clock_psd = clock_psd
+        self.order = order
+        self.joseph = joseph
+        self.P = np.array(P0, dtype=float)
+        self.x = np.zeros(space.size)
+        # The extra blocks' dynamics do not depend on the navigation state: build them once.
+        n0 = space.layout.size
+        self._F_extra = np.zeros((space.size - n0,) * 2)
+        self._Q_extra = np.zeros_like(self._F_extra)
+        i = 0
+        for block in space.extras.values():
+            s = slice(i, i + block.size)
+            if np.isfinite(block.tau):
+                self._F_extra[s, s] = -np.eye(block.size) / block.tau
+            self._Q_extra[s, s] = block.psd * np.eye(block.size)
+            i += block.size
+        self._Q = None
+        self.F_model = None
+
+    def continuous_model(self, nav_state, f_b, w_ib_b):
+        """Continuous F and Q = G Qc G^T of the whole state (error_model.py plus extras).
+
+        Q does not depend on the navigation state: the white noises are the same on the three
+        axes of a triad, so C Qc C^T = Qc for any attitude C. It is computed once.
+
+        Parameters
+        ----------
+        nav_state : NavState
+            Current (corrected) navigation solution.
+        f_b, w_ib_b : array_like, shape (3,)
+            Compensated specific force (m/s^2) and angular rate (rad/s), body FLU.
+
+        Returns
+        -------
+        F : (n, n) ndarray [1/s]
+        Q : (n, n) ndarray [state^2 / s]
+        """
+        lay = self.space.layout
+        n0 = lay.size
+        F = np.zeros((self.space.size,) * 2)
+        F[:n0, :n0] = system_matrix(lay, nav_state, f_b, w_ib_b)
+        F[n0:, n0:] = self._F_extra
+        if self._Q is None:
+            G, Qc = noise_input(lay, nav_state, self.noise, self.clock_psd)
+            Q = np.zeros_like(F)
+            Q[:n0, :n0] = (G * np.diag(Qc)) @ G.T
+            Q[n0:, n0:] = self._Q_extra
+            self._Q = Q
+        return F, self._Q
+
+    def predict(self, nav_state, f_b, w_ib_b, dt, refresh=True):
+        """Propagate x and P over dt with the model frozen at the given state.
+
+        Parameters
+        ----------
+        nav_state : NavState
+        f_b, w_ib_b : array_like, shape (3,)
+            Compensated specific force and angular rate, body FLU (m/s^2, rad/s).
+        dt : float
+            Step, s.
+        refresh : bool
+            Rebuild F from the arguments (True), or reuse the F of the last refresh (the caller
+            decides how often the model changes enough to matter).
+
+        Returns
+        -------
+        phi : (n, n) ndarray
+            Transition matrix of the step (kept by the navigator for the RTS smoother).
+        """
+        if refresh or self.F_model is None:
+            self.F_model, self._Q = self.continuous_model(nav_state, f_b, w_ib_b)
+        F, Q = self.F_model, self._Q
+        phi = picard_transition(F, dt, self.order)
+        self.P = picard_predict(self.P, F, Q, dt, self.order)
+        self.x = phi @ self.x
+        return phi
+
+    def update(self, name, t, z, H, R, gate_prob=DEFAULT_GATE_PROB, force=False):
+        """Measurement update with chi-square innovation gating.
+
+        Parameters
+        ----------
+        name : str
+            Measurement kind, for the report.
+        t : float
+            Epoch, s.
+        z : array_like, shape (m,)
+            Measurement residual "predicted minus measured" (the filter's z, seed 004 2.1.3).
+        H : array_like, shape (m, n)
+        R : array_like, shape (m, m)
+            Measurement noise covariance.
+        gate_prob : float or None
+            Chi-square gate probability; None disables gating.
+        force : bool
+            Update even if the gate rejects (the navigator's recovery after long rejections).
+
+        Returns
+        -------
+        UpdateResult
+        """
+        z = np.atleast_1d(np.asarray(z, float))
+        H = np.atleast_2d(np.asarray(H, float))
+        R = np.atleast_2d(np.asarray(R, float))
+        nu = z - H @ self.x
+        PHt = self.P @ H.T
+        S = H @ PHt + R
+        S = 0.5 * (S + S.T)
+        nis = normalised_innovation(nu, S)
+        gate = chi2_gate(len(z), gate_prob) if gate_prob is not None else np.inf
+        ok = nis <= gate
+        result = UpdateResult(name, float(t), nu, np.diag(S).copy(), nis, gate, ok or force,
+                              "ok" if ok else ("forced" if force else "gated"))
+        if not result.accepted:
+            return result
+        K = np.linalg.solve(S, PHt.T).T
+        self.x = self.x + K @ nu
+        if self.joseph:
+            A = np.eye(self.space.size) - K @ H
+            P = A @ self.P @ A.T + K @ R @ K.T
+        else:
+            P = self.P - K @ PHt.T
+        self.P = symmetrize(P)
+        return result
+
+    def take_correction(self):
+        """Return the estimated error state and zero it (closed-loop reset).
+
+        The caller feeds it back (navigation errors to the strapdown, the rest to the running
+        estimates). The covariance is unchanged: the reset subtracts a known quantity.
+        """
+        dx = self.x
+        self.x = np.zeros(self.space.size)
+        return dx
+
+
+def symmetrize(P):
+    """Average P with its transpose and floor the diagonal at `MIN_VARIANCE`."""
+    P = 0.5 * (P + P.T)
+    d = np.diagonal(P)
+    low = d < MIN_VARIANCE
+    if np.any(low):
+        P[low, low] = MIN_VARIANCE
+    return P

@@ -1,0 +1,424 @@
+"""Measurement models of the error-state filter: residual z, matrix H, noise covariance R.
+
+Every model returns an :class:`Innovation` with z = predicted - measured ("computed minus
+measured", seed 004 eq. 2.1.3 and section 2.6), predicted from the current navigation solution
+and the running sensor/clock estimates, and H the Jacobian of the prediction with respect to the
+error state of :class:`~ins_gnss_ros.nav.ekf.StateSpace` (conventions in ekf.py: navigation errors
+computed minus true, C_nb_computed = (I - [phi x]) C_nb_true; other states true minus estimate).
+
+Attitude terms come from d(C l) = -[phi x] C l = [(C l) x] phi. Lever arms l_b are the sensor's
+position relative to the IMU in body FLU (:mod:`ins_gnss_ros.nav.lever_arm`, Groves,
+"Principles of GNSS, Inertial and Multisensor Integrated Navigation", 2nd ed., section 14.2.4
+and eqs. 14.121-14.122 for the lever-arm terms of the loosely coupled measurement matrix).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .conventions import azimuth_from_yaw, wrap_pi
+from .earth import WGS84, earth_rate_enu, ecef_to_enu_matrix, geodetic_to_ecef, radii
+from .lever_arm import lever_arm_position, lever_arm_velocity
+from .rotations import quat_to_dcm, skew
+
+
+@dataclass(frozen=True)
+class Innovation:
+    """A linearised measurement: z = H dx + noise, noise ~ N(0, R).
+
+    Attributes
+    ----------
+    name : str
+    z : ndarray, shape (m,)
+        Predicted minus measured.
+    H : ndarray, shape (m, n)
+    R : ndarray, shape (m, m)
+    """
+
+    name: str
+    z: np.ndarray
+    H: np.ndarray
+    R: np.ndarray
+
+
+def _zeros(space, m):
+    return np.zeros((m, space.size))
+
+
+def _add_time_offset(space, H, dzdt):
+    """Column of the "td" state: a measurement stamped t refers to the epoch t - td, so the
+    prediction made at t - td_estimate has the residual error dz/dt (td - td_estimate)."""
+    if dzdt is not None and "td" in space:
+        H[:, space["td"].start] = dzdt
+
+
+def _gyro_columns(space, H, block):
+    """Put `block` (m, 3) into the columns of every gyro-bias block of the space."""
+    for name in ("bg", "gmg"):
+        if name in space:
+            H[:, space[name]] = block
+
+
+def position_residual_enu(lat, lon, h, lat_ref, lon_ref, h_ref, ell=WGS84):
+    """(lat, lon, h) - (lat_ref, lon_ref, h_ref) as ENU metres at the reference position.
+
+    Uses the curvilinear scaling of the error state (error_model.py), exact to first order.
+    """
+    rm, rn = radii(lat_ref, ell)
+    dlon = (lon - lon_ref + np.pi) % (2.0 * np.pi) - np.pi
+    return np.array([(rn + h_ref) * np.cos(lat_ref) * dlon, (rm + h_ref) * (lat - lat_ref),
+                     h - h_ref])
+
+
+def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=None):
+    """GNSS antenna position (loose coupling).
+
+    Parameters
+    ----------
+    space : StateSpace
+    state : NavState
+        IMU solution at the measurement epoch.
+    lat, lon, h : float
+        Measured antenna position (rad, rad, m).
+    cov_enu : (3, 3) array_like
+        Its covariance in ENU, m^2.
+    lever_b : array_like, shape (3,)
+        Antenna relative to the IMU, FLU, m.
+    dzdt : array_like, shape (3,), optional
+        Antenna velocity ENU (m/s), for the time-offset state.
+
+    Returns
+    -------
+    Innovation
+        z in ENU metres; H = [I, 0, [(C l) x]] (+ time offset).
+    """
+    lever_n = quat_to_dcm(state.q_nb) @ np.asarray(lever_b, float)
+    # Antenna minus measured = (IMU minus measured) + C l, resolved in the ENU frame of the
+    # measured point; the curvature neglected is |l|^2 / R ~ 1e-7 m for a metre-long arm.
+    z = position_residual_enu(state.lat, state.lon, state.h, lat, lon, h) + lever_n
+    H = _zeros(space, 3)
+    H[:, space["pos"]] = np.eye(3)
+    H[:, space["att"]] = skew(lever_n)
+    _add_time_offset(space, H, dzdt)
+    return Innovation("gnss_pos", z, H, np.asarray(cov_enu, float))
+
+
+def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3), dzdt=None):
+    """GNSS antenna velocity (loose coupling).
+
+    Predicted v_a = v + C (omega_ib x l) - omega_ie x (C l) (Groves eq. 2.167). Its error:
+    dv + [C (omega x l) x] phi - [omega_ie x][(C l) x] phi - C [l x] d_omega, with d_omega the
+    residual gyro error.
+
+    Parameters
+    ----------
+    v_enu : array_like, shape (3,)
+        Measured antenna velocity, ENU, m/s.
+    cov_enu : (3, 3) array_like
+        Its covariance, (m/s)^2.
+    omega_ib_b : array_like, shape (3,)
+        Compensated angular rate, FLU, rad/s.
+    lever_b : array_like, shape (3,)
+    dzdt : array_like, shape (3,), optional
+        Antenna acceleration ENU (m/s^2), for the time-offset state.
+
+    Returns
+    -------
+    Innovation
+    """
+    lever_b = np.asarray(lever_b, float)
+    omega_ib_b = np.asarray(omega_ib_b, float)
+    C = quat_to_dcm(state.q_nb)
+    pred = lever_arm_velocity(state.v_enu, state.q_nb, omega_ib_b, lever_b, state.lat)
+    H = _zeros(space, 3)
+    H[:, space["vel"]] = np.eye(3)
+    H[:, space["att"]] = skew(C @ np.cross(omega_ib_b, lever_b)) \
+        - skew(earth_rate_enu(state.lat)) @ skew(C @ lever_b)
+    _gyro_columns(space, H, -C @ skew(lever_b))
+    _add_time_offset(space, H, dzdt)
+    return Innovation("gnss_vel", pred - np.asarray(v_enu, float), H, np.asarray(cov_enu, float))
+
+
+def azimuth_of_axis(q_nb, axis_b=(1.0, 0.0, 0.0)):
+    """Azimuth (clockwise from north, rad) of a body axis, and its gradient w.r.t. phi.
+
+    Returns
+    -------
+    azimuth : float
+        In [0, 2 pi).
+    grad : ndarray, shape (3,)
+        d azimuth / d phi, from d c = -[phi x] c = [c x] phi for the axis c = C axis_b.
+    """
+    c = quat_to_dcm(q_nb) @ np.asarray(axis_b, float)
+    yaw = np.arctan2(c[1], c[0])
+    r2 = c[0] ** 2 + c[1] ** 2
+    dc = skew(c)
+    dyaw = (c[0] * dc[1] - c[1] * dc[0]) / r2
+    # azimuth = pi/2 - yaw.
+    return azimuth_from_yaw(yaw), -dyaw
+
+
+def heading(space, state, azimuth, variance, baseline_yaw_b=0.0, name="heading"):
+    """True heading (e.g. dual-antenna GNSS baseline): azimuth of a horizontal body axis.
+
+    Parameters
+    ----------
+    azimuth : float
+        Measured azimuth of the axis, clockwise from north, rad.
+    variance : float
+        rad^2.
+    baseline_yaw_b : float
+        Axis direction in the body, counter-clockwise from body x in the body x-y plane, rad.
+
+    Returns
+    -------
+    Innovation
+        z = azimuth_pred - azimuth (wrapped); for a level vehicle H_att = [0, 0, 1] (seed 004
+        section 2.5: H_K(1,1) = +1, z_K = K_pr - K_ext = phi_h).
+    """
+    axis = (np.cos(baseline_yaw_b), np.sin(baseline_yaw_b), 0.0)
+    pred, grad = azimuth_of_axis(state.q_nb, axis)
+    H = _zeros(space, 1)
+    H[0, space["att"]] = grad
+    return Innovation(name, np.array([wrap_pi(pred - azimuth)]), H, np.array([[variance]]))
+
+
+def magnetic_heading(space, state, azimuth, variance, bias=0.0):
+    """Magnetic compass heading, already corrected for declination (seed 004 section 2.8:
+    z_MK = K_pr - K_mk = phi_h - dK_mk - noise).
+
+    With a "mag" extra state the compass bias b (measured minus true) is estimated; `bias` is its
+    running estimate, the state is the residual b - bias, so H_mag = -1.
+
+    Parameters
+    ----------
+    azimuth : float
+        True azimuth from the compass (magnetic plus declination), rad.
+    variance : float
+        rad^2.
+    bias : float
+        Current compass-bias estimate, rad.
+    """
+    pred, grad = azimuth_of_axis(state.q_nb)
+    H = _zeros(space, 1)
+    H[0, space["att"]] = grad
+    if "mag" in space:
+        H[0, space["mag"]] = -1.0
+    return Innovation("mag_heading", np.array([wrap_pi(pred + bias - azimuth)]), H,
+                      np.array([[variance]]))
+
+
+def zero_velocity(space, state, sigma):
+    """ZUPT: the vehicle is at rest, v_enu = 0 (sigma m/s per axis)."""
+    H = _zeros(space, 3)
+    H[:, space["vel"]] = np.eye(3)
+    return Innovation("zupt", np.asarray(state.v_enu, float).copy(), H, sigma ** 2 * np.eye(3))
+
+
+def zero_angular_rate(space, state, omega_ib_b, sigma):
+    """ZARU: at rest the body turns only with the Earth, omega_ib_b = C^T omega_ie.
+
+    Parameters
+    ----------
+    omega_ib_b : array_like, shape (3,)
+        Compensated gyro output averaged over the still period, rad/s.
+    sigma : float
+        rad/s per axis (the white-noise density over the averaging time, plus vibration).
+
+    Returns
+    -------
+    Innovation
+        H = I on the residual gyro-bias states (the attitude term times the Earth rate is
+        negligible).
+    """
+    C = quat_to_dcm(state.q_nb)
+    z = np.asarray(omega_ib_b, float) - C.T @ earth_rate_enu(state.lat)
+    H = _zeros(space, 3)
+    _gyro_columns(space, H, np.eye(3))
+    return Innovation("zaru", z, H, sigma ** 2 * np.eye(3))
+
+
+def nonholonomic(space, state, sigma_lateral, sigma_vertical, omega_ib_b=np.zeros(3),
+                 lever_b=np.zeros(3), boresight=np.zeros(2)):
+    """Non-holonomic constraint of a wheeled vehicle: no lateral or vertical velocity at the
+    constraint point (the rear axle's centre).
+
+    v_point_b = C^T v_n + omega x l (the Earth rate is negligible over a lever arm); its error is
+    C^T dv - C^T [v x] phi - [l x] d_omega (from C_computed^T = C^T (I + [phi x]) and the
+    residual gyro error d_omega). The vehicle axes may differ from the IMU's by small boresight
+    angles (pitch theta, yaw psi): v_vehicle = v_b + v_b x (0, theta, psi), i.e. lateral
+    v_y - v_x psi and vertical v_z + v_x theta. With an "nhc" extra state (the residual boresight,
+    true minus `boresight`) H_nhc = [[0, v_x], [-v_x, 0]].
+
+    Parameters
+    ----------
+    sigma_lateral, sigma_vertical : float
+        Constraint noise, m/s (skid, suspension motion).
+    omega_ib_b : array_like, shape (3,)
+        Compensated angular rate, FLU, rad/s.
+    lever_b : array_like, shape (3,)
+        Constraint point relative to the IMU, FLU, m.
+    boresight : array_like, shape (2,)
+        Current estimate of the vehicle-axes pitch and yaw relative to the IMU axes, rad.
+
+    Returns
+    -------
+    Innovation
+        z = predicted (lateral, vertical) velocity of the point in vehicle axes - 0.
+    """
+    lever_b = np.asarray(lever_b, float)
+    theta, psi = boresight
+    C = quat_to_dcm(state.q_nb)
+    v = np.asarray(state.v_enu, float)
+    v_b = C.T @ v + np.cross(omega_ib_b, lever_b)
+    # Lateral and vertical vehicle-axes components of a body vector.
+    A = np.array([[-psi, 1.0, 0.0], [theta, 0.0, 1.0]])
+    H = _zeros(space, 2)
+    H[:, space["vel"]] = A @ C.T
+    H[:, space["att"]] = -A @ C.T @ skew(v)
+    _gyro_columns(space, H, -A @ skew(lever_b))
+    if "nhc" in space:
+        H[:, space["nhc"]] = [[0.0, v_b[0]], [-v_b[0], 0.0]]
+    z = A @ v_b
+    return Innovation("nhc", z, H, np.diag([sigma_lateral ** 2, sigma_vertical ** 2]))
+
+
+def speed_log(space, state, speed, variance, current_enu=np.zeros(2), scale=0.0):
+    """Speed log: water-relative speed along the body x axis (seed 004 section 2.8).
+
+    V_L = (1 + s) r^T (v - w), r = C e_x the body x axis in ENU, w the horizontal water current
+    (ENU) and s the log scale error. Seed 004 writes the same as two components
+    V_pr - V_L (sin K, cos K) with the current and log errors lumped into dV^L; here they are
+    states: with a "log" extra block [w_E, w_N, s] (residuals, true minus `current_enu` and
+    `scale`) H_log = [(1 + s) r_E, (1 + s) r_N, -r^T (v - w)]. The attitude column
+    -(1 + s) (C^T [(v - w) x])_x carries seed 004's heading terms (H_L(1,1) = -V_N,
+    H_L(2,1) = +V_E).
+
+    Parameters
+    ----------
+    speed : float
+        Measured speed through the water, m/s (positive ahead).
+    variance : float
+        (m/s)^2.
+    current_enu : array_like, shape (2,)
+        Current estimate (velocity of the water over ground, E and N), m/s.
+    scale : float
+        Log scale-error estimate.
+
+    Returns
+    -------
+    Innovation
+    """
+    C = quat_to_dcm(state.q_nb)
+    w = np.array([current_enu[0], current_enu[1], 0.0])
+    rel = np.asarray(state.v_enu, float) - w
+    r = C[:, 0]
+    H = _zeros(space, 1)
+    H[0, space["vel"]] = (1.0 + scale) * r
+    H[0, space["att"]] = -(1.0 + scale) * (C.T @ skew(rel))[0]
+    if "log" in space:
+        H[0, space["log"]] = [(1.0 + scale) * r[0], (1.0 + scale) * r[1], -(r @ rel)]
+    return Innovation("speed_log", np.array([(1.0 + scale) * (r @ rel) - speed]), H,
+                      np.array([[variance]]))
+
+
+def _line_of_sight(state, sat_pos_ecef, lever_b):
+    """Antenna ECEF position, unit vectors to the satellites (ENU rows) and ranges."""
+    lat, lon, h = lever_arm_position(state.lat, state.lon, state.h, state.q_nb, lever_b)
+    r = geodetic_to_ecef(lat, lon, h)
+    d = np.atleast_2d(np.asarray(sat_pos_ecef, float)) - r
+    rho = np.linalg.norm(d, axis=1)
+    u_ecef = d / rho[:, None]
+    u_enu = u_ecef @ ecef_to_enu_matrix(state.lat, state.lon).T
+    return u_ecef, u_enu, rho
+
+
+def pseudoranges(space, state, sat_pos_ecef, sat_clock_m, pseudorange, variance, clock_m=0.0,
+                 lever_b=np.zeros(3)):
+    """GNSS pseudoranges of any number of satellites (tight coupling; fewer than 4 is fine).
+
+    rho_pred = |r_sat - r_ant| + clock - sat_clock (seed 004 section 2.4, eq. 2.1.1-2.1.6). The
+    satellite positions must be at transmission time, expressed in the ECEF frame of reception
+    time (Earth rotation during the signal flight applied by the caller), and the pseudoranges
+    corrected for the atmosphere.
+
+    Parameters
+    ----------
+    sat_pos_ecef : array_like, shape (k, 3)
+        Satellite positions, m.
+    sat_clock_m : array_like, shape (k,)
+        Satellite clock offsets times c, m (positive: the satellite clock is ahead).
+    pseudorange : array_like, shape (k,)
+        Measured pseudoranges, m.
+    variance : float or array_like, shape (k,)
+        m^2.
+    clock_m : float
+        Current receiver clock-offset estimate, m.
+    lever_b : array_like, shape (3,)
+
+    Returns
+    -------
+    Innovation
+        H_pos = -u_enu^T, H_att = -u_enu^T [(C l) x], H_clock = -1 (seed 004 H_i(1,22) = -1).
+    """
+    lever_b = np.asarray(lever_b, float)
+    _, u_enu, rho = _line_of_sight(state, sat_pos_ecef, lever_b)
+    pred = rho + clock_m - np.asarray(sat_clock_m, float)
+    k = len(rho)
+    H = _zeros(space, k)
+    H[:, space["pos"]] = -u_enu
+    H[:, space["att"]] = -u_enu @ skew(quat_to_dcm(state.q_nb) @ lever_b)
+    if "clock" in space:
+        H[:, space["clock"].start] = -1.0
+    R = np.diag(np.broadcast_to(np.asarray(variance, float), (k,)).copy())
+    return Innovation("pseudorange", pred - np.asarray(pseudorange, float), H, R)
+
+
+def range_rates(space, state, sat_pos_ecef, sat_vel_ecef, sat_clock_drift, range_rate,
+                variance, omega_ib_b, clock_drift=0.0, lever_b=np.zeros(3)):
+    """GNSS range rates (Doppler times -wavelength) of any number of satellites.
+
+    rhodot_pred = u . (v_sat - v_ant) + clock_drift - sat_clock_drift (seed 004 eq. 2.1.1),
+    u the unit vector from the antenna to the satellite, v_ant the Earth-relative antenna velocity
+    in ECEF.
+
+    Parameters
+    ----------
+    sat_vel_ecef : array_like, shape (k, 3)
+        m/s.
+    sat_clock_drift : array_like, shape (k,)
+        Satellite clock drift times c, m/s.
+    range_rate : array_like, shape (k,)
+        Measured range rates = -wavelength * doppler, m/s.
+    variance : float or array_like, shape (k,)
+        (m/s)^2.
+    omega_ib_b : array_like, shape (3,)
+        Compensated angular rate, rad/s (for the lever arm).
+    clock_drift : float
+        Current receiver clock-drift estimate, m/s.
+
+    Returns
+    -------
+    Innovation
+        H_vel = -u_enu^T, lever-arm attitude and gyro terms as in :func:`gnss_velocity`,
+        H_drift = -1.
+    """
+    lever_b = np.asarray(lever_b, float)
+    omega_ib_b = np.asarray(omega_ib_b, float)
+    u_ecef, u_enu, _ = _line_of_sight(state, sat_pos_ecef, lever_b)
+    C = quat_to_dcm(state.q_nb)
+    v_ant_enu = lever_arm_velocity(state.v_enu, state.q_nb, omega_ib_b, lever_b, state.lat)
+    v_ant_ecef = ecef_to_enu_matrix(state.lat, state.lon).T @ v_ant_enu
+    pred = np.einsum("ij,ij->i", u_ecef, np.atleast_2d(sat_vel_ecef) - v_ant_ecef) \
+        + clock_drift - np.asarray(sat_clock_drift, float)
+    k = len(pred)
+    H = _zeros(space, k)
+    H[:, space["vel"]] = -u_enu
+    H[:, space["att"]] = -u_enu @ (skew(C @ np.cross(omega_ib_b, lever_b))
+                                   - skew(earth_rate_enu(state.lat)) @ skew(C @ lever_b))
+    _gyro_columns(space, H, u_enu @ C @ skew(lever_b))
+    if "clock" in space:
+        H[:, space["clock"].start + 1] = -1.0
+    R = np.diag(np.broadcast_to(np.asarray(variance, float), (k,)).copy())
+    return Innovation("range_rate", pred - np.asarray(range_rate, float), H, R)

@@ -1,0 +1,338 @@
+"""``ekf`` node: the closed-loop error-state filter around the strapdown, on the live topics.
+
+The node runs :class:`ins_gnss_ros.nav.navigator.Navigator` (the same code as the offline path
+and the replay benchmarks) on ``imu/delta`` and the aiding topics, and keeps the ``strapdown``
+node on the filter's solution by state synchronisation: whenever the filter has updated, it
+compares the strapdown's ``ins/state`` of a common epoch with its own solution and sends the
+difference as an ``ins/correction`` referred to that epoch (errors "computed minus true", the
+strapdown re-mechanises from there). A correction that was lost, a strapdown restarted from its
+parameters or a state published before the last correction arrived are all handled the same way:
+the next comparison sees the difference and removes it.
+
+Outputs: ``nav/odom`` (ENU ``map`` frame around a datum, covariance from the filter),
+``nav/fix``, ``nav/status`` (mode, coupling, every update with innovation, NIS and verdict).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections import deque
+
+import numpy as np
+from geometry_msgs.msg import TwistWithCovarianceStamped
+from ins_gnss_msgs.msg import FilterStatus, Heading, ImuDelta, InsCorrection, InsState, \
+    MeasurementUpdate
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import NavSatFix, NavSatStatus
+
+from ..nav.earth import ecef_to_enu, geodetic_to_ecef
+from ..nav.ekf import ExtraState
+from ..nav.error_model import LAYOUTS, nav_error
+from ..nav.navigator import (ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, GnssVelocity,
+                             HeadingFix, Navigator, NavigatorConfig, SpeedLog)
+from ..nav.rotations import quat_to_dcm
+from ..nav.sensor_errors import GRADES, filter_noise
+from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, run
+from .convert import (nav_state_from_msg, sec_to_stamp, stamp_to_sec, to_quaternion,
+                      to_vector3, vec)
+
+MODES = {ALIGNING: FilterStatus.MODE_ALIGNING, NAVIGATING: FilterStatus.MODE_NAVIGATING,
+         DEAD_RECKONING: FilterStatus.MODE_DEAD_RECKONING}
+#: InsCorrection sensor fields and the filter blocks whose running estimates add up to them.
+SENSOR_FIELDS = {"gyro_bias": ("bg", "gmg"), "accel_bias": ("ba", "gma"),
+                 "gyro_scale_factor": ("sg",), "accel_scale_factor": ("sa",)}
+
+
+class EkfNode(NavNode):
+    PARAMS = (
+        Param("layout", "15", "error-state layout (error_model.LAYOUTS key)", choices=tuple(LAYOUTS)),
+        Param("imu_grade", "mems_adis16405", "IMU noise model preset (sensor_errors.GRADES)",
+              choices=tuple(GRADES)),
+        Param("bias_model", "gm", "bias process: gm (constant + Gauss-Markov) or rw (random walk)",
+              choices=("gm", "rw")),
+        Param("lever_arm", [0.0, 0.0, 0.0], "GNSS antenna position in base_link (FLU), m",
+              -100.0, 100.0, length=3),
+        Param("gate_probability", 0.9999, "chi-square gate probability of every update", 0.5, 1.0),
+        Param("covariance_interval_s", 0.1, "covariance propagation interval, s", 0.005, 1.0),
+        Param("gnss.position_sigma_floor_m", 0.02, "floor of the GNSS position sigma per axis, m",
+              0.0, 100.0),
+        Param("gnss.velocity_sigma_floor_mps", 0.02, "floor of the GNSS velocity sigma, m/s",
+              0.0, 10.0),
+        Param("use_heading", True, "use gnss/heading (phase-difference or receiver azimuth)"),
+        Param("use_magnetic_heading", False, "use mag/heading as backup heading aiding"),
+        Param("magnetic_bias_sigma_deg", 2.0,
+              "initial sigma of the magnetic-heading bias state, deg (0: no bias state)", 0.0, 30.0),
+        Param("use_speed_log", False,
+              "use log/speed (water speed along body x) with water-current and log-scale states"),
+        Param("speed_log.current_sigma_mps", 0.3, "initial sigma of the water current, m/s",
+              0.0, 10.0),
+        Param("speed_log.scale_sigma", 0.02, "initial sigma of the log scale error, -", 0.0, 1.0),
+        Param("time_offset_sigma_s", 0.0,
+              "initial sigma of the IMU-GNSS time-offset state, s (0: no state)", 0.0, 1.0),
+        Param("nonholonomic_sigma_mps", [0.0, 0.0],
+              "wheeled-vehicle constraint noise (lateral, vertical), m/s; 0 disables", 0.0, 10.0,
+              length=2),
+        Param("init.position_sigma_m", 1.0, "initial position sigma at the first fix, m", 0.0, 1e4),
+        Param("init.velocity_sigma_mps", 0.1, "initial velocity sigma, m/s", 0.0, 100.0),
+        Param("init.tilt_sigma_deg", 1.0, "initial roll/pitch sigma, deg", 0.0, 90.0),
+        Param("align.speed_mps", 0.5, "GNSS speed at which the heading is taken from motion, m/s",
+              0.0, 50.0),
+        Param("align.static_speed_mps", 0.1, "GNSS speed below which the vehicle is at rest, m/s",
+              0.0, 10.0),
+        Param("dead_reckoning_after_s", 2.0, "no accepted aiding for this long: DEAD_RECKONING, s",
+              0.1, 3600.0),
+        Param("history_s", 3.0, "how late a measurement may arrive and still be used, s", 0.1, 60.0),
+        Param("sync.min_interval_s", 0.1, "shortest interval between two corrections, s", 0.0, 10.0),
+        Param("sync.resend_after_s", 1.0,
+              "send a correction against the newest ins/state if none matched for this long, s",
+              0.1, 60.0),
+        Param("datum.from_first_fix", True, "map-frame origin at the first fix (else datum.*)"),
+        Param("datum.latitude_deg", 0.0, "map-frame origin latitude, deg", -90.0, 90.0),
+        Param("datum.longitude_deg", 0.0, "map-frame origin longitude, deg", -180.0, 360.0),
+        Param("datum.altitude_m", 0.0, "map-frame origin ellipsoidal height, m", -1000.0, 1e5),
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__("ekf", **kwargs)
+        p = self.p
+        extras = {}
+        if p["time_offset_sigma_s"] > 0.0:
+            extras["td"] = ExtraState(1, p["time_offset_sigma_s"])
+        if p["use_magnetic_heading"] and p["magnetic_bias_sigma_deg"] > 0.0:
+            extras["mag"] = ExtraState(1, np.radians(p["magnetic_bias_sigma_deg"]))
+        if p["use_speed_log"]:
+            # water current east, north (m/s) and log scale error (-), slowly varying
+            sigma_current = p["speed_log.current_sigma_mps"]
+            extras["log"] = ExtraState(3, np.array([sigma_current, sigma_current,
+                                                    p["speed_log.scale_sigma"]]), psd=1e-6)
+        nhc = tuple(p["nonholonomic_sigma_mps"])
+        self.config = NavigatorConfig(
+            noise=filter_noise(GRADES[p["imu_grade"]], p["bias_model"]),
+            layout=p["layout"], extras=extras, lever_arm_b=np.array(p["lever_arm"], float),
+            cov_interval=p["covariance_interval_s"], gate_prob=p["gate_probability"],
+            sigma_pos0=p["init.position_sigma_m"], sigma_vel0=p["init.velocity_sigma_mps"],
+            sigma_tilt0=np.radians(p["init.tilt_sigma_deg"]), align_speed=p["align.speed_mps"],
+            static_speed=p["align.static_speed_mps"], dr_timeout=p["dead_reckoning_after_s"],
+            nhc_sigma=nhc if min(nhc) > 0.0 else None, history=p["history_s"],
+            store_covariance=False, record=False)
+        self.navigator = Navigator(self.config)
+        self.datum = None
+        if not p["datum.from_first_fix"]:
+            self.datum = (np.radians(p["datum.latitude_deg"]), np.radians(p["datum.longitude_deg"]),
+                          p["datum.altitude_m"])
+        self.sequence = 0
+        self.last_sync_t = -np.inf
+        self.last_match_t = -np.inf
+        self.synced_updates = 0
+        self.reported_updates = 0
+        self.accepted = 0
+        self.rejected = 0
+        # strapdown states by stamp (ns) for the comparison at a common epoch
+        self.ins_states: deque[tuple[int, InsState]] = deque()
+
+        self.pub_correction = self.publisher(InsCorrection, "ins/correction", STATE_QOS)
+        self.pub_odom = self.publisher(Odometry, "nav/odom", SENSOR_QOS)
+        self.pub_fix = self.publisher(NavSatFix, "nav/fix", SENSOR_QOS)
+        self.pub_status = self.publisher(FilterStatus, "nav/status", STATE_QOS)
+        self.subscribe(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS)
+        self.subscribe(InsState, "ins/state", self.on_ins_state, SENSOR_QOS)
+        self.subscribe(NavSatFix, "gnss/fix", self.on_fix, DRIVER_QOS)
+        self.subscribe(TwistWithCovarianceStamped, "gnss/vel", self.on_vel, DRIVER_QOS)
+        if p["use_heading"]:
+            self.subscribe(Heading, "gnss/heading", self.on_heading, SENSOR_QOS)
+        if p["use_magnetic_heading"]:
+            self.subscribe(Heading, "mag/heading", self.on_heading, SENSOR_QOS)
+        if p["use_speed_log"]:
+            self.subscribe(TwistWithCovarianceStamped, "log/speed", self.on_log, DRIVER_QOS)
+
+    # -- inputs --------------------------------------------------------------------------------
+    def on_delta(self, msg: ImuDelta) -> None:
+        dtheta, dv = vec(msg.delta_angle), vec(msg.delta_velocity)
+        if not (np.all(np.isfinite(dtheta)) and np.all(np.isfinite(dv))):
+            self.diag.count("non-finite increment dropped")
+            return
+        self.navigator.add_imu(stamp_to_sec(msg.header.stamp), dtheta, dv)
+        self.after_filter()
+
+    def on_fix(self, msg: NavSatFix) -> None:
+        if msg.status.status < NavSatStatus.STATUS_FIX:
+            self.diag.count("gnss/fix without a fix ignored", log=False)
+            return
+        cov = np.reshape(msg.position_covariance, (3, 3))
+        if not (np.isfinite([msg.latitude, msg.longitude, msg.altitude]).all()
+                and np.isfinite(cov).all()):
+            self.diag.count("non-finite gnss/fix rejected")
+            return
+        if msg.position_covariance_type == NavSatFix.COVARIANCE_TYPE_UNKNOWN or cov[0, 0] <= 0.0:
+            cov = np.eye(3) * 25.0  # an unknown accuracy is treated as a 5 m single-point fix
+            self.diag.count("gnss/fix without covariance: 5 m assumed", log=False)
+        floor = self.p["gnss.position_sigma_floor_m"] ** 2
+        cov = cov + np.diag(np.maximum(floor - np.diag(cov), 0.0))
+        lat, lon = np.radians(msg.latitude), np.radians(msg.longitude)
+        if self.datum is None:
+            self.datum = (lat, lon, msg.altitude)
+        self.navigator.add_measurement(
+            GnssFix(stamp_to_sec(msg.header.stamp), lat, lon, msg.altitude, cov))
+        self.after_filter()
+
+    def on_vel(self, msg: TwistWithCovarianceStamped) -> None:
+        v = vec(msg.twist.twist.linear)
+        cov = np.reshape(msg.twist.covariance, (6, 6))[:3, :3]
+        if not (np.isfinite(v).all() and np.isfinite(cov).all()):
+            self.diag.count("non-finite gnss/vel rejected")
+            return
+        floor = self.p["gnss.velocity_sigma_floor_mps"] ** 2
+        cov = cov + np.diag(np.maximum(floor - np.diag(cov), 0.0))
+        self.navigator.add_measurement(GnssVelocity(stamp_to_sec(msg.header.stamp), v, cov))
+        self.after_filter()
+
+    def on_heading(self, msg: Heading) -> None:
+        if msg.status == Heading.STATUS_NONE and msg.source != Heading.SOURCE_MAGNETIC:
+            return
+        azimuth = msg.azimuth + (msg.declination if msg.reference == Heading.REFERENCE_MAGNETIC
+                                 else 0.0)
+        if not (np.isfinite(azimuth) and np.isfinite(msg.azimuth_variance)
+                and msg.azimuth_variance > 0.0):
+            self.diag.count("heading without a finite azimuth and variance rejected")
+            return
+        self.navigator.add_measurement(HeadingFix(
+            stamp_to_sec(msg.header.stamp), float(azimuth), float(msg.azimuth_variance),
+            magnetic=msg.source == Heading.SOURCE_MAGNETIC))
+        self.after_filter()
+
+    def on_log(self, msg: TwistWithCovarianceStamped) -> None:
+        speed, variance = msg.twist.twist.linear.x, msg.twist.covariance[0]
+        if not (np.isfinite(speed) and np.isfinite(variance) and variance > 0.0):
+            self.diag.count("log/speed without a finite speed and variance rejected")
+            return
+        self.navigator.add_measurement(SpeedLog(stamp_to_sec(msg.header.stamp), speed, variance))
+        self.after_filter()
+
+    def on_ins_state(self, msg: InsState) -> None:
+        stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        if self.ins_states and stamp < self.ins_states[-1][0]:
+            self.ins_states.clear()  # the strapdown restarted or the bag looped
+        self.ins_states.append((stamp, msg))
+        while self.ins_states and stamp - self.ins_states[0][0] > self.p["history_s"] * 1e9:
+            self.ins_states.popleft()
+        self.after_filter()
+
+    # -- synchronisation and outputs -----------------------------------------------------------
+    def after_filter(self) -> None:
+        nav = self.navigator
+        self.report_updates()
+        if nav.nav is None or nav.ekf is None:
+            return
+        updated = nav.update_count > self.synced_updates
+        due = nav.nav.t - self.last_sync_t >= self.p["sync.min_interval_s"]
+        if updated and due:
+            self.synchronise()
+
+    def synchronise(self) -> None:
+        """Send the difference between the strapdown and the filter at a common epoch."""
+        nav = self.navigator
+        t_ns = int(round(nav.nav.t * 1e9))
+        match = next((m for s, m in reversed(self.ins_states)
+                      if abs(s - t_ns) < 1e6 and m.correction_sequence == self.sequence), None)
+        if match is not None:
+            self.last_match_t = nav.nav.t
+        elif self.ins_states and nav.nav.t - self.last_match_t > self.p["sync.resend_after_s"]:
+            # Nothing comparable for a while (lost correction, restarted strapdown): correct the
+            # strapdown's newest state with the filter solution extrapolated to its epoch.
+            match = self.ins_states[-1][1]
+            self.diag.count("strapdown out of step: re-synchronised on its newest state")
+            self.last_match_t = nav.nav.t
+        else:
+            return
+        strapdown = nav_state_from_msg(match)
+        target = nav.state_at(strapdown.t)
+        if target is None:
+            return
+        dp, dv, phi = nav_error(strapdown, target)
+        corr = InsCorrection(sequence=self.sequence + 1)
+        corr.header.stamp = match.header.stamp
+        corr.header.frame_id = "map"
+        corr.position_error, corr.velocity_error = to_vector3(dp), to_vector3(dv)
+        corr.attitude_error = to_vector3(phi)
+        for field, blocks in SENSOR_FIELDS.items():
+            estimate = sum(nav.estimates[b] for b in blocks if b in nav.estimates)
+            if np.ndim(estimate):  # the layout has at least one of the blocks
+                setattr(corr, field, to_vector3(estimate - vec(getattr(match, field))))
+        self.sequence += 1
+        self.synced_updates = nav.update_count
+        self.last_sync_t = nav.nav.t
+        self.pub_correction.publish(corr)
+        self.publish_solution()
+
+    def report_updates(self) -> None:
+        nav = self.navigator
+        # A delayed measurement re-runs the filter from an earlier epoch: its re-done updates
+        # are reported again.
+        self.reported_updates = min(self.reported_updates, nav.update_count)
+        self.synced_updates = min(self.synced_updates, nav.update_count)
+        updates = nav.updates_since(self.reported_updates)
+        if not updates:
+            return
+        self.reported_updates = nav.update_count
+        status = FilterStatus(mode=MODES[nav.mode], coupling=FilterStatus.COUPLING_LOOSE)
+        status.header.stamp = sec_to_stamp(updates[-1].t)
+        for u in updates:
+            self.accepted += u.accepted
+            self.rejected += not u.accepted
+            if not u.accepted and u.reason not in ("aligning",):
+                self.diag.count(f"{u.name} rejected: {u.reason}", log=False)
+            status.updates.append(MeasurementUpdate(
+                name=u.name, stamp=sec_to_stamp(u.t),
+                innovation=[float(x) for x in u.innovation],
+                innovation_variance=[float(x) for x in u.s_diag], nis=float(u.nis),
+                gate=float(u.gate), accepted=bool(u.accepted),
+                reason="" if u.accepted else u.reason))
+        if nav.ekf is not None:
+            status.state_names = [f"{name}[{i}]" for name in nav.space.blocks
+                                  for i in range(nav.space[name].stop - nav.space[name].start)]
+            status.state_std = np.sqrt(np.diag(nav.ekf.P)).tolist()
+        status.accepted_count, status.rejected_count = self.accepted, self.rejected
+        self.pub_status.publish(status)
+
+    def publish_solution(self) -> None:
+        nav = self.navigator
+        st, P, S = nav.nav, nav.ekf.P, nav.space
+        stamp = sec_to_stamp(st.t)
+        fix = NavSatFix()
+        fix.header.stamp, fix.header.frame_id = stamp, "base_link"
+        fix.status.status = NavSatStatus.STATUS_FIX
+        fix.latitude, fix.longitude, fix.altitude = np.degrees(st.lat), np.degrees(st.lon), st.h
+        fix.position_covariance = P[S["pos"], S["pos"]].flatten().tolist()
+        fix.position_covariance_type = NavSatFix.COVARIANCE_TYPE_KNOWN
+        self.pub_fix.publish(fix)
+        if self.datum is None:
+            return
+        odom = Odometry()
+        odom.header.stamp, odom.header.frame_id, odom.child_frame_id = stamp, "map", "base_link"
+        enu = ecef_to_enu(geodetic_to_ecef(st.lat, st.lon, st.h), *self.datum)
+        odom.pose.pose.position.x, odom.pose.pose.position.y, odom.pose.pose.position.z = \
+            (float(x) for x in enu)
+        odom.pose.pose.orientation = to_quaternion(st.q_nb)
+        pose_cov = np.zeros((6, 6))
+        pose_cov[:3, :3] = P[S["pos"], S["pos"]]
+        pose_cov[3:, 3:] = P[S["att"], S["att"]]  # small-angle errors about ENU axes
+        odom.pose.covariance = pose_cov.flatten().tolist()
+        # Odometry twists are in the child frame (base_link).
+        c_bn = quat_to_dcm(st.q_nb).T
+        odom.twist.twist.linear = to_vector3(c_bn @ st.v_enu)
+        twist_cov = np.zeros((6, 6))
+        twist_cov[:3, :3] = c_bn @ P[S["vel"], S["vel"]] @ c_bn.T
+        if self.ins_states:
+            odom.twist.twist.angular = self.ins_states[-1][1].angular_velocity
+        # one navigation-rate sample of gyro white noise (the rate is not a filter state)
+        twist_cov[3:, 3:] = np.eye(3) * self.config.noise.gyro_psd / self.config.cov_interval
+        odom.twist.covariance = twist_cov.flatten().tolist()
+        self.pub_odom.publish(odom)
+
+
+def main(args=None) -> int:
+    return run(EkfNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,102 @@
+"""Filter engine checks against closed-form results (ekf.py, gating.py)."""
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from ins_gnss_ros.nav.ekf import ErrorStateEKF, ExtraState, StateSpace
+from ins_gnss_ros.nav.error_model import make_layout
+from ins_gnss_ros.nav.gating import chi2_gate, normalised_innovation
+from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405, filter_noise
+from ins_gnss_ros.nav.strapdown import NavState
+
+NOISE = filter_noise(MEMS_ADIS16405, "rw")
+
+
+def scalar_filter(p0, extra=ExtraState(1, 1.0)):
+    """A filter whose extra scalar state ("mag") is decoupled from the 9 navigation states."""
+    space = StateSpace(make_layout("9"), {"mag": extra})
+    P0 = np.eye(space.size)
+    P0[9, 9] = p0
+    return ErrorStateEKF(space, NOISE, P0), space
+
+
+def test_random_constant_matches_closed_form():
+    # x constant, z_k = x + v_k, v ~ N(0, r): the posterior of a Gaussian prior N(0, p0) after
+    # n measurements has variance 1 / (1/p0 + n/r) and mean P_n sum(z)/r.
+    rng = np.random.default_rng(1)
+    p0, r, x = 4.0, 0.25, 1.3
+    ekf, space = scalar_filter(p0)
+    H = np.zeros((1, space.size))
+    H[0, 9] = 1.0
+    z = x + np.sqrt(r) * rng.standard_normal(50)
+    for k, zk in enumerate(z, start=1):
+        res = ekf.update("c", k, [zk], H, [[r]], gate_prob=None)
+        assert res.accepted
+        pn = 1.0 / (1.0 / p0 + k / r)
+        assert ekf.P[9, 9] == pytest.approx(pn, rel=1e-12)
+        assert ekf.x[9] == pytest.approx(pn * z[:k].sum() / r, rel=1e-10)
+
+
+def test_gauss_markov_variance_propagation():
+    # First-order Gauss-Markov: P(t) = P0 e^{-2t/tau} + s^2 (1 - e^{-2t/tau}), psd = 2 s^2 / tau.
+    tau, s, p0 = 20.0, 0.3, 0.0
+    ekf, _ = scalar_filter(p0, ExtraState(1, 0.0, 2 * s * s / tau, tau))
+    state = NavState(0.7, 0.2, 10.0)
+    f_b, w_b = np.array([0.0, 0.0, 9.8]), np.zeros(3)
+    dt, n = 0.1, 300
+    for k in range(n):
+        ekf.predict(state, f_b, w_b, dt, refresh=(k == 0))
+    t = n * dt
+    assert ekf.P[9, 9] == pytest.approx(s * s * (1 - np.exp(-2 * t / tau)), rel=1e-6)
+
+
+def test_joseph_equals_standard_on_well_conditioned_case():
+    rng = np.random.default_rng(2)
+    space = StateSpace(make_layout("15", NOISE))
+    A = rng.standard_normal((15, 15))
+    P0 = A @ A.T + 15 * np.eye(15)
+    H = rng.standard_normal((3, 15))
+    R = np.diag([0.5, 1.0, 2.0])
+    z = rng.standard_normal(3)
+    ekfs = [ErrorStateEKF(space, NOISE, P0, joseph=j) for j in (True, False)]
+    for e in ekfs:
+        e.update("m", 0.0, z, H, R, gate_prob=None)
+    np.testing.assert_allclose(ekfs[0].P, ekfs[1].P, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(ekfs[0].x, ekfs[1].x, rtol=1e-12)
+
+
+def test_gate_rejects_outlier_and_keeps_state():
+    ekf, space = scalar_filter(1.0)
+    H = np.zeros((1, space.size))
+    H[0, 9] = 1.0
+    P_before = ekf.P.copy()
+    res = ekf.update("c", 0.0, [10.0], H, [[1.0]])  # NIS = 100 / 2 = 50
+    assert not res.accepted and res.reason == "gated"
+    assert res.nis == pytest.approx(50.0)
+    assert res.gate == pytest.approx(chi2.ppf(0.9999, 1))
+    np.testing.assert_array_equal(ekf.P, P_before)
+    assert np.all(ekf.x == 0.0)
+    forced = ekf.update("c", 0.0, [10.0], H, [[1.0]], force=True)
+    assert forced.accepted and forced.reason == "forced"
+
+
+def test_take_correction_zeroes_state():
+    ekf, space = scalar_filter(1.0)
+    H = np.zeros((1, space.size))
+    H[0, 9] = 1.0
+    ekf.update("c", 0.0, [1.0], H, [[1.0]])
+    dx = ekf.take_correction()
+    assert dx[9] == pytest.approx(0.5)
+    assert np.all(ekf.x == 0.0)
+
+
+def test_unknown_extra_block_is_refused():
+    with pytest.raises(ValueError):
+        StateSpace(make_layout("9"), {"speed_of_light": ExtraState()})
+
+
+def test_nis_and_gate_values():
+    S = np.array([[4.0, 1.0], [1.0, 2.0]])
+    nu = np.array([1.0, -2.0])
+    assert normalised_innovation(nu, S) == pytest.approx(nu @ np.linalg.solve(S, nu))
+    assert chi2_gate(3, 0.99) == pytest.approx(11.344866730144373)

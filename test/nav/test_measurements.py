@@ -1,0 +1,233 @@
+"""Measurement matrices against numerical differentiation of the non-linear measurement functions.
+
+The error state is injected into a true NavState with strapdown.apply_correction (the inverse of
+the filter's feedback: a computed state with errors dx is apply_correction(true, -dp, -dv, -phi)
+to first order), sensor residuals are added to the quantities they corrupt, and the measurement
+residual z is differentiated by central differences. A sign error in any H block fails here.
+"""
+import numpy as np
+import pytest
+
+from ins_gnss_ros.nav import measurements as M
+from ins_gnss_ros.nav.earth import ecef_to_enu_matrix, geodetic_to_ecef
+from ins_gnss_ros.nav.ekf import ExtraState, StateSpace
+from ins_gnss_ros.nav.error_model import make_layout
+from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
+from ins_gnss_ros.nav.rotations import quat_from_euler
+from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405, filter_noise
+from ins_gnss_ros.nav.strapdown import NavState, apply_correction
+
+NOISE = filter_noise(MEMS_ADIS16405, "rw")
+SPACE = StateSpace(make_layout("24", NOISE), {"td": ExtraState(1, 0.1), "mag": ExtraState(1, 0.1),
+                                              "nhc": ExtraState(2, 0.01),
+                                              "log": ExtraState(3, 0.1)})
+TRUE = NavState(np.deg2rad(40.1), np.deg2rad(-105.1), 1600.0, np.array([6.0, -8.0, 0.3]),
+                quat_from_euler(0.1, -0.2, 2.5), 0.0)
+OMEGA = np.array([0.05, -0.1, 0.3])  # true angular rate, FLU rad/s
+LEVER = np.array([0.8, -0.4, 1.2])   # FLU m
+
+
+def perturbed(dx):
+    """Computed state and the residual sensor errors encoded in the error vector dx."""
+    S = SPACE
+    state = apply_correction(TRUE, -dx[S["pos"]], -dx[S["vel"]], -dx[S["att"]])
+    return state, {name: dx[S[name]] for name in ("bg", "clock", "mag", "nhc", "log")}
+
+
+def numerical_H(z_of, dx_scale):
+    """Central-difference Jacobian of z_of(dx) at dx = 0 with per-state steps."""
+    z0 = z_of(np.zeros(SPACE.size))
+    H = np.zeros((len(z0), SPACE.size))
+    for i in range(SPACE.size):
+        e = np.zeros(SPACE.size)
+        e[i] = dx_scale[i]
+        H[:, i] = (z_of(e) - z_of(-e)) / (2 * dx_scale[i])
+    return H
+
+
+STEPS = np.full(SPACE.size, 1e-4)
+STEPS[SPACE["pos"]] = 1e-2
+STEPS[SPACE["clock"]] = 1e-2
+
+
+def check(model, z_of, atol):
+    H_num = numerical_H(z_of, STEPS)
+    np.testing.assert_allclose(model.H, H_num, atol=atol)
+
+
+def test_gnss_position_with_lever_arm():
+    meas = lever_arm_position(TRUE.lat, TRUE.lon, TRUE.h, TRUE.q_nb, LEVER)
+    cov = np.eye(3) * 0.01
+    model = M.gnss_position(SPACE, TRUE, *meas, cov, LEVER)
+    np.testing.assert_allclose(model.z, 0.0, atol=1e-6)
+
+    def z_of(dx):
+        st, _ = perturbed(dx)
+        return M.gnss_position(SPACE, st, *meas, cov, LEVER).z
+    H_num = numerical_H(z_of, STEPS)
+    cols = np.r_[SPACE["pos"].start:SPACE["att"].stop]
+    np.testing.assert_allclose(model.H[:, cols], H_num[:, cols], atol=2e-6)
+
+
+def test_gnss_velocity_with_lever_arm_and_gyro_bias():
+    meas = lever_arm_velocity(TRUE.v_enu, TRUE.q_nb, OMEGA, LEVER, TRUE.lat)
+    model = M.gnss_velocity(SPACE, TRUE, meas, np.eye(3), OMEGA, LEVER)
+    np.testing.assert_allclose(model.z, 0.0, atol=1e-12)
+
+    def z_of(dx):
+        st, res = perturbed(dx)
+        # residual gyro error: compensated rate = true + residual
+        return M.gnss_velocity(SPACE, st, meas, np.eye(3), OMEGA + res["bg"], LEVER).z
+    check(model, z_of, 1e-6)
+
+
+@pytest.mark.parametrize("axis_yaw", [0.0, 0.7])
+def test_heading(axis_yaw):
+    x = np.cos(axis_yaw), np.sin(axis_yaw), 0.0
+    az, _ = M.azimuth_of_axis(TRUE.q_nb, x)
+    model = M.heading(SPACE, TRUE, az, 1e-4, axis_yaw)
+    assert model.z[0] == pytest.approx(0.0, abs=1e-12)
+
+    def z_of(dx):
+        st, _ = perturbed(dx)
+        return M.heading(SPACE, st, az, 1e-4, axis_yaw).z
+    check(model, z_of, 1e-7)
+
+
+def test_heading_level_vehicle_is_phi_up():
+    # Seed 004: z_K = K_pr - K_ext = phi_h (H = +1 on the vertical attitude error).
+    level = NavState(0.7, 0.1, 0.0, np.zeros(3), quat_from_euler(0.0, 0.0, 0.4))
+    model = M.heading(SPACE, level, 0.0, 1.0)
+    np.testing.assert_allclose(model.H[0, SPACE["att"]], [0.0, 0.0, 1.0], atol=1e-12)
+
+
+def test_magnetic_heading_with_bias_state():
+    az, _ = M.azimuth_of_axis(TRUE.q_nb)
+    bias_true = 0.05
+    model = M.magnetic_heading(SPACE, TRUE, az + bias_true, 1e-4, bias=bias_true)
+    assert model.z[0] == pytest.approx(0.0, abs=1e-12)
+
+    def z_of(dx):
+        st, res = perturbed(dx)
+        # residual = true bias - estimate, so the estimate is true - residual
+        return M.magnetic_heading(SPACE, st, az + bias_true, 1e-4, bias_true - res["mag"][0]).z
+    check(model, z_of, 1e-7)
+
+
+def test_nonholonomic_and_zupt_zaru():
+    # A state that satisfies the constraint at the point `arm` of vehicle axes turned by
+    # `bore` (pitch, yaw) from the IMU axes.
+    arm = np.array([-1.5, 0.2, -1.0])
+    bore = np.array([0.02, -0.03])
+    c_vb = M.quat_to_dcm(quat_from_euler(0.0, bore[0], bore[1])).T  # IMU -> vehicle axes
+    v_b = c_vb.T @ np.array([9.0, 0.0, 0.0]) - np.cross(OMEGA, arm)
+    state = NavState(TRUE.lat, TRUE.lon, TRUE.h, M.quat_to_dcm(TRUE.q_nb) @ v_b, TRUE.q_nb)
+    model = M.nonholonomic(SPACE, state, 0.1, 0.1, OMEGA, arm, bore)
+    np.testing.assert_allclose(model.z, 0.0, atol=1e-2)  # small-angle boresight model
+
+    def z_of(dx):
+        st, res = perturbed(dx)
+        st = NavState(st.lat, st.lon, st.h, st.v_enu + state.v_enu - TRUE.v_enu, st.q_nb)
+        return M.nonholonomic(SPACE, st, 0.1, 0.1, OMEGA + res["bg"], arm,
+                              bore - res["nhc"]).z
+    check(model, z_of, 1e-6)
+
+    def z_zupt(dx):
+        st, _ = perturbed(dx)
+        return M.zero_velocity(SPACE, st, 0.01).z
+    check(M.zero_velocity(SPACE, TRUE, 0.01), z_zupt, 1e-9)
+
+    still = NavState(TRUE.lat, TRUE.lon, TRUE.h, np.zeros(3), TRUE.q_nb)
+    w_earth = M.quat_to_dcm(still.q_nb).T @ M.earth_rate_enu(still.lat)
+    model = M.zero_angular_rate(SPACE, still, w_earth, 1e-4)
+    np.testing.assert_allclose(model.z, 0.0, atol=1e-18)
+
+    def z_zaru(dx):
+        st, res = perturbed(dx)
+        return M.zero_angular_rate(SPACE, st, w_earth + res["bg"], 1e-4).z
+    # the attitude term (phi times the Earth rate, ~1e-4 of H) is neglected by design
+    check(model, z_zaru, 1e-4)
+
+
+def test_speed_log_with_current_and_scale():
+    current, scale = np.array([0.3, -0.2]), 0.02
+    r = M.quat_to_dcm(TRUE.q_nb)[:, 0]
+    speed = (1 + scale) * r @ (TRUE.v_enu - np.r_[current, 0.0])
+    model = M.speed_log(SPACE, TRUE, speed, 0.01, current, scale)
+    assert model.z[0] == pytest.approx(0.0, abs=1e-12)
+
+    def z_of(dx):
+        st, res = perturbed(dx)
+        return M.speed_log(SPACE, st, speed, 0.01, current - res["log"][:2],
+                           scale - res["log"][2]).z
+    check(model, z_of, 1e-6)
+
+
+def test_speed_log_level_heading_terms():
+    # A level vessel moving along its own axis: a small heading error changes the along-axis
+    # speed only to second order (cos), so the heading column vanishes.
+    level = NavState(0.7, 0.1, 0.0, np.array([0.0, 5.0, 0.0]), quat_from_euler(0, 0, np.pi / 2))
+    model = M.speed_log(SPACE, level, 5.0, 0.01)
+    assert model.z[0] == pytest.approx(0.0, abs=1e-12)
+    assert model.H[0, SPACE["att"].start + 2] == pytest.approx(0.0, abs=1e-12)
+
+
+def satellites():
+    """Four satellites at GNSS distances above the test position, ECEF."""
+    r = geodetic_to_ecef(TRUE.lat, TRUE.lon, TRUE.h)
+    C = ecef_to_enu_matrix(TRUE.lat, TRUE.lon)
+    dirs = np.array([[0.3, 0.4, 0.866], [-0.7, 0.1, 0.7], [0.1, -0.8, 0.6], [0.6, 0.6, 0.5]])
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    pos = r + 2.2e7 * dirs @ C
+    vel = np.array([[3000.0, -500.0, 1000.0], [-2000.0, 1500.0, 200.0],
+                    [100.0, 2500.0, -2000.0], [-1500.0, -1500.0, 1500.0]])
+    return pos, vel
+
+
+def test_pseudoranges_and_range_rates():
+    pos, vel = satellites()
+    sat_clk = np.array([10.0, -20.0, 5.0, 0.0])
+    clock = np.array([300.0, 2.0, 0.0])
+    lat, lon, h = lever_arm_position(TRUE.lat, TRUE.lon, TRUE.h, TRUE.q_nb, LEVER)
+    rho = np.linalg.norm(pos - geodetic_to_ecef(lat, lon, h), axis=1)
+    pr = rho + clock[0] - sat_clk
+    model = M.pseudoranges(SPACE, TRUE, pos, sat_clk, pr, 9.0, clock[0], LEVER)
+    np.testing.assert_allclose(model.z, 0.0, atol=1e-6)
+
+    def z_pr(dx):
+        st, res = perturbed(dx)
+        return M.pseudoranges(SPACE, st, pos, sat_clk, pr, 9.0, clock[0] - res["clock"][0],
+                              LEVER).z
+    H_num = numerical_H(z_pr, STEPS)
+    # The attitude columns agree to ~4e-5 (relative 5e-4): second-order lever-arm terms
+    # (1.5 m arm, 1e-4 rad steps) of no consequence next to pseudorange noise.
+    np.testing.assert_allclose(model.H, H_num, atol=1e-4)
+
+    drift = np.array([0.1, -0.2, 0.0, 0.05])
+    v_ant = lever_arm_velocity(TRUE.v_enu, TRUE.q_nb, OMEGA, LEVER, TRUE.lat)
+    u = (pos - geodetic_to_ecef(lat, lon, h)) / rho[:, None]
+    v_ant_ecef = ecef_to_enu_matrix(TRUE.lat, TRUE.lon).T @ v_ant
+    rr = np.einsum("ij,ij->i", u, vel - v_ant_ecef) + clock[1] - drift
+    model = M.range_rates(SPACE, TRUE, pos, vel, drift, rr, 0.01, OMEGA, clock[1], LEVER)
+    np.testing.assert_allclose(model.z, 0.0, atol=1e-6)
+
+    def z_rr(dx):
+        st, res = perturbed(dx)
+        return M.range_rates(SPACE, st, pos, vel, drift, rr, 0.01, OMEGA + res["bg"],
+                             clock[1] - res["clock"][1], LEVER).z
+    H_num = numerical_H(z_rr, STEPS)
+    # The line-of-sight change with the antenna position (relative satellite velocity / range
+    # ~ 1.5e-4 per m of displacement, here from the position error or from the lever arm
+    # turning with phi) is neglected: tolerance 5e-4 against H entries of order 1.
+    cols = np.r_[SPACE["vel"].start:SPACE["att"].stop, SPACE["bg"].start:SPACE["bg"].stop,
+                 SPACE["clock"].start:SPACE["clock"].stop]
+    np.testing.assert_allclose(model.H[:, cols], H_num[:, cols], atol=5e-4)
+    vel_cols = np.r_[SPACE["vel"].start:SPACE["vel"].stop, SPACE["clock"].start + 1]
+    np.testing.assert_allclose(model.H[:, vel_cols], H_num[:, vel_cols], atol=1e-7)
+
+
+def test_time_offset_column():
+    # A measurement stamped t refers to t - td: predicting at t - td_est leaves dz/dt * residual.
+    v_ant = np.array([5.0, -3.0, 0.2])
+    model = M.gnss_position(SPACE, TRUE, TRUE.lat, TRUE.lon, TRUE.h, np.eye(3), dzdt=v_ant)
+    np.testing.assert_array_equal(model.H[:, SPACE["td"].start], v_ant)

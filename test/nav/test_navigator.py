@@ -1,0 +1,259 @@
+"""Offline navigator on a simulated car (sim/scenarios.car + sim/imu_sim MEMS grade).
+
+Truth is the simulator's trajectory; GNSS is simulated from it at 4 Hz with the antenna lever arm.
+"""
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ins_gnss_ros.nav.earth import radii
+from ins_gnss_ros.nav.ekf import ExtraState
+from ins_gnss_ros.nav.error_model import nav_error
+from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
+from ins_gnss_ros.nav.navigator import ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, \
+    GnssVelocity, Navigator, NavigatorConfig, point_track
+from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405, filter_noise
+from ins_gnss_ros.nav.strapdown import NavState
+from ins_gnss_ros.sim.imu_sim import ImuSpec, simulate_imu
+from ins_gnss_ros.sim.scenarios import car
+from ins_gnss_ros.trial.evaluate import Trajectory, evaluate
+
+LEVER = np.array([0.5, 0.3, 1.2])
+SIGMA_P, SIGMA_V = 0.3, 0.03
+IMU_RATE = 100.0
+
+
+def simulate(duration=110.0, seed=3):
+    traj = car(duration=duration, seed=seed, rate=IMU_RATE, static=15.0).trajectory
+    imu = simulate_imu(traj, ImuSpec(MEMS_ADIS16405, rate=IMU_RATE), seed=seed)
+    return traj, imu
+
+
+def gnss(traj, rng, delay=0.0, step=25):
+    """GnssFix/GnssVelocity pairs every `step` samples (4 Hz), stamped `delay` s late."""
+    out = []
+    for k in range(step, len(traj.t), step):
+        lat, lon, h = lever_arm_position(traj.lat[k], traj.lon[k], traj.h[k], traj.q_nb[k], LEVER)
+        rm, rn = radii(lat)
+        e = SIGMA_P * rng.standard_normal(3)
+        v = lever_arm_velocity(traj.v_enu[k], traj.q_nb[k], traj.omega_ib_b[k], LEVER, lat)
+        t = traj.t[k] + delay
+        out.append(GnssFix(t, lat + e[1] / (rm + h), lon + e[0] / ((rn + h) * np.cos(lat)),
+                           h + e[2], SIGMA_P ** 2 * np.eye(3)))
+        out.append(GnssVelocity(t, v + SIGMA_V * rng.standard_normal(3),
+                                SIGMA_V ** 2 * np.eye(3)))
+    return out
+
+
+def config(**kw):
+    base = NavigatorConfig(noise=filter_noise(MEMS_ADIS16405, "rw"), layout="21",
+                           lever_arm_b=LEVER, sigma_pos0=1.0, sigma_vel0=0.1,
+                           sigma_tilt0=np.deg2rad(1.0), align_speed=1.0)
+    return replace(base, **kw)
+
+
+def run(imu, measurements, cfg):
+    nav = Navigator(cfg)
+    for m in measurements:
+        nav.add_measurement(m)
+    nav.add_imu(imu.t, imu.dtheta, imu.dv)
+    nav.flush()
+    return nav.output()
+
+
+def truth_state(traj, t):
+    k = int(round(t * IMU_RATE))
+    return NavState(traj.lat[k], traj.lon[k], traj.h[k], traj.v_enu[k], traj.q_nb[k], t)
+
+
+def nees(out, traj, t_min):
+    """Mean NEES of position, velocity and attitude over epochs after t_min."""
+    S = out.space
+    vals = []
+    for k in np.flatnonzero(out.t > t_min):
+        errs = nav_error(out.state(k), truth_state(traj, out.t[k]))
+        vals.append([e @ np.linalg.solve(out.P[k][S[b], S[b]], e)
+                     for e, b in zip(errs, ("pos", "vel", "att"))])
+    return np.mean(vals, axis=0)
+
+
+@pytest.fixture(scope="module")
+def sim():
+    traj, imu = simulate()
+    meas = gnss(traj, np.random.default_rng(5))
+    out = run(imu, meas, config())
+    return traj, imu, meas, out
+
+
+def test_modes_and_convergence(sim):
+    traj, _, _, out = sim
+    assert out.mode[0] == ALIGNING and out.mode[-1] == NAVIGATING
+    assert np.all(np.isfinite(out.lat))
+    k = len(out.t) - 1
+    dp, dv, phi = nav_error(out.state(k), truth_state(traj, out.t[k]))
+    assert np.linalg.norm(dp) < 3 * SIGMA_P
+    assert np.linalg.norm(dv) < 0.1
+    # A MEMS IMU (0.07 deg/s/sqrt(Hz)) keeps about half a degree of heading uncertainty.
+    assert np.degrees(np.linalg.norm(phi)) < 1.5
+    assert np.all(np.abs(phi) < 3 * out.sigma("att")[k])
+
+
+def test_nees_is_sane(sim):
+    traj, _, _, out = sim
+    # One short run: a loose band around the dimension 3 (the Monte Carlo average is in
+    # bench/bench_filter_speed.py --nees).
+    values = nees(out, traj, t_min=40.0)
+    assert np.all(values > 0.2 * 3) and np.all(values < 4 * 3), values
+
+
+def test_clean_data_false_rejections_below_one_percent(sim):
+    *_, out = sim
+    gated = [u for u in out.updates if u.reason in ("gated", "forced")]
+    assert len(gated) < 0.01 * len(out.updates)
+
+
+def test_faults_rejected(sim):
+    traj, imu, meas, clean = sim
+    rng = np.random.default_rng(9)
+    faulty = list(meas)
+    fix_idx = [i for i, m in enumerate(faulty) if isinstance(m, GnssFix) and m.t > 50.0]
+    vel_idx = [i for i, m in enumerate(faulty) if isinstance(m, GnssVelocity) and m.t > 50.0]
+    jumps = fix_idx[::40][:5]
+    glitches = vel_idx[20::40][:5]
+    for i in jumps:
+        m = faulty[i]
+        rm, _ = radii(m.lat)
+        faulty[i] = replace(m, lat=m.lat + rng.choice([-1, 1]) * 100.0 / rm)
+    for i in glitches:
+        m = faulty[i]
+        faulty[i] = replace(m, v_enu=m.v_enu + 5.0 * np.array([0.6, -0.8, 0.0]))
+    # A frozen receiver repeats one fix for 2 s while the car drives.
+    frozen = [i for i in fix_idx if 85.0 < faulty[i].t <= 87.0]
+    for i in frozen[1:]:
+        faulty[i] = replace(faulty[frozen[0]], t=faulty[i].t)
+    out = run(imu, faulty, config())
+    bad_t = {faulty[i].t for i in jumps + frozen[1:]}
+    pos = [u for u in out.updates if u.name == "gnss_pos" and u.t in bad_t]
+    assert len(pos) == len(bad_t) and not any(u.accepted for u in pos)
+    vel = [u for u in out.updates if u.name == "gnss_vel" and u.t in {faulty[i].t for i in glitches}]
+    assert len(vel) == len(glitches) and not any(u.accepted for u in vel)
+    # The solution does not move by more than 3 sigma at the faults.
+    S = out.space
+    for t in sorted(bad_t):
+        k = np.searchsorted(out.t, t)
+        dp, _, _ = nav_error(out.state(k), truth_state(traj, out.t[k]))
+        sigma = np.sqrt(np.diag(out.P[k][S["pos"], S["pos"]]))
+        assert np.all(np.abs(dp) < 3 * sigma + 3 * SIGMA_P)
+
+
+def test_delayed_measurement_equals_on_time(sim):
+    traj, imu, meas, _ = sim
+    short = [m for m in meas if m.t < 54.0]
+    late = [m for m in short if abs(m.t - 50.0) < 1e-9]
+    assert len(late) == 2
+    cfg = config()
+    on_time = run(imu, short, cfg)
+    nav = Navigator(cfg)
+    for m in short:
+        if m not in late:
+            nav.add_measurement(m)
+    k = np.searchsorted(imu.t, 51.5)
+    nav.add_imu(imu.t[:k], imu.dtheta[:k], imu.dv[:k])
+    for m in late:  # arrives 1.5 s after its epoch
+        nav.add_measurement(m)
+    nav.add_imu(imu.t[k:], imu.dtheta[k:], imu.dv[k:])
+    nav.flush()
+    delayed = nav.output()
+    assert len(delayed.t) == len(on_time.t)
+    np.testing.assert_allclose(delayed.lat, on_time.lat, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(delayed.v_enu, on_time.v_enu, atol=1e-9)
+    np.testing.assert_allclose(delayed.P, on_time.P, rtol=1e-9, atol=1e-15)
+
+
+def test_streaming_equals_batch(sim):
+    """IMU in chunks of 7 samples and each measurement as soon as its time has passed (as the
+    ROS node feeds it): the same filter output as one batch, with bounded IMU memory."""
+    traj, imu, meas, _ = sim
+    short = [m for m in meas if m.t < 38.0]
+    n = int(np.searchsorted(imu.t, 38.0))
+    cfg = config()
+    batch = run(replace(imu, t=imu.t[:n], dtheta=imu.dtheta[:n], dv=imu.dv[:n]), short, cfg)
+    nav = Navigator(cfg)
+    pending = list(short)
+    for i in range(0, n, 7):
+        nav.add_imu(imu.t[i:min(i + 7, n)], imu.dtheta[i:i + 7][:n - i], imu.dv[i:i + 7][:n - i])
+        while pending and pending[0].t <= imu.t[min(i + 7, n) - 1]:
+            nav.add_measurement(pending.pop(0))
+    nav.flush()
+    stream = nav.output()
+    assert len(nav._imu_t) < 2000 + 7 * 100
+    np.testing.assert_allclose(stream.lat, batch.lat, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(stream.P, batch.P, rtol=1e-9, atol=1e-15)
+
+
+def test_dead_reckoning_mode_and_reset_on_time_jump(sim):
+    traj, imu, meas, _ = sim
+    gap = [m for m in meas if not 70.0 < m.t < 80.0 and m.t < 85.0]
+    n = int(np.searchsorted(imu.t, 85.0))
+    out = run(replace(imu, t=imu.t[:n], dtheta=imu.dtheta[:n], dv=imu.dv[:n]), gap, config())
+    modes = out.mode[(out.t > 73.0) & (out.t < 79.0)]
+    assert np.all(modes == DEAD_RECKONING)
+    assert out.mode[-1] == NAVIGATING
+    nav = Navigator(config())
+    for m in meas[:200]:
+        nav.add_measurement(m)
+    nav.add_imu(imu.t[:3000], imu.dtheta[:3000], imu.dv[:3000])
+    assert nav.nav is not None
+    nav.add_imu(imu.t[:10], imu.dtheta[:10], imu.dv[:10])  # time went backwards
+    assert nav.nav is None and nav.mode == ALIGNING and len(nav.output().t) == 0
+
+
+def test_time_offset_state_recovers_100_ms(sim):
+    traj, imu, _, _ = sim
+    delayed = gnss(traj, np.random.default_rng(6), delay=0.1)
+    cfg = config(extras={"td": ExtraState(1, 0.2, 1e-8)})
+    out = run(imu, delayed, cfg)
+    td = out.estimates["td"][:, 0]
+    assert abs(td[-1] - 0.1) < 0.005, td[-1]
+
+
+SHARED = Path(__file__).resolve().parents[2] / ".." / "shared"
+DRIVE = SHARED / "data" / "car_drive_0708"
+
+
+def test_real_car_drive_first_minutes():
+    """Recorded data: the first 100 s of the real car drive with RTK fixes and velocities,
+    one 10 s outage. Aided antenna error at the RTK level, outage drift of metres, no NaN."""
+    if not DRIVE.is_dir():
+        pytest.skip(f"{DRIVE} not available")
+    from ins_gnss_ros.trial.car_drive import load_car_drive
+    drive = load_car_drive(DRIVE)
+    tr = drive.truth
+    t0 = tr.time[0]
+    t = drive.imu_time_gnss
+    keep = (t > t0 - 5.0) & (t < t0 + 100.0)
+    dt = np.diff(t[keep], prepend=t[keep][0] - 0.01)
+    lever = drive.antenna_lever_arm_flu
+    cfg = config(noise=filter_noise(MEMS_ADIS16405, "rw"), layout="15", lever_arm_b=lever,
+                 nhc_sigma=(0.2, 0.5), sigma_pos0=0.1, align_speed=0.5)
+    nav = Navigator(cfg)
+    outage = (t0 + 70.0, t0 + 80.0)
+    for k in np.flatnonzero(tr.time < t0 + 100.0):
+        if outage[0] <= tr.time[k] < outage[1]:
+            continue
+        nav.add_measurement(GnssFix(tr.time[k], tr.lat[k], tr.lon[k], tr.height[k],
+                                    tr.pos_cov_enu[k] + 0.03 ** 2 * np.eye(3)))
+        # The solution's velocities lag its positions by 0.125 s (bench_car_drive.py).
+        nav.add_measurement(GnssVelocity(tr.time[k] - 0.125, tr.vel_enu[k], 0.03 ** 2 * np.eye(3)))
+    nav.add_imu(t[keep], drive.gyro_flu[keep] * dt[:, None], drive.accel_flu[keep] * dt[:, None])
+    nav.flush()
+    out = nav.output()
+    assert np.all(np.isfinite(out.lat)) and out.mode[-1] == NAVIGATING
+    lat, lon, h = point_track(out, lever)
+    est = Trajectory(time=out.t, lat=lat, lon=lon, height=h)
+    ev = evaluate(est, tr, np.array([outage]))
+    aided = (ev.errors.time > t0 + 50.0) & (ev.errors.time < outage[0])
+    assert np.sqrt(np.mean(ev.errors.horizontal[aided] ** 2)) < 0.1
+    assert ev.outages[0].max_horizontal_m < 5.0
