@@ -26,6 +26,7 @@ setup(
         "imu_preprocessor = ins_gnss_ros.nodes.imu_preprocessor_node:main",
         "strapdown = ins_gnss_ros.nodes.strapdown_node:main",
         "mag_compass = ins_gnss_ros.nodes.mag_compass_node:main",
+        "gnss_driver = ins_gnss_ros.nodes.gnss_driver_node:main",
         "gnss_simulator = ins_gnss_ros.nodes.gnss_simulator_node:main",
         "ekf = ins_gnss_ros.nodes.ekf_node:main",
         # calibration tools

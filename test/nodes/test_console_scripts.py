@@ -18,6 +18,8 @@ CONTRACT = {
     "imu_preprocessor": (["/imu/data", "/imu/delta", "/imu/mag"], ["/imu/data_raw", "/imu/mag_raw"]),
     "strapdown": (["/ins/state"], ["/imu/delta", "/ins/correction"]),
     "mag_compass": (["/mag/heading"], ["/imu/mag", "/ins/state", "/gnss/fix"]),
+    "gnss_driver": (["/gnss/fix", "/gnss/vel", "/gnss/observations", "/gnss/ephemeris",
+                     "/gnss/heading", "/gnss/time_reference"], []),
     "gnss_simulator": (["/gnss/fix", "/gnss/vel", "/gnss/observations", "/gnss/ephemeris",
                         "/gnss/time_reference"], ["/sim/truth"]),
     "ekf": (["/ins/correction", "/nav/odom", "/nav/fix", "/nav/status"],

@@ -40,10 +40,11 @@ SENSOR_QOS = QoSProfile(
 DRIVER_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST, depth=200, reliability=ReliabilityPolicy.BEST_EFFORT
 )
-# Navigation state and status: latest value matters; late joiners get the last one.
+# Navigation state, status and broadcast ephemerides: late joiners get the recent ones (deep
+# enough for one ephemeris per satellite of a multi-constellation receiver).
 STATE_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
-    depth=20,
+    depth=100,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )

@@ -31,6 +31,7 @@ from ..nav.error_model import LAYOUTS, nav_error
 from ..nav.navigator import (ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, GnssVelocity,
                              HeadingFix, Navigator, NavigatorConfig, SpeedLog)
 from ..nav.rotations import quat_to_dcm
+from ..nav.strapdown import NavState
 from ..nav.sensor_errors import GRADES, filter_noise
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, run
 from .convert import (nav_state_from_msg, sec_to_stamp, stamp_to_sec, to_quaternion,
@@ -86,6 +87,8 @@ class EkfNode(NavNode):
         Param("sync.resend_after_s", 1.0,
               "send a correction against the newest ins/state if none matched for this long, s",
               0.1, 60.0),
+        Param("output_rate_hz", 10.0, "rate of nav/odom and nav/fix (from the synchronised "
+              "ins/state), Hz", 0.1, 1000.0),
         Param("datum.from_first_fix", True, "map-frame origin at the first fix (else datum.*)"),
         Param("datum.latitude_deg", 0.0, "map-frame origin latitude, deg", -90.0, 90.0),
         Param("datum.longitude_deg", 0.0, "map-frame origin longitude, deg", -180.0, 360.0),
@@ -127,6 +130,8 @@ class EkfNode(NavNode):
         self.reported_updates = 0
         self.accepted = 0
         self.rejected = 0
+        self.last_output_t = -np.inf
+        self.last_status_t = -np.inf
         # strapdown states by stamp (ns) for the comparison at a common epoch
         self.ins_states: deque[tuple[int, InsState]] = deque()
 
@@ -216,6 +221,13 @@ class EkfNode(NavNode):
         while self.ins_states and stamp - self.ins_states[0][0] > self.p["history_s"] * 1e9:
             self.ins_states.popleft()
         self.after_filter()
+        t = stamp * 1e-9
+        if self.navigator.ekf is not None and msg.correction_sequence == self.sequence \
+                and t - self.last_output_t >= 1.0 / self.p["output_rate_hz"]:
+            self.last_output_t = t
+            self.publish_solution(nav_state_from_msg(msg), msg)
+        if t - self.last_status_t >= 1.0:  # the mode is reported even when nothing updates
+            self.publish_status(t, [])
 
     # -- synchronisation and outputs -----------------------------------------------------------
     def after_filter(self) -> None:
@@ -262,7 +274,6 @@ class EkfNode(NavNode):
         self.synced_updates = nav.update_count
         self.last_sync_t = nav.nav.t
         self.pub_correction.publish(corr)
-        self.publish_solution()
 
     def report_updates(self) -> None:
         nav = self.navigator
@@ -271,11 +282,15 @@ class EkfNode(NavNode):
         self.reported_updates = min(self.reported_updates, nav.update_count)
         self.synced_updates = min(self.synced_updates, nav.update_count)
         updates = nav.updates_since(self.reported_updates)
-        if not updates:
-            return
-        self.reported_updates = nav.update_count
+        if updates:
+            self.reported_updates = nav.update_count
+            self.publish_status(updates[-1].t, updates)
+
+    def publish_status(self, t: float, updates) -> None:
+        nav = self.navigator
+        self.last_status_t = t
         status = FilterStatus(mode=MODES[nav.mode], coupling=FilterStatus.COUPLING_LOOSE)
-        status.header.stamp = sec_to_stamp(updates[-1].t)
+        status.header.stamp = sec_to_stamp(t)
         for u in updates:
             self.accepted += u.accepted
             self.rejected += not u.accepted
@@ -294,10 +309,10 @@ class EkfNode(NavNode):
         status.accepted_count, status.rejected_count = self.accepted, self.rejected
         self.pub_status.publish(status)
 
-    def publish_solution(self) -> None:
-        nav = self.navigator
-        st, P, S = nav.nav, nav.ekf.P, nav.space
-        stamp = sec_to_stamp(st.t)
+    def publish_solution(self, st: NavState, ins: InsState) -> None:
+        """nav/fix and nav/odom: the synchronised strapdown state with the filter covariance."""
+        P, S = self.navigator.ekf.P, self.navigator.space
+        stamp = ins.header.stamp
         fix = NavSatFix()
         fix.header.stamp, fix.header.frame_id = stamp, "base_link"
         fix.status.status = NavSatStatus.STATUS_FIX
@@ -322,8 +337,7 @@ class EkfNode(NavNode):
         odom.twist.twist.linear = to_vector3(c_bn @ st.v_enu)
         twist_cov = np.zeros((6, 6))
         twist_cov[:3, :3] = c_bn @ P[S["vel"], S["vel"]] @ c_bn.T
-        if self.ins_states:
-            odom.twist.twist.angular = self.ins_states[-1][1].angular_velocity
+        odom.twist.twist.angular = ins.angular_velocity
         # one navigation-rate sample of gyro white noise (the rate is not a filter state)
         twist_cov[3:, 3:] = np.eye(3) * self.config.noise.gyro_psd / self.config.cov_interval
         odom.twist.covariance = twist_cov.flatten().tolist()

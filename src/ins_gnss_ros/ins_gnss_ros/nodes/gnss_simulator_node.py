@@ -38,88 +38,26 @@ from sensor_msgs.msg import NavSatFix, NavSatStatus, TimeReference
 
 from ..gnss import ephemeris_data
 from ..gnss.clock_model import OCXO, TCXO
-from ..gnss.constants import GALILEO, GPS, SECONDS_PER_WEEK
+from ..gnss.constants import GALILEO, GPS
 from ..gnss.differences import NoiseModel
 from ..gnss.multipath import MultipathModel
 from ..gnss.simulator import (GnssSimulator, SimulatorConfig, default_start, solve_fix,
                                time_reference)
-from ..gnss.time import GPS_EPOCH, GST_WEEK_OFFSET
+from ..gnss.time import gps_to_utc, leap_seconds
 from ..sim import scenarios
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import quat, sec_to_stamp, stamp_to_sec, vec
+from .gnss_convert import ephemeris_msg, gps_to_posix
+from .gnss_convert import observations_msg as raw_observations_msg
 
 NS = 1_000_000_000
-#: u-blox gnssId of each simulated system (GnssObservations.SYSTEM_*), and the sigId of its
-#: simulated signal (GPS L1 C/A = 0, Galileo E1 C = 0).
-GNSS_ID = {GPS: GnssObservations.SYSTEM_GPS, GALILEO: GnssObservations.SYSTEM_GALILEO}
-SIG_ID = {GPS: 0, GALILEO: 0}
-#: GPS time minus POSIX time at the GPS epoch, without leap seconds [s].
-GPS_EPOCH_POSIX = (GPS_EPOCH - GPS_EPOCH.replace(year=1970, month=1, day=1)).total_seconds()
-#: URA index -> metres (IS-GPS-200 §20.3.3.3.1.3, upper bounds).
-_URA_M = (2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0, 1536.0,
-          3072.0, 6144.0)
-
-
-def accuracy_m(system: str, index: int) -> float:
-    """Broadcast accuracy [m]: GPS URA index, Galileo SISA index (OS SIS ICD §5.1.12); NaN when
-    the index means 'no accuracy prediction'."""
-    if system == GALILEO:
-        if index < 50:
-            return index * 0.01
-        if index < 75:
-            return 0.5 + (index - 50) * 0.02
-        if index < 100:
-            return 1.0 + (index - 75) * 0.04
-        if index < 126:
-            return 2.0 + (index - 100) * 0.16
-        return math.nan
-    return _URA_M[index] if 0 <= index < len(_URA_M) else math.nan
-
-
-def gps_to_posix(t_gps: float, leap_s: int) -> float:
-    """POSIX (UTC) seconds of a GPS time, with GPST - UTC = ``leap_s``."""
-    return t_gps + GPS_EPOCH_POSIX - leap_s
-
-
-def ephemeris_msg(eph, stamp: Time) -> GnssEphemeris:
-    """GnssEphemeris of a KeplerEphemeris. ``tgd`` carries the group delay of the simulated E1 /
-    L1 signal (Galileo: BGD(E1, E5b) of I/NAV); ``iodc`` repeats IODE (not kept by the decoder)."""
-    week, toe = divmod(eph.toe, SECONDS_PER_WEEK)
-    if eph.system == GALILEO:
-        week -= GST_WEEK_OFFSET
-    return GnssEphemeris(
-        header=_header(stamp, "earth"), system=GNSS_ID[eph.system], prn=eph.prn,
-        week=int(week), iode=int(eph.iode), iodc=int(eph.iode), health=int(eph.health),
-        ura=accuracy_m(eph.system, eph.accuracy_index), toe=float(toe),
-        toc=float(eph.toc % SECONDS_PER_WEEK), af0=eph.af0, af1=eph.af1, af2=eph.af2,
-        tgd=eph.tgd, sqrt_a=eph.sqrt_a, eccentricity=eph.e, i0=eph.i0, omega0=eph.omega0,
-        omega=eph.omega, m0=eph.m0, delta_n=eph.delta_n, idot=eph.idot,
-        omega_dot=eph.omega_dot, cuc=eph.cuc, cus=eph.cus, crc=eph.crc, crs=eph.crs,
-        cic=eph.cic, cis=eph.cis)
 
 
 def observations_msg(epoch, stamp: Time, newly_valid) -> GnssObservations:
     """GnssObservations of one antenna's SimEpoch; ``newly_valid`` flags (per observation) a phase
-    whose half-cycle ambiguity was resolved at this epoch."""
-    raw = epoch.raw
-    msg = GnssObservations(header=_header(stamp, f"gnss_antenna_{epoch.antenna}"),
-                           antenna_id=epoch.antenna, gps_week=raw.week,
-                           time_of_week=float(raw.tow), leap_seconds=raw.leap_s,
-                           clock_reset=raw.clock_reset)
-    msg.system = [GNSS_ID[o.system] for o in raw.obs]
-    msg.prn = [o.prn for o in raw.obs]
-    msg.frequency_slot = [o.freq_slot for o in raw.obs]
-    msg.signal = [SIG_ID[o.system] for o in raw.obs]
-    msg.pseudorange = [float(o.pseudorange_m) for o in raw.obs]
-    msg.doppler = [float(o.doppler_hz) for o in raw.obs]
-    msg.carrier_phase = [float(o.carrier_cycles) if o.half_cycle_valid else math.nan
-                         for o in raw.obs]
-    msg.cn0 = [float(o.cn0_dbhz) for o in raw.obs]
-    msg.lock_time = [o.lock_ms / 1000.0 for o in raw.obs]
-    msg.loss_of_lock = [bool(a or b) for a, b in zip(epoch.loss_of_lock, newly_valid)]
-    msg.pseudorange_std = [float(o.pr_std_m) for o in raw.obs]
-    msg.carrier_phase_std = [float(o.cp_std_cycles) for o in raw.obs]
-    return msg
+    whose half-cycle ambiguity was resolved at this epoch (reported as a loss of lock)."""
+    return raw_observations_msg(epoch.raw, epoch.antenna, stamp, f"gnss_antenna_{epoch.antenna}",
+                                [bool(a or b) for a, b in zip(epoch.loss_of_lock, newly_valid)])
 
 
 def fix_msgs(fix, stamp: Time, systems) -> tuple[NavSatFix, TwistWithCovarianceStamped]:
@@ -311,7 +249,8 @@ class GnssSimulatorNode(NavNode):
             return False
         self.scenario_k += 2   # the trajectory runs at twice the epoch rate
         t_gps = self.sim.gps_time(traj.t[k])
-        stamp = sec_to_stamp(gps_to_posix(t_gps, 18))
+        # GPST - UTC from the leap-second table at that date (18 s since 2017)
+        stamp = sec_to_stamp(gps_to_posix(t_gps, leap_seconds(gps_to_utc(t_gps, 18))))
         self.simulate(traj.t[k], traj.lat[k], traj.lon[k], traj.h[k], traj.v_enu[k],
                       traj.q_nb[k], traj.omega_ib_b[k], stamp)
         return True
@@ -339,7 +278,7 @@ class GnssSimulatorNode(NavNode):
                             log=False)
         if t_gps - self.last_ephemeris_t >= self.p["ephemeris_period_s"]:
             for eph in self.sim.ephemerides.values():
-                self.pub_eph.publish(ephemeris_msg(eph, stamp))
+                self.pub_eph.publish(ephemeris_msg(eph, stamp, epochs[0].raw.leap_s))
             self.last_ephemeris_t = t_gps
         for epoch in epochs:
             newly_valid = []
