@@ -26,9 +26,12 @@ setup(
         "imu_preprocessor = ins_gnss_ros.nodes.imu_preprocessor_node:main",
         "strapdown = ins_gnss_ros.nodes.strapdown_node:main",
         "mag_compass = ins_gnss_ros.nodes.mag_compass_node:main",
+        "phase_heading = ins_gnss_ros.nodes.phase_heading_node:main",
         "gnss_driver = ins_gnss_ros.nodes.gnss_driver_node:main",
         "gnss_simulator = ins_gnss_ros.nodes.gnss_simulator_node:main",
         "ekf = ins_gnss_ros.nodes.ekf_node:main",
+        # the main job: simulate, import, replay, evaluate, batch, run
+        "trial = ins_gnss_ros.trial.cli:main",
         # calibration tools
         "imu_allan = ins_gnss_ros.tools.allan_cli:main",
         "imu_calibrate = ins_gnss_ros.tools.imu_calibrate_cli:main",

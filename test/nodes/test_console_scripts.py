@@ -18,6 +18,8 @@ CONTRACT = {
     "imu_preprocessor": (["/imu/data", "/imu/delta", "/imu/mag"], ["/imu/data_raw", "/imu/mag_raw"]),
     "strapdown": (["/ins/state"], ["/imu/delta", "/ins/correction"]),
     "mag_compass": (["/mag/heading"], ["/imu/mag", "/ins/state", "/gnss/fix"]),
+    "phase_heading": (["/gnss/heading"], ["/gnss/observations", "/gnss/ephemeris", "/gnss/fix",
+                                          "/ins/state"]),
     "gnss_driver": (["/gnss/fix", "/gnss/vel", "/gnss/observations", "/gnss/ephemeris",
                      "/gnss/heading", "/gnss/time_reference"], []),
     "gnss_simulator": (["/gnss/fix", "/gnss/vel", "/gnss/observations", "/gnss/ephemeris",

@@ -388,3 +388,32 @@ def test_publishes_over_ros(executor, ros_context, probe):
                what="4 imu/data, 2 imu/delta")
     assert deltas[-1].header.stamp.sec * NS + deltas[-1].header.stamp.nanosec == T0_NS + 4 * DT_NS
     assert deltas[-1].dt == pytest.approx(0.01)
+
+
+def test_time_offset_moves_every_output_stamp(graph):
+    from ins_gnss_ros.nodes.imu_preprocessor_node import stamp_ns
+
+    plain, shifted = graph(), graph(Parameter("time_offset_s", value=-0.125))
+    for g in (plain, shifted):
+        _run_stream(g, 10)
+    for topic in ("/imu/data", "/imu/delta"):
+        a = [stamp_ns(m.header.stamp) for m in plain.out[topic]]
+        b = [stamp_ns(m.header.stamp) for m in shifted.out[topic]]
+        assert a and b == [t - 125_000_000 for t in a]
+
+
+def test_instant_samples_are_integrated_by_the_trapezoid_rule(graph):
+    """A rate ramp w(t) = a t sampled at instants: the exact increment over [t-dt, t] is the
+    trapezoid a (t - dt/2) dt; rate x dt would lag by half a sample."""
+    from ins_gnss_ros.nodes.imu_preprocessor_node import stamp_ns
+
+    g = graph(Parameter("sample_model", value="instant"), Parameter("rate_hz", value=100.0),
+              Parameter("coning_method", value="one_sample"))
+    a, dt = 0.2, 0.01
+    for k in range(1, 6):
+        t_ns = T0_NS + k * 10_000_000
+        g.imu(t_ns, [0.0, 0.0, a * (t_ns - T0_NS) / 1e9], G_UP)
+    deltas = g.out["/imu/delta"][1:]  # the first has no neighbour before it
+    for d in deltas:
+        t = (stamp_ns(d.header.stamp) - T0_NS) / 1e9
+        assert d.delta_angle.z == pytest.approx(a * (t - dt / 2) * dt, rel=1e-9)

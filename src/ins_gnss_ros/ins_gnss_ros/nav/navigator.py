@@ -625,6 +625,12 @@ class Navigator:
         for name in ("gmg", "gma"):
             if name in self.estimates:
                 self.estimates[name] *= np.exp(-T / self.config.noise.blocks[name].tau)
+        if "clock" in self.estimates:
+            # The receiver clock runs on between updates: offset, drift and drift rate follow
+            # the same model as their errors (seed 004 section 2.4; error_model.system_matrix).
+            c = self.estimates["clock"]
+            self.estimates["clock"] = np.array([c[0] + c[1] * T + 0.5 * c[2] * T * T,
+                                                c[1] + c[2] * T, c[2]])
         self._next = j
         self._t_epoch = self.nav.t
         P_prior = self.ekf.P.copy()

@@ -32,7 +32,7 @@ from ..nav.navigator import (ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, Gnss
                              HeadingFix, Navigator, NavigatorConfig, SpeedLog)
 from ..nav.rotations import quat_to_dcm
 from ..nav.strapdown import NavState
-from ..nav.sensor_errors import GRADES, filter_noise
+from ..nav.sensor_errors import GRADES, BlockNoise, FilterNoise, filter_noise
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, run
 from .convert import (nav_state_from_msg, sec_to_stamp, stamp_to_sec, to_quaternion,
                       to_vector3, vec)
@@ -51,6 +51,17 @@ class EkfNode(NavNode):
               choices=tuple(GRADES)),
         Param("bias_model", "gm", "bias process: gm (constant + Gauss-Markov) or rw (random walk)",
               choices=("gm", "rw")),
+        Param("noise.gyro_white", 0.0, "gyro white noise, rad/s/sqrt(Hz) (0: the grade's)", 0.0, 1.0),
+        Param("noise.accel_white", 0.0, "accelerometer white noise, m/s^2/sqrt(Hz) (0: the grade's)",
+              0.0, 10.0),
+        Param("noise.gyro_bias_sigma", 0.0, "initial gyro bias sigma, rad/s (0: the grade's)",
+              0.0, 1.0),
+        Param("noise.gyro_bias_walk", 0.0, "gyro bias random walk, rad/s/sqrt(s) (0: the grade's)",
+              0.0, 1.0),
+        Param("noise.accel_bias_sigma", 0.0, "initial accelerometer bias sigma, m/s^2 (0: the "
+              "grade's)", 0.0, 10.0),
+        Param("noise.accel_bias_walk", 0.0, "accelerometer bias random walk, m/s^2/sqrt(s) (0: the "
+              "grade's)", 0.0, 10.0),
         Param("lever_arm", [0.0, 0.0, 0.0], "GNSS antenna position in base_link (FLU), m",
               -100.0, 100.0, length=3),
         Param("gate_probability", 0.9999, "chi-square gate probability of every update", 0.5, 1.0),
@@ -59,6 +70,8 @@ class EkfNode(NavNode):
               0.0, 100.0),
         Param("gnss.velocity_sigma_floor_mps", 0.02, "floor of the GNSS velocity sigma, m/s",
               0.0, 10.0),
+        Param("gnss.velocity_delay_s", 0.0, "latency of the receiver's velocity solution: a "
+              "gnss/vel stamped t is applied at t - delay, s", 0.0, 2.0),
         Param("use_heading", True, "use gnss/heading (phase-difference or receiver azimuth)"),
         Param("use_magnetic_heading", False, "use mag/heading as backup heading aiding"),
         Param("magnetic_bias_sigma_deg", 2.0,
@@ -110,7 +123,7 @@ class EkfNode(NavNode):
                                                     p["speed_log.scale_sigma"]]), psd=1e-6)
         nhc = tuple(p["nonholonomic_sigma_mps"])
         self.config = NavigatorConfig(
-            noise=filter_noise(GRADES[p["imu_grade"]], p["bias_model"]),
+            noise=self.noise_model(),
             layout=p["layout"], extras=extras, lever_arm_b=np.array(p["lever_arm"], float),
             cov_interval=p["covariance_interval_s"], gate_prob=p["gate_probability"],
             sigma_pos0=p["init.position_sigma_m"], sigma_vel0=p["init.velocity_sigma_mps"],
@@ -150,6 +163,19 @@ class EkfNode(NavNode):
         if p["use_speed_log"]:
             self.subscribe(TwistWithCovarianceStamped, "log/speed", self.on_log, DRIVER_QOS)
 
+    def noise_model(self) -> FilterNoise:
+        """The grade's filter noise with the noise.* parameters that are set put in its place."""
+        p = self.p
+        noise = filter_noise(GRADES[p["imu_grade"]], p["bias_model"])
+        blocks = dict(noise.blocks)
+        for block, sigma, walk in (("bg", "noise.gyro_bias_sigma", "noise.gyro_bias_walk"),
+                                   ("ba", "noise.accel_bias_sigma", "noise.accel_bias_walk")):
+            b = blocks[block]
+            blocks[block] = BlockNoise(p[sigma] or b.sigma0, b.tau,
+                                       p[walk] ** 2 if p[walk] else b.psd)
+        return FilterNoise(p["noise.gyro_white"] ** 2 or noise.gyro_psd,
+                           p["noise.accel_white"] ** 2 or noise.accel_psd, blocks)
+
     # -- inputs --------------------------------------------------------------------------------
     def on_delta(self, msg: ImuDelta) -> None:
         dtheta, dv = vec(msg.delta_angle), vec(msg.delta_velocity)
@@ -188,7 +214,8 @@ class EkfNode(NavNode):
             return
         floor = self.p["gnss.velocity_sigma_floor_mps"] ** 2
         cov = cov + np.diag(np.maximum(floor - np.diag(cov), 0.0))
-        self.navigator.add_measurement(GnssVelocity(stamp_to_sec(msg.header.stamp), v, cov))
+        t = stamp_to_sec(msg.header.stamp) - self.p["gnss.velocity_delay_s"]
+        self.navigator.add_measurement(GnssVelocity(t, v, cov))
         self.after_filter()
 
     def on_heading(self, msg: Heading) -> None:

@@ -113,6 +113,13 @@ class ImuPreprocessorNode(NavNode):
               "apply the filter's bias/scale increments from ins/correction here; exactly one of "
               "this and strapdown.apply_sensor_corrections may be true (default: the strapdown)"),
         Param("frame_id", "base_link", "frame of the calibrated outputs"),
+        Param("sample_model", "interval_mean",
+              "what a raw sample is: interval_mean (the mean rate over the interval ending at its "
+              "stamp: increment = rate dt) or instant (the rate at the stamp: increment by the "
+              "trapezoid of neighbouring samples; rate dt would lag it by half a sample)",
+              choices=("interval_mean", "instant")),
+        Param("time_offset_s", 0.0, "added to the sensor stamps to put them on GNSS time (the "
+              "IMU clock's offset, e.g. -0.125 for the car drive's logger), s", -10.0, 10.0),
     )
 
     def __init__(self, **kwargs):
@@ -131,10 +138,12 @@ class ImuPreprocessorNode(NavNode):
         self.checker = SampleChecker(p["rate_hz"], np.radians(p["gyro_range_dps"]),
                                      p["accel_range_mps2"], p["max_bridge_samples"], p["bridge"])
         self.residual = ResidualErrors()
+        self.offset_ns = int(round(p["time_offset_s"] * NS))
         self.temperature: float | None = None
         self.synthesised = 0
         self._origin_ns: int | None = None   # stamps go to the checker relative to the first one
         self._last_ns: int | None = None     # end of the last integrated sample
+        self._last_rates = None              # its rates (trapezoid of instant samples)
         self._last_mag_ns: int | None = None
         self.pub_data = self.publisher(Imu, "imu/data", SENSOR_QOS)
         self.pub_delta = self.publisher(ImuDelta, "imu/delta", SENSOR_QOS)
@@ -202,7 +211,7 @@ class ImuPreprocessorNode(NavNode):
 
     # -- IMU samples ---------------------------------------------------------------------------
     def on_imu(self, msg: Imu) -> None:
-        t_ns = stamp_ns(msg.header.stamp)
+        t_ns = stamp_ns(msg.header.stamp) + self.offset_ns
         if self._origin_ns is None:
             self._origin_ns = t_ns
         gyro, accel = vec(msg.angular_velocity), vec(msg.linear_acceleration)
@@ -213,7 +222,7 @@ class ImuPreprocessorNode(NavNode):
         if result.reason == "gap":
             self.diag.count("imu gap longer than max_bridge_samples: integration restarted")
             self.integrator.reset()
-            self._last_ns = None
+            self._last_ns = self._last_rates = None
         elif result.reason == "gap_bridged":
             self.diag.count("imu gap bridged")
             self.synthesised += len(result.fill_stamps)
@@ -225,12 +234,17 @@ class ImuPreprocessorNode(NavNode):
                                     self.residual)
         for k, t in enumerate(stamps):
             self._integrate(t, w_b[k], f_b[k])
-        self._publish_data(msg, w_b[-1], f_b[-1])
+        self._publish_data(msg, t_ns, w_b[-1], f_b[-1])
 
     def _integrate(self, t_ns: int, w_b, f_b) -> None:
         dt = 1.0 / self.p["rate_hz"] if self._last_ns is None else (t_ns - self._last_ns) / NS
         self._last_ns = t_ns
-        out = self.integrator.add_rates(w_b, f_b, dt)
+        if self.p["sample_model"] == "instant" and self._last_rates is not None:
+            w_mean, f_mean = 0.5 * (self._last_rates[0] + w_b), 0.5 * (self._last_rates[1] + f_b)
+        else:
+            w_mean, f_mean = w_b, f_b
+        self._last_rates = (w_b, f_b)
+        out = self.integrator.add_rates(w_mean, f_mean, dt)
         if out is None:
             return
         phi, dv, dt_nav = out
@@ -239,10 +253,10 @@ class ImuPreprocessorNode(NavNode):
         delta.header.frame_id = self.p["frame_id"]
         self.pub_delta.publish(delta)
 
-    def _publish_data(self, raw: Imu, w_b, f_b) -> None:
+    def _publish_data(self, raw: Imu, t_ns: int, w_b, f_b) -> None:
         c = self.cal.c_bs
         out = Imu(angular_velocity=to_vector3(w_b), linear_acceleration=to_vector3(f_b))
-        out.header.stamp = raw.header.stamp
+        out.header.stamp = ns_to_stamp(t_ns)
         out.header.frame_id = self.p["frame_id"]
         out.orientation_covariance[0] = -1.0  # REP-145: no orientation estimate
         out.angular_velocity_covariance = rotate_covariance(raw.angular_velocity_covariance, c)
@@ -270,7 +284,7 @@ class ImuPreprocessorNode(NavNode):
     # -- magnetometer --------------------------------------------------------------------------
     def on_mag(self, msg: MagneticField) -> None:
         m = vec(msg.magnetic_field)
-        t_ns = stamp_ns(msg.header.stamp)
+        t_ns = stamp_ns(msg.header.stamp) + self.offset_ns
         if not np.all(np.isfinite(m)):
             self.diag.count("magnetometer sample rejected: non_finite")
             return
@@ -280,7 +294,7 @@ class ImuPreprocessorNode(NavNode):
         self._last_mag_ns = t_ns
         c = self.cal.c_bs
         out = MagneticField(magnetic_field=to_vector3(c @ m))
-        out.header.stamp = msg.header.stamp
+        out.header.stamp = ns_to_stamp(t_ns)
         out.header.frame_id = self.p["frame_id"]
         out.magnetic_field_covariance = rotate_covariance(msg.magnetic_field_covariance, c)
         self.pub_mag.publish(out)

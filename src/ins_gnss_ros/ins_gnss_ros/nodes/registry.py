@@ -11,6 +11,7 @@ NODES = {
     "imu_preprocessor": "ins_gnss_ros.nodes.imu_preprocessor_node:ImuPreprocessorNode",
     "strapdown": "ins_gnss_ros.nodes.strapdown_node:StrapdownNode",
     "mag_compass": "ins_gnss_ros.nodes.mag_compass_node:MagCompassNode",
+    "phase_heading": "ins_gnss_ros.nodes.phase_heading_node:PhaseHeadingNode",
     "gnss_driver": "ins_gnss_ros.nodes.gnss_driver_node:GnssDriverNode",
     "gnss_simulator": "ins_gnss_ros.nodes.gnss_simulator_node:GnssSimulatorNode",
     "ekf": "ins_gnss_ros.nodes.ekf_node:EkfNode",

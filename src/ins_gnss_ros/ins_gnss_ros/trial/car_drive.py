@@ -33,6 +33,10 @@ STANDARD_GRAVITY = 9.80665
 
 #: Add to the tag-file IMU times to align them with GNSS time, s (source configuration).
 IMU_TIME_OFFSET_S = -0.125
+#: Geoid height at the site, m: the ``.pos`` files of this source hold u-blox hMSL, not
+#: ellipsoidal height (their converter wrote NAV-PVT hMSL); the walk_0827 stream's NAV-PVT gives
+#: height - hMSL = -21.387 m there, and both recordings start within 300 m of each other.
+SITE_GEOID_SEPARATION_M = -21.387
 
 #: IMU mounting: two successive (roll, pitch, yaw) rotations, deg, of the IMU axes in the FRD body.
 IMU_MOUNT_EULER_DEG = ((180.0, 0.0, 180.0), (0.0, -6.79, 5.35))
@@ -166,7 +170,7 @@ def load_car_drive(folder):
     values, tick_ms = read_imu_csv(folder / "imu_1934.csv")
     tag = read_time_tag(folder / "imu_1934.csv.tag")
     c_body_imu = imu_to_body_dcm()
-    gnss = read_pos(folder / "gnss_1934_sf.pos")
+    gnss = read_pos(folder / "gnss_1934_sf.pos", SITE_GEOID_SEPARATION_M)
     fixed = gnss.select(gnss.quality == Q_FIX)
     truth = Trajectory(time=fixed.time, lat=fixed.lat, lon=fixed.lon, height=fixed.height,
                        vel_enu=fixed.vel_enu, pos_cov_enu=fixed.pos_cov_enu,

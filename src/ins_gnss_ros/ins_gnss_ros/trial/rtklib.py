@@ -7,7 +7,7 @@ calendar label converts by plain calendar arithmetic; UTC labels go through the 
 The ``.pos`` layout is RTKLIB's ``outsol`` text format (RTKLIB manual, appendix B "Output file
 formats"): '%' comment lines, the last of which names the columns, then one epoch per line.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime
 from pathlib import Path
 
@@ -136,7 +136,7 @@ def gps_seconds_from_calendar(label, time_system="GPST"):
     return (stamp - GPS_EPOCH).total_seconds()
 
 
-def read_pos(path):
+def read_pos(path, geoid_separation=0.0):
     """Read an RTKLIB ``.pos`` solution file with geodetic (deg) positions and GPST time.
 
     The columns are taken from the last '%' header line, so files with or without velocity
@@ -147,6 +147,10 @@ def read_pos(path):
     ----------
     path : str or Path
         The ``.pos`` file.
+    geoid_separation : float
+        Geoid height N, m, added to the file's heights when they are above the geoid (RTKLIB's
+        "geodetic" height option, or a converter that wrote u-blox hMSL): the returned
+        heights are then ellipsoidal (h = H + N).
 
     Returns
     -------
@@ -177,7 +181,8 @@ def read_pos(path):
             rows.append(_parse_line(text, time_system, len(header), path, number))
     if header is None:
         raise ValueError(f"{path}: no '%  GPST ...' column header line found")
-    return _solution_from_rows(np.array(rows, dtype=float).reshape(-1, len(header)), header)
+    solution = _solution_from_rows(np.array(rows, dtype=float).reshape(-1, len(header)), header)
+    return replace(solution, height=solution.height + geoid_separation)
 
 
 def read_time_tag(path):

@@ -1,0 +1,239 @@
+"""Simulated sea trial of the ``phase_heading`` node (issue 6): prints the acceptance numbers.
+
+Truth: the seed 004 Lab 2 ``sea`` scenario (vessel at 6-10 m/s with course changes, in waves;
+:func:`ins_gnss_ros.sim.scenarios.sea`). Observations: :class:`~ins_gnss_ros.gnss.simulator.
+GnssSimulator` from real broadcast orbits (GPS L1 + Galileo E1, 10 deg mask, 2 mm + 2 mm/sin E
+phase noise, elevation-dependent Gauss-Markov multipath, Klobuchar + Saastamoinen, one receiver
+clock, half-cycle ambiguity resolved after 6 s of lock), turned into ``gnss/observations`` and
+``gnss/ephemeris`` messages as the ``gnss_simulator`` node publishes them (``nodes/gnss_convert``),
+and fed to a
+``PhaseHeadingNode`` on the in-process bus. Nothing of the truth reaches the node.
+
+Per epoch a FIXED solution is *correct* when every double-difference ambiguity the solver holds
+equals the simulator's integer (DD of the true N of both antennas and both satellites), *wrong*
+otherwise. Time to first fix counts from the first epoch (the receiver's half-cycle resolution
+included) and, separately, from the first epoch with valid carrier phases.
+
+Usage: ``.venv/bin/python bench/bench_phase_heading.py [--quick]``
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+import warnings
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import rclpy
+from rclpy.parameter import Parameter
+
+from ins_gnss_ros.gnss import ephemeris_data
+from ins_gnss_ros.gnss.simulator import GnssSimulator, SimulatorConfig, SlipEvent
+from ins_gnss_ros.nav.conventions import seed_angles_from_quat, wrap_pi
+from ins_gnss_ros.nodes.base import InProcessBus
+from ins_gnss_ros.nodes.convert import sec_to_stamp
+from ins_gnss_ros.nodes.gnss_convert import ephemeris_msg, observations_msg
+from ins_gnss_ros.nodes.phase_heading_node import PhaseHeadingNode
+from ins_gnss_ros.sim import scenarios
+
+TWO_ANTENNAS = ((0.75, 0.0, 1.0), (-0.75, 0.0, 1.0))                 # 1.5 m fore-aft
+FOUR_ANTENNAS = ((0.75, 0.5, 1.0), (-0.75, 0.5, 1.0), (0.75, -0.5, 1.0), (-0.75, -0.5, 1.0))
+STAMP0 = 1000.0   # ROS-axis stamp of trajectory time 0, s
+
+
+@dataclass
+class Trial:
+    """Per-epoch outcome of one run."""
+
+    t: list = field(default_factory=list)
+    status: list = field(default_factory=list)      # Heading.status
+    correct: list = field(default_factory=list)     # held ambiguities all true (FIXED only)
+    err: list = field(default_factory=list)         # (azimuth, pitch, roll) error, rad
+    sigma: list = field(default_factory=list)       # their reported 1-sigma, rad
+    phase_valid: list = field(default_factory=list)  # carrier phases valid on every antenna
+    slips: tuple = ()                                # injected SlipEvents
+    slips_detected: int = 0                          # of them, flagged at the epoch they occur
+    max_norm_err_after_slip: float = 0.0             # max |heading err|/sigma within 5 s after
+    seconds_node: float = 0.0
+    tilt_rejections: int = 0                         # fixes the node's max_tilt_deg check refused
+
+
+def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0):
+    """One simulated sea trial through the node; returns a :class:`Trial`."""
+    sc = scenarios.sea(duration=duration, seed=seed, rate=2 * rate, oversample=2)
+    tr = sc.trajectory
+    broadcast = ephemeris_data.load(tr.lon[0])
+    config = SimulatorConfig(lever_arms=antennas, seed=seed)
+    sim = GnssSimulator(broadcast, config)
+    if slip_every > 0:
+        # Slips on antenna 1 every slip_every s, each on the satellite highest at the start (the
+        # likely reference satellite: the hardest case for holding the other ambiguities).
+        first = sim.epoch(tr.t[0], tr.lat[0], tr.lon[0], tr.h[0], tr.v_enu[0], tr.q_nb[0])
+        by_el = [o.sat_id for _, o in sorted(zip(-first[0].truth.elevation, first[0].raw.obs),
+                                             key=lambda x: x[0])]
+        slips = tuple(SlipEvent(t, by_el[i % len(by_el)], (-1) ** i * (1 + i % 3), antenna=1)
+                      for i, t in enumerate(np.arange(slip_every, duration, slip_every)))
+        sim = GnssSimulator(broadcast, replace(config, slips=slips))
+    bus = InProcessBus()
+    heads = []
+    bus.recorders.append(lambda topic, msg: heads.append(msg) if topic == "/gnss/heading" else 0)
+    node = PhaseHeadingNode(bus=bus, parameter_overrides=[
+        Parameter("antenna_positions", value=[float(v) for a in antennas for v in a]),
+        Parameter("ratio_threshold", value=ratio)])
+    valid = {}
+    out = Trial(slips=sim.config.slips)
+    pending_slips = list(out.slips)
+    step = int(round(1.0 / (tr.dt * rate)))
+    for k in range(0, len(tr), step):
+        epochs = sim.epoch(tr.t[k], tr.lat[k], tr.lon[k], tr.h[k], tr.v_enu[k], tr.q_nb[k],
+                           tr.omega_ib_b[k])
+        stamp = sec_to_stamp(STAMP0 + tr.t[k])
+        if k == 0:
+            for eph in sim.ephemerides.values():
+                bus.publish("gnss/ephemeris", ephemeris_msg(eph, stamp, epochs[0].raw.leap_s))
+        ok_phase = True
+        for ep in epochs:
+            newly = []
+            for o in ep.raw.obs:
+                key = (ep.antenna, o.sat_id)
+                newly.append(o.half_cycle_valid and not valid.get(key, False))
+                valid[key] = o.half_cycle_valid
+            ok_phase &= sum(o.half_cycle_valid for o in ep.raw.obs) >= 4
+            # What the gnss_simulator node publishes: loss of lock also when a phase becomes
+            # valid (half-cycle ambiguity resolved).
+            bus.publish("gnss/observations", observations_msg(
+                ep.raw, ep.antenna, stamp, f"gnss_antenna_{ep.antenna}",
+                [bool(a or b) for a, b in zip(ep.loss_of_lock, newly)]))
+        n_before = len(heads)
+        t0 = time.perf_counter()
+        bus.drain()
+        out.seconds_node += time.perf_counter() - t0
+        if len(heads) == n_before:
+            continue
+        h = heads[-1]
+        sol = node.last_solution
+        while pending_slips and pending_slips[0].t <= tr.t[k]:
+            out.slips_detected += pending_slips.pop(0).sat_id in sol.slipped
+        az, pitch, roll = seed_angles_from_quat(tr.q_nb[k])
+        if h.status == 2 and any(0.0 <= tr.t[k] - ev.t < 5.0 for ev in out.slips):
+            out.max_norm_err_after_slip = max(out.max_norm_err_after_slip, abs(
+                wrap_pi(h.azimuth - az)) / math.sqrt(h.azimuth_variance))
+        out.t.append(tr.t[k])
+        out.status.append(h.status)
+        out.phase_valid.append(ok_phase)
+        out.err.append((wrap_pi(h.azimuth - az), h.pitch - pitch, h.roll - roll))
+        out.sigma.append(np.sqrt([h.azimuth_variance, h.pitch_variance, h.roll_variance]))
+        out.correct.append(h.status == 2 and held_ambiguities_true(node, epochs))
+    out.tilt_rejections = node.diag.counts[
+        "FIXED attitude beyond max_tilt_deg: wrong fix, ambiguities dropped"]
+    node.destroy_node()
+    return out
+
+
+def held_ambiguities_true(node, epochs) -> bool:
+    """Whether every ambiguity held by the node's solver is the simulator's integer."""
+    true = [dict(zip((o.sat_id for o in epochs[a].raw.obs), epochs[a].truth.ambiguity))
+            for a in node.order]     # in the core's antenna order
+    # The store is the solver's internal table (baseline, signal, reference) -> integer.
+    for (k, s, r), n in node.solver.store._n.items():
+        dd = (true[k][s] - true[0][s]) - (true[k][r] - true[0][r])
+        if abs(dd - n) > 1e-6:
+            return False
+    return len(node.solver.store) > 0
+
+
+def summarise(trials, label):
+    """Print the acceptance numbers of a list of trials."""
+    fixed_after, correct_after, wrong, ttff, ttff_phase, n_pub = 0, 0, 0, [], [], 0
+    errs, sigmas = [], []
+    for tr in trials:
+        st = np.array(tr.status)
+        idx = np.flatnonzero(st == 2)
+        n_pub += st.size
+        if idx.size == 0:
+            ttff.append(math.inf)
+            continue
+        first = idx[0]
+        ttff.append(tr.t[first] - tr.t[0])
+        phase_ok = np.flatnonzero(tr.phase_valid)
+        ttff_phase.append(tr.t[first] - tr.t[phase_ok[0]])
+        after = np.arange(first, st.size)
+        corr = np.array(tr.correct)
+        correct_after += int(np.sum(corr[after]))
+        fixed_after += after.size
+        wrong += int(np.sum((st == 2) & ~corr))
+        # Every published FIXED epoch counts, a wrong fix included: what a consumer gets.
+        errs.append(np.array(tr.err)[st == 2])
+        sigmas.append(np.array(tr.sigma)[st == 2])
+    e = np.degrees(np.vstack(errs))
+    s = np.degrees(np.vstack(sigmas))
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)     # roll: all NaN with 2 antennas
+        rms = np.sqrt(np.nanmean(e ** 2, axis=0))
+        nees = np.nanmean((e / s) ** 2, axis=0)
+    print(f"\n## {label}")
+    print(f"epochs published: {n_pub}, after the first fix: {fixed_after}")
+    print(f"correct fix after the first fix: {correct_after}/{fixed_after} = "
+          f"{100.0 * correct_after / max(fixed_after, 1):.2f} %")
+    print(f"wrong fixes (FIXED with a wrong held integer): {wrong}/{n_pub} = "
+          f"{100.0 * wrong / max(n_pub, 1):.3f} %; wrong fixes caught by the node's tilt check "
+          f"(published as NONE): {sum(tr.tilt_rejections for tr in trials)}")
+    print(f"time to first fix from start: median {np.median(ttff):.1f} s, max {np.max(ttff):.1f} s"
+          f" over {len(ttff)} runs")
+    if ttff_phase:
+        print(f"time to first fix from the first epoch with valid phases: median "
+              f"{np.median(ttff_phase):.1f} s, max {np.max(ttff_phase):.1f} s")
+    names = ("heading", "pitch", "roll")
+    for i, name in enumerate(names):
+        if np.all(np.isnan(e[:, i])):
+            print(f"{name}: not observed")
+            continue
+        print(f"{name} RMS {rms[i]:.3f} deg, mean reported sigma {np.nanmean(s[:, i]):.3f} deg,"
+              f" mean (err/sigma)^2 {nees[i]:.2f}, max |err| {np.nanmax(np.abs(e[:, i])):.3f} deg")
+
+
+def print_slips(trials):
+    """Slips detected at the epoch they occurred, and the worst FIXED heading shortly after."""
+    n = sum(len(tr.slips) for tr in trials)
+    found = sum(tr.slips_detected for tr in trials)
+    worst = max(tr.max_norm_err_after_slip for tr in trials)
+    print(f"slips injected on antenna 1: {n}, flagged at the epoch of the slip: {found}; "
+          f"largest FIXED |heading error|/sigma within 5 s after a slip: {worst:.2f}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="short runs (smoke test)")
+    ap.add_argument("--ratio", type=float, default=3.0, help="ratio_threshold of the node")
+    args = ap.parse_args(argv)
+    long_s, ttff_runs, ttff_s = (120.0, 3, 20.0) if args.quick else (600.0, 10, 30.0)
+    rclpy.init()
+    try:
+        wall = time.perf_counter()
+        print(f"ratio_threshold {args.ratio}; sea scenario; GPS L1 + Galileo E1; 10 deg mask; "
+              "2 mm + 2 mm/sin(E) phase noise + multipath; 5 Hz")
+        summarise([run_trial(100 + i, ttff_s, TWO_ANTENNAS, ratio=args.ratio)
+                   for i in range(ttff_runs)],
+                  f"time to first fix: {ttff_runs} runs x {ttff_s:.0f} s, 2 antennas, 1.5 m")
+        runs = [run_trial(seed, long_s, TWO_ANTENNAS, slip_every=30.0, ratio=args.ratio)
+                for seed in (1, 2, 3, 4)]
+        summarise(runs, f"2 antennas 1.5 m, 4 x {long_s:.0f} s, slips on antenna 1 every 30 s")
+        print_slips(runs)
+        n_ep = sum(len(r.t) for r in runs)
+        print(f"node time per epoch: {1e3 * sum(r.seconds_node for r in runs) / n_ep:.2f} ms")
+        runs4 = [run_trial(seed, long_s, FOUR_ANTENNAS, slip_every=30.0, ratio=args.ratio)
+                 for seed in (5, 6)]
+        summarise(runs4, f"4 antennas (1.5 m x 1.0 m), 2 x {long_s:.0f} s, slips every 30 s")
+        print_slips(runs4)
+        n_ep = sum(len(r.t) for r in runs4)
+        print(f"node time per epoch: {1e3 * sum(r.seconds_node for r in runs4) / n_ep:.2f} ms")
+        print(f"\nwall time {time.perf_counter() - wall:.0f} s")
+    finally:
+        rclpy.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,89 @@
+"""Real-time factor of the trial replay (docs/results/replay.md).
+
+A 600 s car trial with a 200 Hz IMU and 5 Hz GNSS fix + velocity is simulated (not timed), then
+replayed as fast as possible
+
+* through the strapdown node alone (``imu/delta`` bag), in-process on the bus;
+* through the full graph (``imu/data_raw`` bag: imu_preprocessor -> strapdown <-> ekf),
+  in-process, every output serialised into the output bag;
+* through the offline filter path (``trial replay --offline``: the navigator, no ROS graph),
+
+and the wall time of each replay, bag reading and writing included, is compared with the 600 s
+of the trial. Targets: >= 10x for the graph, >= 100x for the offline path.
+
+    .venv/bin/python bench/bench_replay.py [--duration 600] [--keep DIR]
+"""
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+STRAPDOWN = """\
+strapdown:
+  ros__parameters:
+    init.latitude_deg: 0.0
+navigator:
+  ros__parameters:
+    imu_grade: mems_adis16405
+    lever_arm: [0.0, 0.0, 1.5]
+"""
+FULL_GRAPH = STRAPDOWN + """\
+imu_preprocessor:
+  ros__parameters:
+    rate_hz: 200.0
+    nav_rate_hz: 100.0
+ekf:
+  ros__parameters:
+    imu_grade: mems_adis16405
+    lever_arm: [0.0, 0.0, 1.5]
+"""
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=600.0, help="trial length, s")
+    parser.add_argument("--keep", default=None, help="work folder to keep (default: temporary)")
+    args = parser.parse_args()
+
+    from ins_gnss_ros.trial import bag as bagio
+    from ins_gnss_ros.trial.replay import replay, replay_offline
+    from ins_gnss_ros.trial.simulate import SimOptions, simulate
+
+    work = Path(args.keep or tempfile.mkdtemp(prefix="bench_replay_"))
+    work.mkdir(parents=True, exist_ok=True)
+    strapdown, full = work / "strapdown.yaml", work / "full.yaml"
+    strapdown.write_text(STRAPDOWN)
+    full.write_text(FULL_GRAPH)
+    t = time.perf_counter()
+    bag = simulate("car", args.duration, 1, work / "car", SimOptions(imu_topic="delta"))
+    raw = simulate("car", args.duration, 1, work / "car_raw")
+    print(f"simulated {args.duration:.0f} s car trial twice (200 Hz imu/delta, imu/data_raw; "
+          f"5 Hz GNSS) in {time.perf_counter() - t:.1f} s: "
+          f"{sum(1 for _ in bagio.iter_bag(bag))} messages each")
+
+    t = time.perf_counter()
+    n = len(bagio.read_bag(bag))
+    read = time.perf_counter() - t
+    print(f"read + decode the bag alone: {read:.1f} s ({n / read:,.0f} msg/s)")
+
+    runs = (("strapdown node alone, in-process", replay, bag, strapdown, "strapdown",
+             {"init_from_truth": True}, 10.0),
+            ("full graph imu_preprocessor+strapdown+ekf, in-process", replay, raw, full, "full",
+             {"init_from_truth": True}, 10.0),
+            ("offline filter path (navigator)", replay_offline, bag, strapdown, "offline", {},
+             100.0))
+    for name, function, trial, profile, folder, kwargs, target in runs:
+        out = work / folder
+        t = time.perf_counter()
+        function(trial, profile, out, **kwargs)
+        wall = time.perf_counter() - t
+        outputs = sum(1 for _ in bagio.iter_bag(out / "bag"))
+        print(f"{name}: {wall:.1f} s wall for {args.duration:.0f} s of trial = "
+              f"{args.duration / wall:.1f}x real time (target >= {target:g}x), "
+              f"{outputs} output messages")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,220 @@
+"""``trial``: the project's main job on the command line (CONTRACT.md "Trial CLI").
+
+    trial simulate --scenario {car,sea} --duration S --seed N --out bags/NAME
+    trial import {rtklib-drive,ubx,vessel-parquet} SRC --out bags/NAME
+    trial replay bags/NAME --config config/PROFILE.yaml --out OUT [--outages LEN:PERIOD[:FIRST]]
+                 [--init-from-truth] [--rate R --processes | --offline]
+    trial evaluate OUT [--truth bags/NAME] [--json] [--skip S]
+    trial batch --config PROFILE --out DIR (--scenario S --seeds N | --bags B ...) [--scheduler A]
+    trial run --config config/PROFILE.yaml
+
+Exit status: 0 done, 1 failed while running, 2 bad input (a missing, malformed or hostile bag,
+profile or argument), reported as ONE line ``trial: error: ...`` on stderr without a traceback
+(set ``TRIAL_DEBUG=1`` for the traceback).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+#: Exit status for bad input.
+EXIT_BAD_INPUT = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line error (no usage dump) and status 2."""
+
+    def error(self, message):
+        print(f"trial: error: {message}", file=sys.stderr)
+        sys.exit(EXIT_BAD_INPUT)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from ins_gnss_ros.sim.scenarios import SCENARIOS
+    from ins_gnss_ros.trial.importers import IMPORTERS
+    from ins_gnss_ros.trial.simulate import SimOptions
+
+    parser = _Parser(prog="trial", description="Simulate, import, replay and evaluate trials.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    p = sub.add_parser("simulate", help="write a simulated trial as a bag")
+    p.add_argument("--scenario", choices=sorted(SCENARIOS), required=True)
+    p.add_argument("--duration", type=float, default=120.0, help="s")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--imu", choices=("data_raw", "delta"), default="data_raw",
+                   help="IMU topic: raw rates (imu/data_raw) or increments (imu/delta)")
+    p.add_argument("--imu-grade", default=None, help="mems_adis16405, tactical or navigation")
+    p.add_argument("--imu-rate", type=float, default=SimOptions.imu_rate, help="Hz")
+    p.add_argument("--gnss-rate", type=float, default=SimOptions.gnss_rate,
+                   help="Hz, a divisor of the IMU rate")
+    p.add_argument("--gnss-sigma-h", type=float, default=SimOptions.gnss_sigma_h,
+                   help="horizontal position noise per axis, m")
+    p.add_argument("--gnss-sigma-v", type=float, default=SimOptions.gnss_sigma_v,
+                   help="vertical position noise, m")
+    p.add_argument("--out", required=True, help="new bag folder")
+
+    p = sub.add_parser("import", help="convert recorded data into a bag")
+    p.add_argument("kind", choices=sorted(IMPORTERS))
+    p.add_argument("src", help="; ".join(f"{k}: {v[1]}" for k, v in sorted(IMPORTERS.items())))
+    p.add_argument("--truth-pos", default=None,
+                   help="ubx: RTKLIB .pos whose fixed epochs are truth")
+    p.add_argument("--pos-geoid-separation", type=float, default=0.0,
+                   help="ubx: geoid height N (m) added to the .pos heights when they are above "
+                        "the geoid (hMSL), making them ellipsoidal")
+    p.add_argument("--out", required=True, help="new bag folder")
+
+    p = sub.add_parser("replay", help="run the node graph of a profile over a bag")
+    _replay_args(p)
+    p.add_argument("bag")
+    p.add_argument("--out", required=True, help="new output folder")
+    p.add_argument("--rate", type=float, default=None,
+                   help="real-time factor (with --processes); default: as fast as possible")
+    p.add_argument("--processes", action="store_true",
+                   help="run the nodes as processes on DDS with /clock (needs --rate)")
+    p.add_argument("--offline", action="store_true",
+                   help="offline filter path: the navigator of the profile's 'navigator' "
+                        "section instead of the node graph")
+
+    p = sub.add_parser("evaluate", help="error statistics, plots and report of a replay")
+    p.add_argument("out", help="replay output folder")
+    p.add_argument("--truth", default=None, help="bag with truth/state (default: the input bag)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--skip", type=float, default=0.0,
+                   help="leave the first S s (alignment, convergence) out of the statistics")
+
+    p = sub.add_parser("batch", help="many replays or Monte Carlo seeds on dask.distributed")
+    _replay_args(p)
+    p.add_argument("--out", required=True, help="new folder for the runs and batch.json")
+    p.add_argument("--scenario", default=None, help="Monte Carlo: simulate this scenario per seed")
+    p.add_argument("--seeds", type=int, default=10, help="Monte Carlo: number of seeds")
+    p.add_argument("--first-seed", type=int, default=0)
+    p.add_argument("--duration", type=float, default=60.0, help="Monte Carlo: s")
+    p.add_argument("--imu", choices=("data_raw", "delta"), default="data_raw")
+    p.add_argument("--imu-grade", default=None)
+    p.add_argument("--bags", nargs="+", default=None, help="replay these bags instead")
+    p.add_argument("--scheduler", default=None, help="address of a running dask scheduler")
+    p.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes")
+
+    p = sub.add_parser("run", help="start the profile's graph on real sensors, supervised")
+    p.add_argument("--config", required=True, help="params file (config/PROFILE.yaml)")
+    p.add_argument("--max-restarts", type=int, default=5, help="per node, then give up")
+    return parser
+
+
+def _replay_args(p):
+    p.add_argument("--config", required=True, help="params file (config/PROFILE.yaml)")
+    p.add_argument("--outages", default=None, help="LEN:PERIOD[:FIRST] s of GNSS withheld")
+    p.add_argument("--init-from-truth", action="store_true",
+                   help="set the nodes' init.* parameters from the first truth/state")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar (default: when stderr is a terminal)")
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return COMMANDS[args.command](args)
+    except KeyboardInterrupt:
+        print("trial: interrupted", file=sys.stderr)
+        return 130
+    except Exception as err:  # noqa: BLE001 - the one place that turns errors into a status
+        if os.environ.get("TRIAL_DEBUG"):
+            raise
+        from ins_gnss_ros.trial.bag import first_line
+
+        bad_input = isinstance(err, (ValueError, LookupError, OSError))
+        print(f"trial: error: {first_line(err)}", file=sys.stderr)
+        return EXIT_BAD_INPUT if bad_input else 1
+
+
+def _progress(args) -> bool:
+    return sys.stderr.isatty() if args.progress is None else args.progress
+
+
+def cmd_simulate(args) -> int:
+    from ins_gnss_ros.trial.simulate import SimOptions, simulate
+
+    path = simulate(args.scenario, args.duration, args.seed, args.out,
+                    SimOptions(imu_grade=args.imu_grade, imu_topic=args.imu,
+                               imu_rate=args.imu_rate, gnss_rate=args.gnss_rate,
+                               gnss_sigma_h=args.gnss_sigma_h, gnss_sigma_v=args.gnss_sigma_v))
+    print(path)
+    return 0
+
+
+def cmd_import(args) -> int:
+    from ins_gnss_ros.trial.importers import IMPORTERS
+
+    function = IMPORTERS[args.kind][0]
+    kwargs = ({"truth_pos": args.truth_pos, "geoid_separation": args.pos_geoid_separation}
+              if args.kind == "ubx" else {})
+    print(function(args.src, args.out, **kwargs))
+    return 0
+
+
+def cmd_replay(args) -> int:
+    from ins_gnss_ros.trial import replay
+
+    if args.processes and args.rate is None:
+        raise ValueError("--processes needs --rate (e.g. --rate 1)")
+    if args.rate is not None and not args.processes:
+        raise ValueError("--rate needs --processes (the in-process replay runs as fast as "
+                         "possible)")
+    if args.offline:
+        if args.processes or args.init_from_truth:
+            raise ValueError("--offline runs no nodes: it takes neither --processes nor "
+                             "--init-from-truth")
+        summary = replay.replay_offline(args.bag, args.config, args.out, outages=args.outages,
+                                        progress=_progress(args))
+    else:
+        run = replay.replay_processes if args.processes else replay.replay
+        kwargs = {"rate": args.rate} if args.processes else {}
+        summary = run(args.bag, args.config, args.out, outages=args.outages,
+                      progress=_progress(args), init_from_truth=args.init_from_truth, **kwargs)
+    print(f"recorded {', '.join(summary['topics'])} into {args.out}")
+    return 0
+
+
+def cmd_evaluate(args) -> int:
+    from ins_gnss_ros.trial.evaluate import markdown_table
+    from ins_gnss_ros.trial.report import evaluate_run
+
+    evaluation, metrics = evaluate_run(args.out, args.truth, plots=not args.no_plots,
+                                       skip_s=args.skip)
+    if args.json:
+        print(json.dumps(metrics, sort_keys=True))
+    else:
+        print(markdown_table(evaluation))
+        print(f"\nreport: {metrics['report']}")
+    return 0
+
+
+def cmd_batch(args) -> int:
+    from ins_gnss_ros.trial.batch import run_batch
+
+    result = run_batch(args.config, args.out, scheduler=args.scheduler, workers=args.workers,
+                       scenario=args.scenario, seeds=args.seeds, first_seed=args.first_seed,
+                       duration=args.duration, bags=args.bags, outages=args.outages,
+                       init_from_truth=args.init_from_truth, imu=args.imu,
+                       imu_grade=args.imu_grade)
+    print(json.dumps(result["aggregate"], indent=2, sort_keys=True))
+    print(f"batch: {result['path']}")
+    return 0 if result["failed"] == 0 else 1
+
+
+def cmd_run(args) -> int:
+    from ins_gnss_ros.trial.replay import load_profile
+    from ins_gnss_ros.trial.supervisor import Supervisor
+
+    profile = load_profile(args.config)
+    return Supervisor(profile, max_restarts=args.max_restarts).run()
+
+
+COMMANDS = {"simulate": cmd_simulate, "import": cmd_import, "replay": cmd_replay,
+            "evaluate": cmd_evaluate, "batch": cmd_batch, "run": cmd_run}
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,168 @@
+"""``trial evaluate``: the accuracy of a replay against the truth of its bag, as tables, plots and
+a Markdown report.
+
+The estimate is ``ins/state`` of the replay's output bag (position, ENU velocity, attitude); when
+the filter also published ``nav/odom``, its covariances are attached to the estimate so that the
+evaluation gives NEES and sigma bounds: the pose covariance (x, y, z in the ENU ``map`` frame,
+rotations about its fixed axes = the ENU rotation vector) and the twist covariance (base_link,
+REP-147 child frame) rotated into ENU, C P C^T. Truth is ``truth/state`` of the input bag (named
+in ``OUT/replay.json``, or given). Components the truth lacks (NaN, e.g. attitude of an RTK-only
+truth) are not evaluated. The statistics themselves are :mod:`ins_gnss_ros.trial.evaluate`'s.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ins_gnss_ros.nav.rotations import quat_normalize, quat_to_dcm
+from ins_gnss_ros.trial import bag as bagio
+from ins_gnss_ros.trial.evaluate import Trajectory, _subset, evaluate, markdown_table
+
+#: Output-bag topics.
+STATE_TOPIC, ODOM_TOPIC, TRUTH_TOPIC = "/ins/state", "/nav/odom", "/truth/state"
+
+
+def trajectory_from_states(messages, t0_ns: int) -> Trajectory | None:
+    """Trajectory of InsState messages (times in s after ``t0_ns``); NaN-only velocity or
+    attitude become None, duplicate stamps keep the last message. None for no messages."""
+    rows = {}
+    for m in messages:
+        msg = m.msg
+        rows[bagio.stamp_ns(msg)] = (msg.latitude, msg.longitude, msg.altitude,
+                                     msg.velocity.x, msg.velocity.y, msg.velocity.z,
+                                     msg.orientation.w, msg.orientation.x, msg.orientation.y,
+                                     msg.orientation.z)
+    if not rows:
+        return None
+    stamps = np.array(sorted(rows), np.int64)
+    a = np.array([rows[s] for s in stamps], float)
+    ok = np.all(np.isfinite(a[:, :3]), axis=1)
+    a, stamps = a[ok], stamps[ok]
+    if len(a) == 0:
+        return None
+    vel = a[:, 3:6] if np.all(np.isfinite(a[:, 3:6])) else None
+    q = quat_normalize(a[:, 6:10]) if np.all(np.isfinite(a[:, 6:10])) else None
+    return Trajectory(time=(stamps - t0_ns) * 1e-9, lat=a[:, 0], lon=a[:, 1], height=a[:, 2],
+                      vel_enu=vel, q_nb=q)
+
+
+def attach_odometry_covariance(estimate: Trajectory, messages, t0_ns: int) -> Trajectory:
+    """``estimate`` with position, velocity and attitude covariances from nav/Odometry messages,
+    interpolated linearly to its epochs (held constant beyond the first and last)."""
+    if not messages or estimate.q_nb is None:
+        return estimate
+    t = np.array([(bagio.stamp_ns(m.msg) - t0_ns) * 1e-9 for m in messages])
+    pose = np.array([np.reshape(m.msg.pose.covariance, (6, 6)) for m in messages])
+    twist = np.array([np.reshape(m.msg.twist.covariance, (6, 6)) for m in messages])
+    order = np.argsort(t, kind="stable")
+    t, pose, twist = t[order], pose[order], twist[order]
+
+    def at_estimate(cov):
+        flat = cov.reshape(len(t), -1)
+        return np.column_stack([np.interp(estimate.time, t, c) for c in flat.T]).reshape(-1, 3, 3)
+
+    c_nb = quat_to_dcm(estimate.q_nb)
+    vel_body = at_estimate(twist[:, :3, :3])
+    return Trajectory(time=estimate.time, lat=estimate.lat, lon=estimate.lon,
+                      height=estimate.height, vel_enu=estimate.vel_enu, q_nb=estimate.q_nb,
+                      pos_cov_enu=at_estimate(pose[:, :3, :3]),
+                      vel_cov_enu=c_nb @ vel_body @ np.swapaxes(c_nb, 1, 2),
+                      att_cov=at_estimate(pose[:, 3:, 3:]))
+
+
+def load_run(out, truth_bag=None):
+    """Estimate, truth and outage windows of a replay output folder.
+
+    Returns
+    -------
+    estimate, truth : Trajectory
+        Times in s after the first truth epoch.
+    windows : ndarray, shape (k, 2)
+        Outage windows on the same time scale.
+    summary : dict
+        ``replay.json`` (empty if absent).
+    """
+    out = Path(out)
+    summary_path = out / "replay.json"
+    summary = {}
+    if summary_path.is_file():
+        try:
+            summary = json.loads(summary_path.read_text())
+        except json.JSONDecodeError as err:
+            raise ValueError(f"{summary_path}: malformed JSON ({err.msg})") from None
+        if not isinstance(summary, dict):
+            raise ValueError(f"{summary_path}: expected a JSON object")
+    output_bag = out / "bag" if (out / "bag").is_dir() else out
+    truth_bag = truth_bag or summary.get("input_bag")
+    if truth_bag is None:
+        raise ValueError(f"{out}: no replay.json naming the input bag: give --truth BAG")
+    truth_msgs = bagio.read_bag(truth_bag, [TRUTH_TOPIC])
+    if not truth_msgs:
+        raise ValueError(f"{truth_bag}: no {TRUTH_TOPIC} messages to evaluate against")
+    t0_ns = truth_msgs[0].t_ns
+    truth = trajectory_from_states(truth_msgs, t0_ns)
+    outputs = bagio.read_bag(output_bag, [STATE_TOPIC, ODOM_TOPIC])
+    estimate = trajectory_from_states([m for m in outputs if m.topic == STATE_TOPIC], t0_ns)
+    if estimate is None or truth is None:
+        raise ValueError(f"{output_bag}: no {STATE_TOPIC} with finite positions to evaluate")
+    estimate = attach_odometry_covariance(
+        estimate, [m for m in outputs if m.topic == ODOM_TOPIC], t0_ns)
+    windows_ns = np.asarray(summary.get("outage_windows_ns", []), dtype=np.int64).reshape(-1, 2)
+    return estimate, truth, (windows_ns - t0_ns) * 1e-9, summary
+
+
+def evaluate_run(out, truth_bag=None, plots=True, skip_s=0.0):
+    """Evaluate a replay output folder; write ``report.md`` (and PNG plots) into it.
+
+    Parameters
+    ----------
+    out : path
+        Replay output folder.
+    truth_bag : path, optional
+        Bag with ``truth/state`` (default: the replay's input bag).
+    plots : bool
+        Write the PNG plots.
+    skip_s : float
+        Leave the first ``skip_s`` seconds of the estimate (initial alignment and convergence)
+        out of the statistics; the report says so.
+
+    Returns
+    -------
+    evaluation : Evaluation
+    metrics : dict
+        The ``--json`` object (:meth:`Evaluation.to_json` plus ``report``).
+    """
+    from ins_gnss_ros.trial.plots import write_plots
+
+    out = Path(out)
+    if not skip_s >= 0.0:
+        raise ValueError(f"--skip must be >= 0 s, got {skip_s}")
+    estimate, truth, windows, summary = load_run(out, truth_bag)
+    keep = truth.time >= estimate.time[0] + skip_s
+    if not keep.any():
+        raise ValueError(f"no truth epoch after the first {skip_s:g} s of the estimate")
+    truth = _subset(truth, keep)
+    evaluation = evaluate(estimate, truth, windows if len(windows) else None)
+    images = write_plots(evaluation, estimate, truth, out / "plots",
+                         windows if len(windows) else None) if plots else []
+    report = out / "report.md"
+    report.write_text(markdown_report(evaluation, summary, truth_bag, images, out, skip_s))
+    metrics = evaluation.to_json()
+    metrics["report"] = str(report)
+    return evaluation, metrics
+
+
+def markdown_report(evaluation, summary, truth_bag, images, out, skip_s=0.0) -> str:
+    """The report: what ran on what, the error tables, the plots."""
+    lines = ["# Trial evaluation", ""]
+    facts = [("input bag", summary.get("input_bag")), ("truth", truth_bag or
+                                                        summary.get("input_bag")),
+             ("profile", summary.get("profile")), ("graph", ", ".join(summary.get("graph", []))),
+             ("replay", summary.get("mode")), ("outages", summary.get("outages")),
+             ("not evaluated (alignment, convergence)", f"first {skip_s:g} s" if skip_s else None)]
+    lines += [f"- {name}: `{value}`" for name, value in facts if value]
+    lines += ["", markdown_table(evaluation), ""]
+    lines += [f"![{p.stem}]({p.relative_to(out)})" for p in images]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,204 @@
+"""``trial simulate``: a seeded scenario of :mod:`ins_gnss_ros.sim.scenarios` written as a bag.
+
+The bag holds what the vehicle's sensors would have recorded plus the truth (CONTRACT.md "Truth
+and setup"):
+
+* ``imu/data_raw`` (sensor_msgs/Imu, interval-mean rates of :mod:`ins_gnss_ros.sim.imu_sim`) or,
+  with ``imu_topic="delta"``, ``imu/delta`` (ImuDelta, the same increments unchanged); the IMU
+  axes are the body axes (identity mounting);
+* ``gnss/fix`` and ``gnss/vel``: the truth at the antenna lever arm (Groves eqs. 2.165-2.167 via
+  :mod:`ins_gnss_ros.nav.lever_arm`) plus white noise. Raw pseudoranges and carrier phase are the
+  GNSS simulator node's job (from real orbits), not this writer's;
+* ``imu/mag_raw``: :mod:`ins_gnss_ros.sim.mag_sim` in the WMM field at the start point and date;
+* ``log/speed`` (sea only): :mod:`ins_gnss_ros.sim.log_sim`, longitudinal speed through the water
+  (transverse and vertical NaN: a single-axis log), body frame;
+* ``truth/state`` (with the true sensor biases in the bias fields) and ``truth/heading``.
+
+Stamps: simulated time 0 is :data:`SIM_EPOCH_NS` on the ROS time axis (2026-01-01T00:00:00,
+inside the WMM2025 life span). Every random draw derives from ``seed``: the same seed and
+options give the identical (decoded) bag.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ins_gnss_ros.magnetic.wmm import decimal_year, field_elements
+from ins_gnss_ros.nav.earth import radii
+from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
+from ins_gnss_ros.nav.sensor_errors import GRADES
+from ins_gnss_ros.sim import scenarios
+from ins_gnss_ros.sim.imu_sim import ImuSpec, simulate_imu
+from ins_gnss_ros.sim.log_sim import CurrentModel, LogSpec, simulate_log
+from ins_gnss_ros.sim.mag_sim import MagErrors, simulate_magnetometer
+from ins_gnss_ros.trial import bag
+
+#: ROS time of simulated t = 0: 2026-01-01T00:00:00 UTC, ns.
+SIM_EPOCH_NS = 1_767_225_600 * 1_000_000_000
+
+#: IMU grade per scenario when none is given: a MEMS unit in the car (seed 004 Lab 1 uses an
+#: ADIS16405-class prototype), a tactical-grade unit on the ship (seed 004 Lab 2).
+DEFAULT_GRADE = {"car": "mems_adis16405", "sea": "tactical"}
+
+
+@dataclass(frozen=True)
+class SimOptions:
+    """Sensor set-up of a simulated trial (SI units, lever arms in base_link FLU).
+
+    Attributes
+    ----------
+    imu_grade : str or None
+        Key of :data:`ins_gnss_ros.nav.sensor_errors.GRADES`; None: :data:`DEFAULT_GRADE`.
+    imu_rate : float
+        IMU and trajectory rate, Hz.
+    imu_topic : {"data_raw", "delta"}
+        Write raw rates on ``imu/data_raw`` or increments on ``imu/delta``.
+    gnss_rate : float
+        Rate of ``gnss/fix`` and ``gnss/vel``, Hz (a divisor of `imu_rate`).
+    gnss_sigma_h, gnss_sigma_v : float
+        White position noise per horizontal axis and vertical, m.
+    gnss_sigma_vel : float
+        White velocity noise per axis, m/s.
+    antenna_lever_arm : tuple of 3 float
+        GNSS antenna relative to the IMU, m.
+    mag_rate : float
+        Magnetometer rate, Hz.
+    mag_noise : float
+        Magnetometer white noise, T.
+    log_rate, log_noise : float
+        Speed-log rate (Hz) and white noise (m/s), sea scenario.
+    log_lever_arm : tuple of 3 float
+        Speed-log transducer relative to the IMU, m.
+    truth_rate : float
+        Rate of ``truth/state`` and ``truth/heading``, Hz.
+    """
+
+    imu_grade: str | None = None
+    imu_rate: float = 200.0
+    imu_topic: str = "data_raw"
+    gnss_rate: float = 5.0
+    gnss_sigma_h: float = 0.5
+    gnss_sigma_v: float = 1.0
+    gnss_sigma_vel: float = 0.05
+    antenna_lever_arm: tuple = (0.0, 0.0, 1.5)
+    mag_rate: float = 50.0
+    mag_noise: float = 100e-9
+    log_rate: float = 2.0
+    log_noise: float = 0.05
+    log_lever_arm: tuple = (0.0, 0.0, -2.0)
+    truth_rate: float = 20.0
+
+
+def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions = SimOptions()):
+    """Simulate a scenario and write it as a bag folder ``out``.
+
+    Parameters
+    ----------
+    scenario : {"car", "sea"}
+    duration : float
+        s (> 0).
+    seed : int
+    out : path
+        New bag folder.
+    options : SimOptions
+
+    Returns
+    -------
+    Path
+        The bag folder.
+    """
+    if scenario not in scenarios.SCENARIOS:
+        raise ValueError(f"unknown scenario {scenario!r}; known: {', '.join(scenarios.SCENARIOS)}")
+    if not duration > 0.0:
+        raise ValueError(f"duration must be > 0 s, got {duration}")
+    if options.imu_topic not in ("data_raw", "delta"):
+        raise ValueError(f"imu_topic must be data_raw or delta, got {options.imu_topic!r}")
+    grade_name = options.imu_grade or DEFAULT_GRADE[scenario]
+    if grade_name not in GRADES:
+        raise ValueError(f"unknown IMU grade {grade_name!r}; known: {', '.join(GRADES)}")
+    grade = GRADES[grade_name]
+    writer = bag.BagWriter(out)  # an existing output is refused before the work
+    seeds = np.random.SeedSequence(seed).generate_state(4)
+    sc = scenarios.SCENARIOS[scenario](duration=duration, seed=seed, rate=options.imu_rate)
+    traj = sc.trajectory
+    imu = _write_imu(writer, traj, ImuSpec(grade, rate=options.imu_rate), int(seeds[0]), options)
+    _write_gnss(writer, traj, options, np.random.default_rng(seeds[1]))
+    _write_mag(writer, traj, options, int(seeds[2]))
+    if scenario == "sea":
+        _write_log(writer, traj, sc.water_current_enu, options, int(seeds[3]))
+    _write_truth(writer, traj, imu, options)
+    return writer.close()
+
+
+def _every(traj, rate):
+    """Indices of trajectory samples at ``rate`` Hz (rate must divide the trajectory rate)."""
+    factor = int(round(1.0 / (traj.dt * rate)))
+    if factor < 1 or abs(factor * traj.dt * rate - 1.0) > 1e-9:
+        raise ValueError(f"{rate} Hz does not divide the trajectory rate {1.0 / traj.dt:g} Hz")
+    return np.arange(0, len(traj), factor)
+
+
+def _write_imu(writer, traj, spec, seed, options):
+    imu = simulate_imu(traj, spec, seed)
+    t_ns = bag.seconds_to_ns(imu.t, SIM_EPOCH_NS)
+    if options.imu_topic == "delta":
+        writer.write_all("imu/delta", (bag.delta_msg(t, a, v, imu.dt)
+                                       for t, a, v in zip(t_ns, imu.dtheta, imu.dv)))
+    else:
+        writer.write_all("imu/data_raw", (bag.imu_msg(t, w, f)
+                                          for t, w, f in zip(t_ns, imu.gyro, imu.accel)))
+    return imu
+
+
+def _write_gnss(writer, traj, options, rng):
+    k = _every(traj, options.gnss_rate)
+    lever = np.asarray(options.antenna_lever_arm, float)
+    lat, lon, h = lever_arm_position(traj.lat[k], traj.lon[k], traj.h[k], traj.q_nb[k], lever)
+    vel = lever_arm_velocity(traj.v_enu[k], traj.q_nb[k], traj.omega_ib_b[k], lever, traj.lat[k])
+    sigma = np.array([options.gnss_sigma_h, options.gnss_sigma_h, options.gnss_sigma_v])
+    d_enu = sigma * rng.standard_normal((len(k), 3))
+    rm, rn = radii(lat)
+    lat = lat + d_enu[:, 1] / (rm + h)
+    lon = lon + d_enu[:, 0] / ((rn + h) * np.cos(lat))
+    h = h + d_enu[:, 2]
+    vel = vel + options.gnss_sigma_vel * rng.standard_normal(vel.shape)
+    t_ns = bag.seconds_to_ns(traj.t[k], SIM_EPOCH_NS)
+    var, var_v = sigma ** 2, [options.gnss_sigma_vel ** 2] * 3
+    for i, t in enumerate(t_ns):
+        writer.write("gnss/fix", bag.fix_msg(t, lat[i], lon[i], h[i], var))
+        writer.write("gnss/vel", bag.twist_msg(t, vel[i], var_v, "gnss"))
+
+
+def _write_mag(writer, traj, options, seed):
+    year = decimal_year(SIM_EPOCH_NS * 1e-9 + traj.t[0])
+    earth_field = field_elements(traj.lat[0], traj.lon[0], traj.h[0], year).enu
+    mag = simulate_magnetometer(traj, earth_field, MagErrors(noise_std=options.mag_noise),
+                                rate=options.mag_rate, seed=seed)
+    t_ns = bag.seconds_to_ns(mag.t, SIM_EPOCH_NS)
+    writer.write_all("imu/mag_raw", (bag.mag_msg(t, b, options.mag_noise ** 2)
+                                     for t, b in zip(t_ns, mag.field_b)))
+
+
+def _write_log(writer, traj, current_enu, options, seed):
+    spec = LogSpec(rate=options.log_rate, noise_std=options.log_noise,
+                   lever_arm_b=np.asarray(options.log_lever_arm, float))
+    log = simulate_log(traj, CurrentModel(mean_enu=np.asarray(current_enu, float)), spec, seed)
+    t_ns = bag.seconds_to_ns(log.t, SIM_EPOCH_NS)
+    var = [options.log_noise ** 2, np.nan, np.nan]
+    writer.write_all("log/speed", (bag.twist_msg(t, (v, np.nan, np.nan), var, "base_link")
+                                   for t, v in zip(t_ns, log.speed)))
+
+
+def _write_truth(writer, traj, imu, options):
+    k = _every(traj, options.truth_rate)
+    # True bias of the IMU interval ending at or after each truth epoch (the truth of the
+    # filter's bias estimates; the first epoch takes the first interval).
+    j = np.clip(np.searchsorted(imu.t, traj.t[k] - 1e-9), 0, len(imu.t) - 1)
+    gyro_bias, accel_bias = imu.gyro_bias, imu.accel_bias
+    t_ns = bag.seconds_to_ns(traj.t[k], SIM_EPOCH_NS)
+    for n, i in enumerate(k):
+        writer.write("truth/state", bag.ins_state_msg(
+            t_ns[n], traj.lat[i], traj.lon[i], traj.h[i], traj.v_enu[i], traj.q_nb[i],
+            traj.omega_ib_b[i], traj.f_b[i], gyro_bias[j[n]], accel_bias[j[n]]))
+        writer.write("truth/heading", bag.heading_msg(t_ns[n], traj.q_nb[i]))
