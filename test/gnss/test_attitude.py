@@ -69,6 +69,10 @@ def test_solve_attitude_single_and_multiple_baselines():
     assert (a.pitch, a.yaw) == pytest.approx((np.radians(-5.0), np.radians(30.0)), abs=1e-12)
     assert np.degrees(a.azimuth) == pytest.approx(60.0)
     assert baseline_azimuth_elevation(R @ TWO[1])[1] == pytest.approx(np.radians(5.0))
+    # The same attitude seen through a baseline pointing aft (master antenna ahead).
+    aft = -TWO[1]
+    a = solve_attitude((R @ aft)[None], np.eye(3) * 1e-6, aft[None])
+    assert (a.pitch, a.yaw) == pytest.approx((np.radians(-5.0), np.radians(30.0)), abs=1e-12)
     R = dcm_from_euler(0.1, -0.05, 2.5)
     b_body = FOUR[1:] - FOUR[0]
     a = solve_attitude(b_body @ R.T, np.eye(9) * 1e-6, b_body)

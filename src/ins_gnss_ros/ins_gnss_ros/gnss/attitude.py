@@ -67,7 +67,11 @@ def _heading_pitch_one_baseline(b_enu, b_body):
     u = b_enu / np.linalg.norm(b_enu)
     # Ry(p) b_body has up component ρ sin(α - p), ρ = √(x² + z²), α = atan2(z, x).
     rho, alpha = np.hypot(x, z), np.arctan2(z, x)
-    p = alpha - np.arcsin(np.clip(u[2] / rho, -1.0, 1.0))
+    s = np.arcsin(np.clip(u[2] / rho, -1.0, 1.0))
+    # Two pitch angles give the baseline its measured elevation, alpha - s and alpha - pi + s;
+    # with roll taken as zero the vehicle's is the one within +-90 deg (for a baseline pointing
+    # aft the other one is the vehicle turned upside down and about).
+    p = min(wrap_pi(alpha - s), wrap_pi(alpha - np.pi + s), key=abs)
     beta = np.arctan2(y, x * np.cos(p) + z * np.sin(p))
     return wrap_pi(np.arctan2(u[1], u[0]) - beta), p
 

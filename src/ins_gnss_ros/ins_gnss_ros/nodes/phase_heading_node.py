@@ -255,14 +255,14 @@ class PhaseHeadingNode(NavNode):
         if np.min(np.linalg.norm(self.antennas[1:] - self.antennas[0], axis=1)) < 0.05:
             raise ParameterError("parameter 'antenna_positions': every antenna must be at least "
                                  "5 cm from the master")
-        self.order = self._solver_order(self.antennas)
+        self._check_geometry(self.antennas)
         self.systems = {s for name, s in SYSTEM_PARAMS.items() if p[name]}
         if not self.systems:
             raise ParameterError("parameters 'gps', 'galileo', 'beidou': enable at least one")
         noise = NoiseModel(p["noise.phase_m"], p["noise.phase_m"], p["noise.code_m"],
                            p["noise.code_m"])
         self.solver = AttitudeSolver(
-            self.antennas[self.order], noise,
+            self.antennas, noise,
             ratio_threshold=p["ratio_threshold"], sigma_length=p["baseline_length_sigma_m"],
             elevation_mask=math.radians(p["elevation_mask_deg"]),
             slip_threshold=p["slip_threshold_cycles"], max_gap=p["max_gap_s"],
@@ -284,23 +284,14 @@ class PhaseHeadingNode(NavNode):
         self.subscribe(InsState, "ins/state", self.on_ins_state, SENSOR_QOS)
 
     @staticmethod
-    def _solver_order(antennas) -> list:
-        """Antenna ids in the order given to the core (its antenna 0 is the master).
-
-        With one baseline the core solves pitch and heading with roll = 0 in closed form, taking
-        the pitch root near zero only for a baseline pointing forward: a backward one (master
-        ahead) comes out as heading + 180 deg, pitch 180 deg - pitch. The core's differences are
-        symmetric in the two antennas, so the node hands it the aft antenna as the master. The
-        closed form also needs the baseline mostly fore-aft (with roll unobserved, a baseline
-        across the ship measures heading only through an assumed roll of zero).
-        """
-        if len(antennas) > 2:
-            return list(range(len(antennas)))
+    def _check_geometry(antennas) -> None:
+        """With one baseline the core solves heading and pitch with roll = 0 in closed form, which
+        needs the baseline mostly fore-aft (across the ship it would see heading only through an
+        assumed roll of zero)."""
         b = antennas[1] - antennas[0]
-        if abs(b[0]) < abs(b[1]):
+        if len(antennas) == 2 and abs(b[0]) < abs(b[1]):
             raise ParameterError("parameter 'antenna_positions': with 2 antennas the baseline "
                                  "must be mostly fore-aft (|x| >= |y| in base_link)")
-        return [0, 1] if b[0] > 0 else [1, 0]
 
     # -- inputs ---------------------------------------------------------------------------------
     def on_ephemeris(self, msg: GnssEphemeris) -> None:
@@ -381,7 +372,7 @@ class PhaseHeadingNode(NavNode):
         if len(group) < len(self.antennas):
             self.diag.count("epoch without every antenna skipped")
             return None
-        parsed = [parse_observations(group[a], self.systems) for a in self.order]
+        parsed = [parse_observations(group[a], self.systems) for a in range(len(self.antennas))]
         if any(p is None for p in parsed):
             self.diag.count("observations with arrays of unequal length: epoch skipped")
             return None
