@@ -82,7 +82,7 @@ def loose(epoch, sim, x0):
 
 
 def run(mode, imu, sim, epochs, t_switch, t_open, nhc=False):
-    """Stream one case through the navigator; returns (output, per-epoch satellites used)."""
+    """Stream one case through the navigator; returns (output, [(t, satellites used)])."""
     nav = Navigator(navigator_config(nhc))
     rc = RangeConfig(klobuchar=sim.broadcast.klobuchar, **RANGES)
     x0, i, used = None, 0, []
@@ -97,7 +97,7 @@ def run(mode, imu, sim, epochs, t_switch, t_open, nhc=False):
             m = satellite_ranges(ep.raw, sim.ephemerides, ep.t, nav.state_at(ep.t), LEVER, rc)
             if m is not None:
                 nav.add_measurement(m)
-                used.append(len(m.pseudorange))
+                used.append((ep.t, len(m.pseudorange)))
             continue
         meas, x0 = loose(ep, sim, x0)
         for m in meas:
@@ -153,8 +153,7 @@ def main():
                 out, used = run(mode, imu, sim, epochs, args.switch, t0, args.nhc)
                 res[mode] = horizontal_errors(out, traj, t0, t1)
                 if mode == "tight":
-                    k = [u for ep, u in zip([e for e in epochs if e.t >= args.switch], used)
-                         if t0 <= ep.t < t1]
+                    k = [n_used for t, n_used in used if t0 <= t < t1]
                     res["sats"] = (min(k), max(k)) if k else (0, 0)
             ins_err = res.get("ins", ins_err)
             res["ins"] = ins_err

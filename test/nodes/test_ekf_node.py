@@ -161,3 +161,89 @@ def test_bad_measurements_are_counted_not_used(ros_context):
     assert node.diag.counts["non-finite gnss/vel rejected"] == 1
     assert node.diag.counts["gnss/fix without a fix ignored"] == 1
     node.destroy_node()
+
+
+def test_tight_coupling_with_three_satellites_through_the_nodes(ros_context):
+    """Raw GNSS from real orbits (the GNSS simulator): the ekf aligns on SPP fix + velocity, then
+    with 3 satellites uses their pseudoranges and Dopplers. The strapdown's error stays at the
+    metre level where free inertial navigation drifts away."""
+    from ins_gnss_msgs.msg import GnssObservations
+
+    from ins_gnss_ros.gnss import ephemeris_data
+    from ins_gnss_ros.gnss.simulator import GnssSimulator, SimulatorConfig, solve_fix
+    from ins_gnss_ros.nodes.ekf_node import EkfNode
+    from ins_gnss_ros.nodes.gnss_convert import ephemeris_msg, gps_to_posix
+    from ins_gnss_ros.nodes.gnss_simulator_node import observations_msg
+    from ins_gnss_ros.nodes.strapdown_node import StrapdownNode
+    from ins_gnss_ros.sim.scenarios import ShadingWindow
+
+    rate, t_switch, duration = 50.0, 60.0, 110.0
+    traj = car(duration=duration, seed=5, rate=rate, static=15.0).trajectory
+    imu = simulate_imu(traj, ImuSpec(MEMS_ADIS16405, rate=rate), seed=5)
+    broadcast = ephemeris_data.load(traj.lon[0])
+    sim = GnssSimulator(broadcast, SimulatorConfig(
+        lever_arms=(tuple(LEVER),), shading=(ShadingWindow(t_switch, duration, 3),)))
+    epochs = [e[0] for e in sim.run(traj, 1.0)]
+    t0 = gps_to_posix(sim.gps_time(0.0), 18)  # simulation time 0 on the UTC stamp axis
+
+    bus = InProcessBus()
+    strapdown = StrapdownNode(context=ros_context, bus=bus)
+    ekf = EkfNode(context=ros_context, bus=bus, parameter_overrides=[
+        Parameter("lever_arm", value=LEVER.tolist()), Parameter("layout", value="24"),
+        Parameter("bias_model", value="rw"), Parameter("coupling", value="auto"),
+        Parameter("auto.min_satellites", value=5),
+        Parameter("tight.code_sigma_m", value=[0.3, 0.32]),
+        Parameter("tight.doppler_sigma_hz", value=[0.02, 0.02]),
+        Parameter("tight.klobuchar", value=[*broadcast.klobuchar[0], *broadcast.klobuchar[1]]),
+        Parameter("init.position_sigma_m", value=3.0), Parameter("init.velocity_sigma_mps", value=0.2),
+        Parameter("align.speed_mps", value=1.0)])
+    states, statuses = [], []
+    bus.subscribe("ins/state", states.append)
+    bus.subscribe("nav/status", statuses.append)
+
+    def send(topic, msg):
+        bus.publish(topic, msg)
+        bus.drain()
+
+    stamp = sec_to_stamp(t0 + epochs[0].t)
+    for eph in sim.ephemerides.values():
+        send("gnss/ephemeris", ephemeris_msg(eph, stamp, 18))
+    x0, i = None, 0
+    for ep in epochs:
+        while i < len(imu.t) and imu.t[i] <= ep.t:
+            delta = ImuDelta(dt=float(imu.dt))
+            delta.header.stamp = sec_to_stamp(t0 + imu.t[i])
+            delta.delta_angle, delta.delta_velocity = (to_vector3(imu.dtheta[i]),
+                                                       to_vector3(imu.dv[i]))
+            send("imu/delta", delta)
+            i += 1
+        stamp = sec_to_stamp(t0 + ep.t)
+        send("gnss/observations", observations_msg(ep, stamp, [False] * len(ep.raw.obs)))
+        fix = solve_fix(ep, sim, x0)
+        if fix is not None:  # an SPP needs 5 satellites (two systems): none after t_switch
+            x0 = fix.xyz
+            fmsg = _fix_msg(ep.t, fix.lat, fix.lon, fix.h, np.zeros(3))
+            fmsg.header.stamp = stamp
+            fmsg.position_covariance = np.asarray(fix.covariance_enu).flatten().tolist()
+            vmsg = _vel_msg(ep.t, fix.vel_enu, np.zeros(3))
+            vmsg.header.stamp = stamp
+            send("gnss/fix", fmsg)
+            send("gnss/vel", vmsg)
+    strapdown.destroy_node()
+    ekf.destroy_node()
+
+    assert any(s.coupling == FilterStatus.COUPLING_TIGHT for s in statuses)
+    ranges = [u for s in statuses for u in s.updates if u.name == "pseudorange"]
+    assert ranges and all(len(u.innovation) == 3 for u in ranges if u.stamp.sec >= t0 + t_switch)
+    assert sum(u.accepted for u in ranges) >= 0.9 * len(ranges)
+    errors = []
+    for msg in states:
+        st = nav_state_from_msg(msg)
+        k = int(round((st.t - t0) * rate))
+        if st.t - t0 < t_switch + 5.0 or k >= len(traj.t):
+            continue
+        true = NavState(traj.lat[k], traj.lon[k], traj.h[k], traj.v_enu[k], traj.q_nb[k], st.t)
+        dp = nav_error(st, true)[0]
+        errors.append(np.hypot(dp[0], dp[1]))
+    # (free inertial drifts far beyond this: test/gnss/test_ranges.py compares the two)
+    assert max(errors) < 5.0

@@ -347,10 +347,9 @@ def test_recorded_single_antenna_stream_end_to_end(ros_context, bus):
     from ins_gnss_ros.gnss.ephemeris import sat_position
     from ins_gnss_ros.gnss.spp import SppConfig, solve_position
     from ins_gnss_ros.gnss.stream import Decoder
-    from ins_gnss_ros.nodes.phase_heading_node import (kepler_from_msg, lines_of_sight,
-                                                       parse_observations)
     from ins_gnss_ros.nodes.gnss_convert import (LockTracker, ephemeris_msg, gps_stamp,
-                                                  observations_msg)
+                                                  kepler_from_msg, observations_msg)
+    from ins_gnss_ros.nodes.phase_heading_node import lines_of_sight, parse_observations
 
     # The first 300 kB (about 25 s, 100 epochs) keep the test short; decoding is the slow part.
     stream = shared_path("data", "walk_0827", "gnss_1730.ubx").read_bytes()

@@ -66,8 +66,8 @@ from .time import wrap_week_difference
 #: Half-width of the broadcast fit interval of Keplerian ephemerides around toe [s]
 #: (IS-GPS-200 20.3.4.4: 4-hour fit interval; Galileo I/NAV and BeiDou used likewise).
 KEPLER_FIT_HALF_WIDTH = 7200.0
-#: Largest |t - tb| of a GLONASS ephemeris [s]: new data every 30 min, integrated within
-#: +-15 min by the ICD's recommendation; twice that still keeps metre-level orbits.
+#: Largest |t - tb| of a GLONASS ephemeris [s]: the ICD integrates within +-15 min of tb (new
+#: data every 30 min); twice that tolerates one missed update.
 GLONASS_MAX_AGE = 1800.0
 #: Half-step of the central differences giving the atmospheric delay rates [s].
 _RATE_STEP = 0.5

@@ -9,6 +9,13 @@ strapdown re-mechanises from there). A correction that was lost, a strapdown res
 parameters or a state published before the last correction arrived are all handled the same way:
 the next comparison sees the difference and removes it.
 
+Coupling: ``loose`` uses ``gnss/fix`` and ``gnss/vel``; ``tight`` uses the pseudoranges and
+Dopplers of ``gnss/observations`` with the broadcast orbits of ``gnss/ephemeris`` (receiver clock
+states, usable with fewer than four satellites, seed 004 section 2.1) once the filter has aligned
+on fix and velocity; ``auto`` switches to tight whenever an epoch has fewer than
+``auto.min_satellites`` usable satellites, as seed 004 describes. Fix/velocity and ranges of the
+same epochs are never both used (the same data would count twice).
+
 Outputs: ``nav/odom`` (ENU ``map`` frame around a datum, covariance from the filter),
 ``nav/fix``, ``nav/status`` (mode, coupling, every update with innovation, NIS and verdict).
 """
@@ -20,11 +27,13 @@ from collections import deque
 
 import numpy as np
 from geometry_msgs.msg import TwistWithCovarianceStamped
-from ins_gnss_msgs.msg import FilterStatus, Heading, ImuDelta, InsCorrection, InsState, \
-    MeasurementUpdate
+from ins_gnss_msgs.msg import FilterStatus, GnssEphemeris, GnssObservations, Heading, ImuDelta, \
+    InsCorrection, InsState, MeasurementUpdate
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import NavSatFix, NavSatStatus
 
+from ..gnss.constants import GALILEO, GPS, UBX_GNSS_ID
+from ..gnss.ranges import RangeConfig, ephemeris_valid, satellite_ranges
 from ..nav.earth import ecef_to_enu, geodetic_to_ecef
 from ..nav.ekf import ExtraState
 from ..nav.error_model import LAYOUTS, nav_error
@@ -33,9 +42,10 @@ from ..nav.navigator import (ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, Gnss
 from ..nav.rotations import quat_to_dcm
 from ..nav.strapdown import NavState
 from ..nav.sensor_errors import GRADES, BlockNoise, FilterNoise, filter_noise
-from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, run
+from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import (nav_state_from_msg, sec_to_stamp, stamp_to_sec, to_quaternion,
                       to_vector3, vec)
+from .gnss_convert import kepler_from_msg, raw_epoch_from_msg
 
 MODES = {ALIGNING: FilterStatus.MODE_ALIGNING, NAVIGATING: FilterStatus.MODE_NAVIGATING,
          DEAD_RECKONING: FilterStatus.MODE_DEAD_RECKONING}
@@ -72,6 +82,21 @@ class EkfNode(NavNode):
               0.0, 10.0),
         Param("gnss.velocity_delay_s", 0.0, "latency of the receiver's velocity solution: a "
               "gnss/vel stamped t is applied at t - delay, s", 0.0, 2.0),
+        Param("coupling", "loose", "GNSS aiding: loose (fix + velocity), tight (pseudorange + "
+              "Doppler; needs a layout with the clock block, e.g. 24) or auto (tight below "
+              "auto.min_satellites)", choices=("loose", "tight", "auto")),
+        Param("auto.min_satellites", 5, "auto coupling: fewer usable satellites than this in an "
+              "epoch switch to tight", 1, 64),
+        Param("tight.gps", True, "tight coupling uses GPS L1 C/A"),
+        Param("tight.galileo", True, "tight coupling uses Galileo E1 (one receiver clock with GPS)"),
+        Param("tight.code_sigma_m", [0.5, 0.5], "pseudorange sigma a, b of a^2 + b^2/sin^2(el), m",
+              0.0, 100.0, length=2),
+        Param("tight.doppler_sigma_hz", [0.05, 0.05], "Doppler sigma a, b, Hz", 0.0, 100.0,
+              length=2),
+        Param("tight.klobuchar", [0.0] * 8, "broadcast ionosphere alpha0-3, beta0-3 (IS-GPS-200 "
+              "units: s, s/semicircle^n); all zero: no ionosphere correction", -1e7, 1e7, length=8),
+        Param("tight.elevation_mask_deg", 10.0, "satellites below this elevation are not used, deg",
+              0.0, 60.0),
         Param("use_heading", True, "use gnss/heading (phase-difference or receiver azimuth)"),
         Param("use_magnetic_heading", False, "use mag/heading as backup heading aiding"),
         Param("magnetic_bias_sigma_deg", 2.0,
@@ -116,6 +141,19 @@ class EkfNode(NavNode):
             extras["td"] = ExtraState(1, p["time_offset_sigma_s"])
         if p["use_magnetic_heading"] and p["magnetic_bias_sigma_deg"] > 0.0:
             extras["mag"] = ExtraState(1, np.radians(p["magnetic_bias_sigma_deg"]))
+        if p["coupling"] != "loose" and "clock" not in LAYOUTS[p["layout"]]:
+            raise ParameterError(f"parameter 'layout' = {p['layout']!r} has no receiver clock "
+                                 f"states: coupling {p['coupling']!r} needs one (e.g. '24')")
+        self.ranges = RangeConfig(
+            signals={sys_: "1C" for sys_, on in ((GPS, p["tight.gps"]), (GALILEO, p["tight.galileo"]))
+                     if on},
+            elevation_mask=np.radians(p["tight.elevation_mask_deg"]),
+            code_sigma=tuple(p["tight.code_sigma_m"]),
+            doppler_sigma=tuple(p["tight.doppler_sigma_hz"]),
+            klobuchar=(tuple(p["tight.klobuchar"][:4]), tuple(p["tight.klobuchar"][4:]))
+            if any(p["tight.klobuchar"]) else None)
+        self.ephemeris_msgs: dict[str, GnssEphemeris] = {}
+        self.use_ranges = False  # the last observation epoch chose tight coupling
         if p["use_speed_log"]:
             # water current east, north (m/s) and log scale error (-), slowly varying
             sigma_current = p["speed_log.current_sigma_mps"]
@@ -155,6 +193,9 @@ class EkfNode(NavNode):
         self.subscribe(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS)
         self.subscribe(InsState, "ins/state", self.on_ins_state, SENSOR_QOS)
         self.subscribe(NavSatFix, "gnss/fix", self.on_fix, DRIVER_QOS)
+        if p["coupling"] != "loose":
+            self.subscribe(GnssObservations, "gnss/observations", self.on_observations, SENSOR_QOS)
+            self.subscribe(GnssEphemeris, "gnss/ephemeris", self.on_ephemeris, STATE_QOS)
         self.subscribe(TwistWithCovarianceStamped, "gnss/vel", self.on_vel, DRIVER_QOS)
         if p["use_heading"]:
             self.subscribe(Heading, "gnss/heading", self.on_heading, SENSOR_QOS)
@@ -186,6 +227,8 @@ class EkfNode(NavNode):
         self.after_filter()
 
     def on_fix(self, msg: NavSatFix) -> None:
+        if self.use_ranges:
+            return
         if msg.status.status < NavSatStatus.STATUS_FIX:
             self.diag.count("gnss/fix without a fix ignored", log=False)
             return
@@ -207,6 +250,8 @@ class EkfNode(NavNode):
         self.after_filter()
 
     def on_vel(self, msg: TwistWithCovarianceStamped) -> None:
+        if self.use_ranges:
+            return
         v = vec(msg.twist.twist.linear)
         cov = np.reshape(msg.twist.covariance, (6, 6))[:3, :3]
         if not (np.isfinite(v).all() and np.isfinite(cov).all()):
@@ -216,6 +261,37 @@ class EkfNode(NavNode):
         cov = cov + np.diag(np.maximum(floor - np.diag(cov), 0.0))
         t = stamp_to_sec(msg.header.stamp) - self.p["gnss.velocity_delay_s"]
         self.navigator.add_measurement(GnssVelocity(t, v, cov))
+        self.after_filter()
+
+    def on_ephemeris(self, msg: GnssEphemeris) -> None:
+        system = UBX_GNSS_ID.get(int(msg.system))
+        if system in self.ranges.signals:
+            self.ephemeris_msgs[f"{system}{int(msg.prn):02d}"] = msg
+
+    def on_observations(self, msg: GnssObservations) -> None:
+        parsed = raw_epoch_from_msg(msg, set(self.ranges.signals))
+        if parsed is None:
+            self.diag.count("gnss/observations with arrays of unequal length rejected")
+            return
+        raw = parsed[0]
+        ephemerides = {}
+        for o in raw.obs:
+            sat = f"{o.system}{o.prn:02d}"
+            if sat in self.ephemeris_msgs and sat not in ephemerides:
+                eph = kepler_from_msg(self.ephemeris_msgs[sat], raw.t_gps)
+                if ephemeris_valid(eph, raw.t_gps):
+                    ephemerides[sat] = eph
+        nav = self.navigator
+        self.use_ranges = nav.heading_known and (
+            self.p["coupling"] == "tight" or len(ephemerides) < self.p["auto.min_satellites"])
+        if not self.use_ranges:
+            return
+        t = stamp_to_sec(msg.header.stamp)
+        ranges = satellite_ranges(raw, ephemerides, t, nav.state_at(t), nav.lever, self.ranges)
+        if ranges is None:
+            self.diag.count("observation epoch without a usable satellite", log=False)
+            return
+        nav.add_measurement(ranges)
         self.after_filter()
 
     def on_heading(self, msg: Heading) -> None:
@@ -316,7 +392,8 @@ class EkfNode(NavNode):
     def publish_status(self, t: float, updates) -> None:
         nav = self.navigator
         self.last_status_t = t
-        status = FilterStatus(mode=MODES[nav.mode], coupling=FilterStatus.COUPLING_LOOSE)
+        status = FilterStatus(mode=MODES[nav.mode], coupling=FilterStatus.COUPLING_TIGHT
+                              if self.use_ranges else FilterStatus.COUPLING_LOOSE)
         status.header.stamp = sec_to_stamp(t)
         for u in updates:
             self.accepted += u.accepted

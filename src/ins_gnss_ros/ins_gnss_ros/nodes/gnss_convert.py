@@ -1,4 +1,8 @@
-"""GNSS receiver records (``gnss.observations``) -> ROS messages: field mapping for ``gnss_driver``.
+"""GNSS records (``gnss.observations``, broadcast ephemerides) <-> ROS messages.
+
+Records -> messages for ``gnss_driver`` and ``gnss_simulator``; messages -> records
+(:func:`raw_epoch_from_msg`, :func:`kepler_from_msg`) for the nodes that use raw observations
+(``phase_heading``, ``ekf`` in tight coupling).
 
 Time axis (one convention for the whole project): a ROS stamp is UTC as POSIX time, derived
 from GPS time with the receiver's leap seconds, ``stamp = t_gps + 315964800 - leap_s``
@@ -25,9 +29,10 @@ from ..gnss.constants import (BEIDOU, GALILEO, GLONASS, GPS, SECONDS_PER_WEEK, U
                               UBX_SIGNALS)
 from ..gnss.ephemeris import KeplerEphemeris
 from ..gnss.glonass import GlonassEphemeris
-from ..gnss.observations import NmeaErrors, NmeaFix, NmeaRecommended, PvtFix, RawEpoch, RelPosNed
+from ..gnss.observations import (NmeaErrors, NmeaFix, NmeaRecommended, PvtFix, RawEpoch,
+                                 RelPosNed, SatObs)
 from ..gnss.time import (BDT_MINUS_GPST_S, BDT_WEEK_OFFSET, GLONASS_MINUS_UTC_S,
-                         GST_WEEK_OFFSET, utc_to_gps)
+                         GST_WEEK_OFFSET, time_of_week_near, utc_to_gps)
 from ..nav.conventions import wrap_2pi
 
 #: POSIX time of the GPS epoch 1980-01-06 00:00:00 UTC [s].
@@ -321,3 +326,64 @@ def rmc_velocity(rmc: NmeaRecommended) -> np.ndarray:
     the vertical is not reported (0)."""
     return np.array([rmc.speed_mps * math.sin(rmc.course), rmc.speed_mps * math.cos(rmc.course),
                      0.0])
+
+
+# -- messages -> records ---------------------------------------------------------------------
+def _optional(values, i: int) -> float:
+    """Element i of an optional per-signal array (the std arrays may be left empty): NaN if absent."""
+    return float(values[i]) if i < len(values) else math.nan
+
+
+def raw_epoch_from_msg(msg: GnssObservations, systems) -> tuple[RawEpoch, list[int]] | None:
+    """The RawEpoch of the signals of ``systems`` (letters) in a GnssObservations, and the message
+    indices they came from; None if the message's arrays have unequal lengths.
+
+    Signals with an unknown (gnssId, sigId) are left out, as are repeated signals and BeiDou GEO
+    satellites (PRN 1-5, 59-63: their orbit needs a rotation the ephemeris module lacks).
+    """
+    n = len(msg.system)
+    arrays = (msg.prn, msg.frequency_slot, msg.signal, msg.pseudorange, msg.doppler,
+              msg.carrier_phase, msg.cn0, msg.lock_time, msg.loss_of_lock)
+    if any(len(a) != n for a in arrays):
+        return None
+    obs, kept, seen = [], [], set()
+    for i in range(n):
+        system = UBX_GNSS_ID.get(int(msg.system[i]))
+        sig = UBX_SIGNALS.get((int(msg.system[i]), int(msg.signal[i])))
+        prn = int(msg.prn[i])
+        if system not in systems or sig is None or (system, prn, sig[0]) in seen:
+            continue
+        if system == BEIDOU and (prn <= 5 or prn >= 59):
+            continue
+        seen.add((system, prn, sig[0]))
+        kept.append(i)
+        obs.append(SatObs(system, prn, int(msg.frequency_slot[i]), sig[0], sig[1],
+                          float(msg.pseudorange[i]), float(msg.doppler[i]),
+                          float(msg.carrier_phase[i]), float(msg.cn0[i]),
+                          1000.0 * float(msg.lock_time[i]), _optional(msg.pseudorange_std, i),
+                          _optional(msg.carrier_phase_std, i), math.nan, True, False))
+    raw = RawEpoch(int(msg.gps_week), float(msg.time_of_week), int(msg.leap_seconds),
+                   msg.leap_seconds != -128, bool(msg.clock_reset), obs)
+    return raw, kept
+
+
+def kepler_from_msg(msg: GnssEphemeris, t_gps: float) -> KeplerEphemeris:
+    """KeplerEphemeris of a GnssEphemeris, toe and toc resolved within half a week of ``t_gps``.
+
+    Only the seconds of week are used: the week field is numbered per system (GST, BDT weeks)
+    and modulo 1024 or 8192 depending on the source, while a broadcast ephemeris in use is
+    always within hours of the epoch (IS-GPS-200 §20.3.3.4.3 resolves it the same way).
+    """
+    system = UBX_GNSS_ID[int(msg.system)]
+    # BeiDou broadcasts BDT seconds of week; KeplerEphemeris keeps GPS seconds.
+    shift = -BDT_MINUS_GPST_S if system == BEIDOU else 0.0
+    toe = time_of_week_near((msg.toe + shift) % SECONDS_PER_WEEK, t_gps)
+    toc = time_of_week_near((msg.toc + shift) % SECONDS_PER_WEEK, toe)
+    return KeplerEphemeris(
+        system=system, prn=int(msg.prn), toe=toe, toc=toc, sqrt_a=msg.sqrt_a,
+        e=msg.eccentricity, m0=msg.m0, delta_n=msg.delta_n, omega0=msg.omega0, i0=msg.i0,
+        omega=msg.omega, idot=msg.idot, omega_dot=msg.omega_dot, cuc=msg.cuc, cus=msg.cus,
+        crc=msg.crc, crs=msg.crs, cic=msg.cic, cis=msg.cis, af0=msg.af0, af1=msg.af1,
+        af2=msg.af2, tgd=msg.tgd, bgd_e5a=0.0, iode=int(msg.iode), health=int(msg.health),
+        accuracy_index=0)
+

@@ -45,17 +45,16 @@ from ins_gnss_msgs.msg import GnssEphemeris, GnssObservations, Heading, InsState
 from sensor_msgs.msg import NavSatFix, NavSatStatus
 
 from ..gnss.attitude import AttitudeSolution, AttitudeSolver
-from ..gnss.constants import (BEIDOU, C_LIGHT, GALILEO, GPS, SECONDS_PER_WEEK, UBX_GNSS_ID,
-                              UBX_SIGNALS)
+from ..gnss.constants import BEIDOU, C_LIGHT, GALILEO, GPS, SECONDS_PER_WEEK, UBX_GNSS_ID
 from ..gnss.differences import AntennaEpoch, NoiseModel
 from ..gnss.ephemeris import KeplerEphemeris, satellite_at_reception
-from ..gnss.observations import RawEpoch, SatObs
+from ..gnss.observations import RawEpoch
 from ..gnss.spp import DEFAULT_SIGNALS, SppConfig, solve_position
-from ..gnss.time import BDT_MINUS_GPST_S, time_of_week_near
 from ..nav.earth import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
 from ..nav.rotations import dcm_from_euler, quat_normalize, quat_to_dcm
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import quat, stamp_to_sec
+from .gnss_convert import kepler_from_msg, raw_epoch_from_msg
 
 #: Half-width of the interval around toe in which a broadcast orbit is used [s]: the 4 h fit
 #: interval of IS-GPS-200 §20.3.4.4 (a line of sight tolerates far worse orbits than ranging).
@@ -82,67 +81,18 @@ def signal_id(sat_id: str, code: str) -> str:
 
 
 def parse_observations(msg: GnssObservations, systems) -> ParsedEpoch | None:
-    """The signals of ``systems`` in a GnssObservations; None if its arrays are inconsistent.
-
-    Signals with an unknown (gnssId, sigId) are left out, as are BeiDou GEO satellites (PRN 1-5,
-    59-63: their orbit needs a rotation the ephemeris module does not implement).
-    """
-    n = len(msg.system)
-    arrays = (msg.prn, msg.frequency_slot, msg.signal, msg.pseudorange, msg.doppler,
-              msg.carrier_phase, msg.cn0, msg.lock_time, msg.loss_of_lock)
-    if any(len(a) != n for a in arrays):
+    """The signals of ``systems`` in a GnssObservations as the phase core's AntennaEpoch and the
+    RawEpoch; None if its arrays are inconsistent (see :func:`.gnss_convert.raw_epoch_from_msg`)."""
+    parsed = raw_epoch_from_msg(msg, systems)
+    if parsed is None:
         return None
-    ids, phase, code, lam, dop, lol, obs = [], [], [], [], [], [], []
-    seen = set()
-    for i in range(n):
-        system = UBX_GNSS_ID.get(int(msg.system[i]))
-        sig = UBX_SIGNALS.get((int(msg.system[i]), int(msg.signal[i])))
-        prn = int(msg.prn[i])
-        if system not in systems or sig is None:
-            continue
-        if system == BEIDOU and (prn <= 5 or prn >= 59):
-            continue
-        sat = f"{system}{prn:02d}"
-        sid = signal_id(sat, sig[0])
-        if sid in seen:
-            continue
-        seen.add(sid)
-        pr, cp, do = (float(msg.pseudorange[i]), float(msg.carrier_phase[i]),
-                      float(msg.doppler[i]))
-        ids.append(sid)
-        phase.append(cp)
-        code.append(pr)
-        lam.append(C_LIGHT / sig[1])
-        dop.append(do)
-        lol.append(bool(msg.loss_of_lock[i]))
-        obs.append(SatObs(system, prn, 0, sig[0], sig[1], pr, do, cp, float(msg.cn0[i]),
-                          1000.0 * float(msg.lock_time[i]), math.nan, math.nan, math.nan,
-                          True, False))
-    raw = RawEpoch(int(msg.gps_week), float(msg.time_of_week), int(msg.leap_seconds),
-                   msg.leap_seconds != -128, bool(msg.clock_reset), obs)
-    return ParsedEpoch(AntennaEpoch(ids, np.array(phase), np.array(code), np.array(lam),
-                                    np.array(dop), np.array(lol, bool)), raw)
-
-
-def kepler_from_msg(msg: GnssEphemeris, t_gps: float) -> KeplerEphemeris:
-    """KeplerEphemeris of a GnssEphemeris, toe and toc resolved within half a week of ``t_gps``.
-
-    Only the seconds of week are used: the week field is numbered per system (GST, BDT weeks)
-    and modulo 1024 or 8192 depending on the source, while a broadcast ephemeris in use is
-    always within hours of the epoch (IS-GPS-200 §20.3.3.4.3 resolves it the same way).
-    """
-    system = UBX_GNSS_ID[int(msg.system)]
-    # BeiDou broadcasts BDT seconds of week; KeplerEphemeris keeps GPS seconds.
-    shift = -BDT_MINUS_GPST_S if system == BEIDOU else 0.0
-    toe = time_of_week_near((msg.toe + shift) % SECONDS_PER_WEEK, t_gps)
-    toc = time_of_week_near((msg.toc + shift) % SECONDS_PER_WEEK, toe)
-    return KeplerEphemeris(
-        system=system, prn=int(msg.prn), toe=toe, toc=toc, sqrt_a=msg.sqrt_a,
-        e=msg.eccentricity, m0=msg.m0, delta_n=msg.delta_n, omega0=msg.omega0, i0=msg.i0,
-        omega=msg.omega, idot=msg.idot, omega_dot=msg.omega_dot, cuc=msg.cuc, cus=msg.cus,
-        crc=msg.crc, crs=msg.crs, cic=msg.cic, cis=msg.cis, af0=msg.af0, af1=msg.af1,
-        af2=msg.af2, tgd=msg.tgd, bgd_e5a=0.0, iode=int(msg.iode), health=int(msg.health),
-        accuracy_index=0)
+    raw, kept = parsed
+    obs = raw.obs
+    ids = [signal_id(f"{o.system}{o.prn:02d}", o.signal) for o in obs]
+    return ParsedEpoch(AntennaEpoch(
+        ids, np.array([o.carrier_cycles for o in obs]), np.array([o.pseudorange_m for o in obs]),
+        np.array([C_LIGHT / o.frequency_hz for o in obs]), np.array([o.doppler_hz for o in obs]),
+        np.array([bool(msg.loss_of_lock[i]) for i in kept], bool)), raw)
 
 
 def lines_of_sight(master: ParsedEpoch, ephemerides: dict, t_gps: float, rx_xyz) -> dict:
