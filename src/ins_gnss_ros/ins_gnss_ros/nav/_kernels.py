@@ -1,10 +1,13 @@
-"""Numba kernel of the strapdown mechanisation (the per-sample hot loop).
+"""Numba kernels of the per-sample hot loops: strapdown mechanisation and coning/sculling.
 
-This module only holds the compiled inner loop of :mod:`ins_gnss_ros.nav.strapdown`; the
-equations, frames and references are documented there. Quaternion arithmetic is written out on
-scalars here (rather than calling :mod:`ins_gnss_ros.nav.rotations`, which works on stacked
-numpy arrays) so that a step allocates almost nothing. Earth-model formulas are the ones of
-:mod:`ins_gnss_ros.nav.earth`, compiled from the same source.
+This module only holds compiled inner loops; the equations, frames and references are
+documented in :mod:`ins_gnss_ros.nav.strapdown` and :mod:`ins_gnss_ros.nav.coning`. Numba
+caches the machine code next to the source (``cache=True``): the first call after a change
+compiles for a few seconds, a later process loads it in about a second (docs/results/replay.md).
+Quaternion arithmetic is written out on scalars here (rather than calling
+:mod:`ins_gnss_ros.nav.rotations`, which works on stacked numpy arrays) so that a step allocates
+almost nothing. Earth-model formulas are the ones of :mod:`ins_gnss_ros.nav.earth`, compiled
+from the same source.
 """
 from __future__ import annotations
 
@@ -128,3 +131,68 @@ def mech_run(lat, lon, h, v0, q0, dths, dvs, dt, ell_par, h_ref, k1, k2):
                                 h_ref[i], k1, k2, vel[i + 1], quat[i + 1])
         lla[i + 1, 0], lla[i + 1, 1], lla[i + 1, 2] = lat, lon, h
     return lla, vel, quat
+
+
+@njit(cache=True)
+def _cross_acc(out, s, a0, a1, a2, b0, b1, b2):
+    """out += s * (a x b) on scalars (no temporary arrays)."""
+    out[0] += s * (a1 * b2 - a2 * b1)
+    out[1] += s * (a2 * b0 - a0 * b2)
+    out[2] += s * (a0 * b1 - a1 * b0)
+
+
+@njit(cache=True)
+def coning_sculling_run(dtheta, dv, prev_th, prev_v, two_sample, phi, dv_nav):
+    """Coning/sculling of M intervals of N sub-samples; see :func:`..coning.coning_sculling`.
+
+    dtheta, dv : (M, N, 3); prev_th, prev_v : (M, 3) sub-sample before each interval
+    ("one_sample" only); two_sample : bool. Writes phi and dv_nav, (M, 3).
+    """
+    m, n = dtheta.shape[0], dtheta.shape[1]
+    step = 2 if two_sample else 1
+    alpha = np.empty(3)   # running sums at the start of the current block
+    ups = np.empty(3)
+    con = np.empty(3)     # coning sum
+    scu = np.empty(3)     # sculling sum
+    th = np.empty(3)      # block increments
+    v = np.empty(3)
+    for k in range(m):
+        alpha[:] = 0.0
+        ups[:] = 0.0
+        con[:] = 0.0
+        scu[:] = 0.0
+        for i in range(0, n, step):
+            if two_sample:
+                a, b, c, d = dtheta[k, i], dtheta[k, i + 1], dv[k, i], dv[k, i + 1]
+                for j in range(3):
+                    th[j] = a[j] + b[j]
+                    v[j] = c[j] + d[j]
+                # Within-block terms of the two-sample algorithm (Ignagni; Savage ch. 7).
+                _cross_acc(con, 2.0 / 3.0, a[0], a[1], a[2], b[0], b[1], b[2])
+                _cross_acc(scu, 2.0 / 3.0, a[0], a[1], a[2], d[0], d[1], d[2])
+                _cross_acc(scu, 2.0 / 3.0, c[0], c[1], c[2], b[0], b[1], b[2])
+            else:
+                if i == 0:
+                    tp, vp = prev_th[k], prev_v[k]
+                else:
+                    tp, vp = dtheta[k, i - 1], dv[k, i - 1]
+                for j in range(3):
+                    th[j] = dtheta[k, i, j]
+                    v[j] = dv[k, i, j]
+                # "Previous-interval" one-sample terms (Savage ch. 7).
+                _cross_acc(con, 1.0 / 12.0, tp[0], tp[1], tp[2], th[0], th[1], th[2])
+                _cross_acc(scu, 1.0 / 12.0, tp[0], tp[1], tp[2], v[0], v[1], v[2])
+                _cross_acc(scu, 1.0 / 12.0, vp[0], vp[1], vp[2], th[0], th[1], th[2])
+            # Exact between-block parts: 1/2 alpha_start x dtheta_B, 1/2 (alpha x dv_B +
+            # upsilon x dtheta_B).
+            _cross_acc(con, 0.5, alpha[0], alpha[1], alpha[2], th[0], th[1], th[2])
+            _cross_acc(scu, 0.5, alpha[0], alpha[1], alpha[2], v[0], v[1], v[2])
+            _cross_acc(scu, 0.5, ups[0], ups[1], ups[2], th[0], th[1], th[2])
+            for j in range(3):
+                alpha[j] += th[j]
+                ups[j] += v[j]
+        for j in range(3):
+            phi[k, j] = alpha[j] + con[j]
+            dv_nav[k, j] = ups[j] + scu[j]
+        # Rotation compensation 1/2 alpha x upsilon of the whole interval.
+        _cross_acc(dv_nav[k], 0.5, alpha[0], alpha[1], alpha[2], ups[0], ups[1], ups[2])

@@ -43,6 +43,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import _kernels
+
 METHODS = ("one_sample", "two_sample")
 
 
@@ -71,38 +73,34 @@ def coning_sculling(dtheta, dv, method: str = "two_sample", prev=None):
     dtheta = np.asarray(dtheta, float)
     dv = np.asarray(dv, float)
     n = dtheta.shape[-2]
-    if method == "two_sample":
-        if n % 2:
-            raise ValueError(f"two_sample needs an even number of sub-samples, got {n}")
-        th1, th2 = dtheta[..., 0::2, :], dtheta[..., 1::2, :]
-        v1, v2 = dv[..., 0::2, :], dv[..., 1::2, :]
-        blk_th, blk_v = th1 + th2, v1 + v2
-        blk_c = 2.0 / 3.0 * np.cross(th1, th2)
-        blk_s = 2.0 / 3.0 * (np.cross(th1, v2) + np.cross(v1, th2))
-    elif method == "one_sample":
-        if prev is None:
-            prev_th = np.zeros(dtheta.shape[:-2] + (1, 3))
-            prev_v = np.zeros_like(prev_th)
-        else:
-            prev_th = np.asarray(prev[0], float)[..., None, :]
-            prev_v = np.asarray(prev[1], float)[..., None, :]
-        th_p = np.concatenate([prev_th, dtheta[..., :-1, :]], axis=-2)
-        v_p = np.concatenate([prev_v, dv[..., :-1, :]], axis=-2)
-        blk_th, blk_v = dtheta, dv
-        blk_c = np.cross(th_p, dtheta) / 12.0
-        blk_s = (np.cross(th_p, dv) + np.cross(v_p, dtheta)) / 12.0
-    else:
+    if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if method == "two_sample" and n % 2:
+        raise ValueError(f"two_sample needs an even number of sub-samples, got {n}")
+    lead = dtheta.shape[:-2] if dtheta.shape == dv.shape else \
+        np.broadcast_shapes(dtheta.shape[:-2], dv.shape[:-2])
 
-    # alpha, upsilon at the start of each block: exclusive cumulative sums.
-    alpha_s = np.cumsum(blk_th, axis=-2) - blk_th
-    ups_s = np.cumsum(blk_v, axis=-2) - blk_v
-    coning = np.sum(0.5 * np.cross(alpha_s, blk_th) + blk_c, axis=-2)
-    sculling = np.sum(0.5 * (np.cross(alpha_s, blk_v) + np.cross(ups_s, blk_th)) + blk_s,
-                      axis=-2)
-    alpha = np.sum(blk_th, axis=-2)
-    ups = np.sum(blk_v, axis=-2)
-    return alpha + coning, ups + 0.5 * np.cross(alpha, ups) + sculling
+    def stacked(x, shape):
+        # C-contiguous and writeable, so that the kernel is compiled for one array type only
+        # (checked first: this runs once per sample in the navigator).
+        if x.shape != lead + shape:
+            x = np.broadcast_to(x, lead + shape)
+        if not (x.flags.c_contiguous and x.flags.writeable):
+            x = np.array(x, order="C")
+        return x.reshape((-1,) + shape)
+
+    th, v = stacked(dtheta, (n, 3)), stacked(dv, (n, 3))
+    m = th.shape[0]
+    if method == "two_sample" or prev is None:
+        prev_th = prev_v = np.zeros((m, 3))
+    else:
+        prev_th, prev_v = stacked(np.asarray(prev[0], float), (3,)), \
+            stacked(np.asarray(prev[1], float), (3,))
+    phi, dv_nav = np.empty((m, 3)), np.empty((m, 3))
+    # Compiled: this runs once per navigation interval in the imu_preprocessor node and once per
+    # sample in the navigator, where numpy's per-call overhead (np.cross) dominated.
+    _kernels.coning_sculling_run(th, v, prev_th, prev_v, method == "two_sample", phi, dv_nav)
+    return phi.reshape(lead + (3,)), dv_nav.reshape(lead + (3,))
 
 
 def to_navigation_rate(dthetas, dvs, n_sub: int, method: str = "two_sample"):
@@ -158,23 +156,29 @@ class Integrator:
 
     def reset(self):
         """Drop buffered samples and the previous-sample memory (e.g. after a data gap)."""
-        self._th: list = []
-        self._v: list = []
+        # Pre-allocated (1, n_sub, 3) buffers filled row by row: one compiled call per interval
+        # and no per-sample array creation.
+        self._th = np.empty((1, self.n_sub, 3))
+        self._v = np.empty((1, self.n_sub, 3))
+        self._count = 0
         self._dt = 0.0
-        self._prev = None
+        self._prev_th = np.zeros((1, 3))
+        self._prev_v = np.zeros((1, 3))
 
     def add(self, dtheta, dv, dt: float):
         """Add one sample of increments (rad, m/s over dt seconds)."""
-        self._th.append(np.asarray(dtheta, float))
-        self._v.append(np.asarray(dv, float))
+        self._th[0, self._count] = dtheta
+        self._v[0, self._count] = dv
+        self._count += 1
         self._dt += dt
-        if len(self._th) < self.n_sub:
+        if self._count < self.n_sub:
             return None
-        th, v = np.array(self._th), np.array(self._v)
-        phi, dv_nav = coning_sculling(th, v, self.method, self._prev)
-        out = (phi, dv_nav, self._dt)
-        self._prev = (th[-1], v[-1])
-        self._th, self._v, self._dt = [], [], 0.0
+        phi, dv_nav = np.empty((1, 3)), np.empty((1, 3))
+        _kernels.coning_sculling_run(self._th, self._v, self._prev_th, self._prev_v,
+                                     self.method == "two_sample", phi, dv_nav)
+        out = (phi[0], dv_nav[0], self._dt)
+        self._prev_th[0], self._prev_v[0] = self._th[0, -1], self._v[0, -1]
+        self._count, self._dt = 0, 0.0
         return out
 
     def add_rates(self, omega, f, dt: float):

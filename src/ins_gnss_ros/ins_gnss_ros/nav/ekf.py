@@ -272,6 +272,6 @@ def symmetrize(P):
     P = 0.5 * (P + P.T)
     d = np.diagonal(P)
     low = d < MIN_VARIANCE
-    if np.any(low):
+    if low.any():
         P[low, low] = MIN_VARIANCE
     return P

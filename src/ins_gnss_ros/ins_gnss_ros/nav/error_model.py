@@ -32,6 +32,7 @@ horizontal "-g/R" terms of a fixed-frame gradient are carried here by φ and ω_
 """
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -81,7 +82,7 @@ class StateLayout:
         if self.blocks[:3] != ("pos", "vel", "att"):
             raise ValueError("a layout starts with pos, vel, att")
 
-    @property
+    @cached_property  # read at every filter epoch: built once (the layout is immutable)
     def slices(self):
         """dict block name -> slice into the state vector."""
         out, i = {}, 0
@@ -90,7 +91,7 @@ class StateLayout:
             i += BLOCK_SIZES[b]
         return out
 
-    @property
+    @cached_property
     def size(self):
         """Number of states."""
         return sum(BLOCK_SIZES[b] for b in self.blocks)
@@ -164,6 +165,23 @@ def _position_block(lat, h, v, ell):
         [0.0, 0.0, 0.0]])
 
 
+#: Sensor-error blocks acting on the gyro (attitude rows) and on the accelerometer (velocity rows).
+_GYRO_BLOCKS = ("bg", "gmg", "sg", "ng", "gs")
+_ACCEL_BLOCKS = ("ba", "gma", "sa", "na")
+
+
+def _sensor_columns(name, C, x_b, f_b):
+    """d(C δx)/d(block) for a sensor-error block: the increment error δx of a triad measuring
+    x_b (rate or specific force); f_b enters only the gyro g-sensitivity "gs"."""
+    if name in ("bg", "gmg", "ba", "gma"):
+        return C
+    if name in ("sg", "sa"):
+        return C * x_b
+    if name in ("ng", "na"):
+        return C @ misalign_jacobian(x_b)
+    return C @ np.kron(np.eye(3), f_b[None, :])  # "gs"
+
+
 def system_matrix(layout, nav_state, f_b, w_ib_b, ell=WGS84):
     """Continuous system matrix F of the error state.
 
@@ -212,15 +230,11 @@ def system_matrix(layout, nav_state, f_b, w_ib_b, ell=WGS84):
     F[a, a] = -skew(w_ie + w_en)
 
     # Sensor errors enter through C δf (velocity) and -C δω (attitude).
-    gyro_cols = {"bg": C, "gmg": C, "sg": C * w_ib_b, "ng": C @ misalign_jacobian(w_ib_b),
-                 "gs": C @ np.kron(np.eye(3), f_b[None, :])}
-    accel_cols = {"ba": C, "gma": C, "sa": C * f_b, "na": C @ misalign_jacobian(f_b)}
-    for name, block in gyro_cols.items():
-        if name in layout:
-            F[a, S[name]] = -block
-    for name, block in accel_cols.items():
-        if name in layout:
-            F[vl, S[name]] = block
+    for name in layout.blocks[3:]:
+        if name in _GYRO_BLOCKS:
+            F[a, S[name]] = -_sensor_columns(name, C, w_ib_b, f_b)
+        elif name in _ACCEL_BLOCKS:
+            F[vl, S[name]] = _sensor_columns(name, C, f_b, f_b)
     for name, tau in layout.tau.items():
         F[S[name], S[name]] = -np.eye(BLOCK_SIZES[name]) / tau
     if "clock" in layout:

@@ -20,7 +20,7 @@ import numpy as np
 from .conventions import azimuth_from_yaw, wrap_pi
 from .earth import WGS84, earth_rate_enu, ecef_to_enu_matrix, geodetic_to_ecef, radii
 from .lever_arm import lever_arm_position, lever_arm_velocity
-from .rotations import quat_to_dcm, skew
+from .rotations import cross, quat_to_dcm, skew
 
 
 @dataclass(frozen=True)
@@ -133,7 +133,7 @@ def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3),
     pred = lever_arm_velocity(state.v_enu, state.q_nb, omega_ib_b, lever_b, state.lat)
     H = _zeros(space, 3)
     H[:, space["vel"]] = np.eye(3)
-    H[:, space["att"]] = skew(C @ np.cross(omega_ib_b, lever_b)) \
+    H[:, space["att"]] = skew(C @ cross(omega_ib_b, lever_b)) \
         - skew(earth_rate_enu(state.lat)) @ skew(C @ lever_b)
     _gyro_columns(space, H, -C @ skew(lever_b))
     _add_time_offset(space, H, dzdt)
@@ -271,7 +271,7 @@ def nonholonomic(space, state, sigma_lateral, sigma_vertical, omega_ib_b=np.zero
     theta, psi = boresight
     C = quat_to_dcm(state.q_nb)
     v = np.asarray(state.v_enu, float)
-    v_b = C.T @ v + np.cross(omega_ib_b, lever_b)
+    v_b = C.T @ v + cross(omega_ib_b, lever_b)
     # Lateral and vertical vehicle-axes components of a body vector.
     A = np.array([[-psi, 1.0, 0.0], [theta, 0.0, 1.0]])
     H = _zeros(space, 2)
@@ -415,7 +415,7 @@ def range_rates(space, state, sat_pos_ecef, sat_vel_ecef, sat_clock_drift, range
     k = len(pred)
     H = _zeros(space, k)
     H[:, space["vel"]] = -u_enu
-    H[:, space["att"]] = -u_enu @ (skew(C @ np.cross(omega_ib_b, lever_b))
+    H[:, space["att"]] = -u_enu @ (skew(C @ cross(omega_ib_b, lever_b))
                                    - skew(earth_rate_enu(state.lat)) @ skew(C @ lever_b))
     _gyro_columns(space, H, u_enu @ C @ skew(lever_b))
     if "clock" in space:

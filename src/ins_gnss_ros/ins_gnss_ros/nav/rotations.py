@@ -32,11 +32,31 @@ def skew(v) -> np.ndarray:
     ndarray, shape (..., 3, 3)
     """
     v = np.asarray(v, float)
-    z = np.zeros_like(v[..., 0])
     x, y, w = v[..., 0], v[..., 1], v[..., 2]
-    return np.stack([np.stack([z, -w, y], -1),
-                     np.stack([w, z, -x], -1),
-                     np.stack([-y, x, z], -1)], -2)
+    # Filled in place: called for single vectors at every filter epoch, where nested
+    # np.stack calls cost several times the arithmetic.
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -w, y
+    out[..., 1, 0], out[..., 1, 2] = w, -x
+    out[..., 2, 0], out[..., 2, 1] = -y, x
+    return out
+
+
+def cross(a, b) -> np.ndarray:
+    """Cross product a × b of 3-vectors, shape (..., 3) with broadcasting.
+
+    The same component formula as np.cross, without its axis handling, which dominates the
+    cost for the single vectors of the per-epoch filter code.
+    """
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a1 * b2 - a2 * b1
+    out[..., 1] = a2 * b0 - a0 * b2
+    out[..., 2] = a0 * b1 - a1 * b0
+    return out
 
 
 def quat_mul(p, q) -> np.ndarray:
@@ -75,8 +95,8 @@ def quat_rotate(q, v) -> np.ndarray:
     q = np.asarray(q, float)
     v = np.asarray(v, float)
     u = q[..., 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + q[..., :1] * t + np.cross(u, t)
+    t = 2.0 * cross(u, v)
+    return v + q[..., :1] * t + cross(u, t)
 
 
 def quat_from_rotvec(rv) -> np.ndarray:
@@ -129,11 +149,17 @@ def quat_to_dcm(q) -> np.ndarray:
     """
     q = np.asarray(q, float)
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack([
-        np.stack([w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z], -1),
-    ], -2)
+    C = np.empty(q.shape[:-1] + (3, 3))  # filled in place, as in skew()
+    C[..., 0, 0] = w * w + x * x - y * y - z * z
+    C[..., 0, 1] = 2 * (x * y - w * z)
+    C[..., 0, 2] = 2 * (x * z + w * y)
+    C[..., 1, 0] = 2 * (x * y + w * z)
+    C[..., 1, 1] = w * w - x * x + y * y - z * z
+    C[..., 1, 2] = 2 * (y * z - w * x)
+    C[..., 2, 0] = 2 * (x * z - w * y)
+    C[..., 2, 1] = 2 * (y * z + w * x)
+    C[..., 2, 2] = w * w - x * x - y * y + z * z
+    return C
 
 
 def dcm_to_quat(C) -> np.ndarray:

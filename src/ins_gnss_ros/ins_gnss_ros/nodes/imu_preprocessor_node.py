@@ -145,6 +145,7 @@ class ImuPreprocessorNode(NavNode):
         self._last_ns: int | None = None     # end of the last integrated sample
         self._last_rates = None              # its rates (trapezoid of instant samples)
         self._last_mag_ns: int | None = None
+        self._rotated_cache: dict[bytes, list] = {}
         self.pub_data = self.publisher(Imu, "imu/data", SENSOR_QOS)
         self.pub_delta = self.publisher(ImuDelta, "imu/delta", SENSOR_QOS)
         self.pub_mag = self.publisher(MagneticField, "imu/mag", SENSOR_QOS)
@@ -229,9 +230,11 @@ class ImuPreprocessorNode(NavNode):
             self.diag.set_value("imu samples synthesised", self.synthesised)
         fill_ns = [self._origin_ns + int(round(t * NS)) for t in result.fill_stamps]
         stamps = fill_ns + [t_ns]
-        w_b, f_b = self.cal.correct(np.vstack([result.fill_gyro, gyro]),
-                                    np.vstack([result.fill_accel, accel]), self.temperature,
-                                    self.residual)
+        if fill_ns:
+            gyro, accel = np.vstack([result.fill_gyro, gyro]), np.vstack([result.fill_accel, accel])
+        else:  # the usual case, without the cost of stacking nothing
+            gyro, accel = gyro[None, :], accel[None, :]
+        w_b, f_b = self.cal.correct(gyro, accel, self.temperature, self.residual)
         for k, t in enumerate(stamps):
             self._integrate(t, w_b[k], f_b[k])
         self._publish_data(msg, t_ns, w_b[-1], f_b[-1])
@@ -254,15 +257,24 @@ class ImuPreprocessorNode(NavNode):
         self.pub_delta.publish(delta)
 
     def _publish_data(self, raw: Imu, t_ns: int, w_b, f_b) -> None:
-        c = self.cal.c_bs
         out = Imu(angular_velocity=to_vector3(w_b), linear_acceleration=to_vector3(f_b))
         out.header.stamp = ns_to_stamp(t_ns)
         out.header.frame_id = self.p["frame_id"]
         out.orientation_covariance[0] = -1.0  # REP-145: no orientation estimate
-        out.angular_velocity_covariance = rotate_covariance(raw.angular_velocity_covariance, c)
-        out.linear_acceleration_covariance = rotate_covariance(
-            raw.linear_acceleration_covariance, c)
+        out.angular_velocity_covariance = self._rotated(raw.angular_velocity_covariance)
+        out.linear_acceleration_covariance = self._rotated(raw.linear_acceleration_covariance)
         self.pub_data.publish(out)
+
+    def _rotated(self, cov) -> list:
+        """:func:`rotate_covariance` by the mounting, memoised: a driver repeats the same few
+        covariances on every sample, and the matrix products cost more than the lookup."""
+        key = np.asarray(cov, float).tobytes()
+        out = self._rotated_cache.get(key)
+        if out is None:
+            if len(self._rotated_cache) > 64:  # a driver with varying covariances
+                self._rotated_cache.clear()
+            out = self._rotated_cache[key] = rotate_covariance(cov, self.cal.c_bs)
+        return list(out)
 
     def on_temperature(self, msg: Temperature) -> None:
         if not np.isfinite(msg.temperature):
@@ -296,7 +308,7 @@ class ImuPreprocessorNode(NavNode):
         out = MagneticField(magnetic_field=to_vector3(c @ m))
         out.header.stamp = ns_to_stamp(t_ns)
         out.header.frame_id = self.p["frame_id"]
-        out.magnetic_field_covariance = rotate_covariance(msg.magnetic_field_covariance, c)
+        out.magnetic_field_covariance = self._rotated(msg.magnetic_field_covariance)
         self.pub_mag.publish(out)
 
 

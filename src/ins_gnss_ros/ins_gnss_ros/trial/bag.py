@@ -173,7 +173,8 @@ def bag_topics(path) -> dict[str, str]:
         return {c.topic: c.msgtype for c in reader.connections}
 
 
-def read_bag(path, topics: Iterable[str] | None = None, plain: bool = False) -> list[BagMessage]:
+def read_bag(path, topics: Iterable[str] | None = None, plain: bool = False,
+             decode: Iterable[str] | None = None) -> list[BagMessage]:
     """All messages of a bag (or of ``topics``), decoded, in stamp order.
 
     Parameters
@@ -186,19 +187,24 @@ def read_bag(path, topics: Iterable[str] | None = None, plain: bool = False) -> 
         Decode into the typestore's plain dataclasses (same field names and constants, about
         twice as fast) instead of rclpy messages: for readers that only look at fields, such
         as the offline filter path; a node must get rclpy messages.
+    decode : iterable of str, optional
+        Decode only these topics; the other messages keep their place and stamp with ``msg``
+        None (a reader that needs the stamp order of a topic but not its content: decoding is
+        most of the cost of reading).
 
     Raises
     ------
     BagError
         One line naming the bag and what is wrong with it.
     """
-    return list(iter_bag(path, topics, plain))
+    return list(iter_bag(path, topics, plain, decode))
 
 
-def iter_bag(path, topics: Iterable[str] | None = None, plain: bool = False
-             ) -> Iterator[BagMessage]:
+def iter_bag(path, topics: Iterable[str] | None = None, plain: bool = False,
+             decode: Iterable[str] | None = None) -> Iterator[BagMessage]:
     """Like :func:`read_bag`, decoding lazily (rows are sorted by stamp first)."""
     wanted = None if topics is None else {resolve(t) for t in topics}
+    decoded = None if decode is None else {resolve(t) for t in decode}
     try:
         with _open(path) as reader:
             connections = [c for c in reader.connections if wanted is None or c.topic in wanted]
@@ -211,10 +217,13 @@ def iter_bag(path, topics: Iterable[str] | None = None, plain: bool = False
         raise BagError(f"{path}: unreadable bag ({type(err).__name__}: {first_line(err)})") \
             from None
     rows.sort(key=lambda row: row[:2])
-    decode = typestore().deserialize_cdr if plain else deserialize_message
+    deserialize = typestore().deserialize_cdr if plain else deserialize_message
     for t, _, topic, cid, data in rows:
+        if decoded is not None and topic not in decoded:
+            yield BagMessage(topic, t, None)
+            continue
         try:
-            msg = decode(bytes(data), classes[cid])
+            msg = deserialize(bytes(data), classes[cid])
         except Exception as err:
             raise BagError(f"{path}: message on {topic} at {t} ns does not decode "
                            f"({first_line(err)})") from None
