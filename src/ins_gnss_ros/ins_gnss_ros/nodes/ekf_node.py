@@ -220,7 +220,7 @@ class EkfNode(NavNode):
     # -- inputs --------------------------------------------------------------------------------
     def on_delta(self, msg: ImuDelta) -> None:
         dtheta, dv = vec(msg.delta_angle), vec(msg.delta_velocity)
-        if not (np.all(np.isfinite(dtheta)) and np.all(np.isfinite(dv))):
+        if not (np.isfinite(dtheta).all() and np.isfinite(dv).all()):
             self.diag.count("non-finite increment dropped")
             return
         self.navigator.add_imu(stamp_to_sec(msg.header.stamp), dtheta, dv)
@@ -236,6 +236,11 @@ class EkfNode(NavNode):
         if not (np.isfinite([msg.latitude, msg.longitude, msg.altitude]).all()
                 and np.isfinite(cov).all()):
             self.diag.count("non-finite gnss/fix rejected")
+            return
+        if not -1000.0 <= msg.altitude <= 1e5:
+            # Outside the heights this filter navigates at (the datum.altitude_m range): a
+            # corrupt fix, which max_reject_time would otherwise force in after a while.
+            self.diag.count("implausible gnss/fix altitude rejected")
             return
         if msg.position_covariance_type == NavSatFix.COVARIANCE_TYPE_UNKNOWN or cov[0, 0] <= 0.0:
             cov = np.eye(3) * 25.0  # an unknown accuracy is treated as a 5 m single-point fix
@@ -256,6 +261,9 @@ class EkfNode(NavNode):
         cov = np.reshape(msg.twist.covariance, (6, 6))[:3, :3]
         if not (np.isfinite(v).all() and np.isfinite(cov).all()):
             self.diag.count("non-finite gnss/vel rejected")
+            return
+        if np.linalg.norm(v) > 1000.0:  # beyond any vehicle this filter is for: corrupt
+            self.diag.count("implausible gnss/vel rejected")
             return
         floor = self.p["gnss.velocity_sigma_floor_mps"] ** 2
         cov = cov + np.diag(np.maximum(floor - np.diag(cov), 0.0))

@@ -85,6 +85,7 @@ class StrapdownNode(NavNode):
         self.sensor = SensorCorrection()
         self.history: deque[_Step] = deque()
         self.last_correction_t = -np.inf
+        self.t_start = np.inf  # start of the first increment of this run, s
         self.correction_sequence = 0
         self.count = 0
         self.pub = self.publisher(InsState, "ins/state", SENSOR_QOS)
@@ -95,12 +96,13 @@ class StrapdownNode(NavNode):
     def on_delta(self, msg: ImuDelta) -> None:
         t = stamp_to_sec(msg.header.stamp)
         dtheta, dv = vec(msg.delta_angle), vec(msg.delta_velocity)
-        if not (np.all(np.isfinite(dtheta)) and np.all(np.isfinite(dv)) and np.isfinite(msg.dt)
+        if not (np.isfinite(dtheta).all() and np.isfinite(dv).all() and np.isfinite(msg.dt)
                 and msg.dt > 0.0):
             self.diag.count("non-finite or non-positive increment dropped")
             return
         state = self.ins.state
         if np.isnan(state.t):  # first increment fixes the time axis
+            self.t_start = t - msg.dt
             self.ins.state = NavState(state.lat, state.lon, state.h, state.v_enu, state.q_nb, t - msg.dt)
         elif t <= state.t:
             self.diag.count("increment stamp not after the previous one: dropped")
@@ -131,6 +133,12 @@ class StrapdownNode(NavNode):
             self.diag.count("non-finite correction rejected")
             return
         t_c = stamp_to_sec(msg.header.stamp)
+        if not self.history or t_c < self.t_start:
+            # ins/correction is TRANSIENT_LOCAL: a restarted node is first handed the corrections
+            # of its previous run, which refer to another state. Applied to this one they would
+            # be wrong while carrying the filter's current sequence (published as synchronised).
+            self.diag.count("correction older than this run ignored", log=False)
+            return
         # Index of the step whose end state is the correction epoch (half a step tolerance).
         replay_from = None
         for i, step in enumerate(self.history):

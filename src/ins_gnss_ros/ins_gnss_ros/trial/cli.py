@@ -3,7 +3,7 @@
     trial simulate --scenario {car,sea} --duration S --seed N --out bags/NAME
     trial import {rtklib-drive,ubx,vessel-parquet} SRC --out bags/NAME
     trial replay bags/NAME --config config/PROFILE.yaml --out OUT [--outages LEN:PERIOD[:FIRST]]
-                 [--init-from-truth] [--rate R --processes | --offline]
+                 [--init-from-truth] [--rate R --processes | --offline] [--faults FILE]
     trial evaluate OUT [--truth bags/NAME] [--json] [--skip S]
     trial batch --config PROFILE --out DIR (--scenario S --seeds N | --bags B ...) [--scheduler A]
     trial run --config config/PROFILE.yaml
@@ -76,6 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--offline", action="store_true",
                    help="offline filter path: the navigator of the profile's 'navigator' "
                         "section instead of the node graph")
+    p.add_argument("--faults", default=None, metavar="FILE",
+                   help="fault specification (YAML) applied to the bag's messages on their way "
+                        "to the nodes (in-process replay only)")
 
     p = sub.add_parser("evaluate", help="error statistics, plots and report of a replay")
     p.add_argument("out", help="replay output folder")
@@ -163,6 +166,9 @@ def cmd_replay(args) -> int:
     if args.rate is not None and not args.processes:
         raise ValueError("--rate needs --processes (the in-process replay runs as fast as "
                          "possible)")
+    if args.faults is not None and (args.processes or args.offline):
+        raise ValueError("--faults works with the in-process replay only (not with "
+                         "--processes or --offline)")
     if args.offline:
         if args.processes or args.init_from_truth:
             raise ValueError("--offline runs no nodes: it takes neither --processes nor "
@@ -171,7 +177,7 @@ def cmd_replay(args) -> int:
                                         progress=_progress(args))
     else:
         run = replay.replay_processes if args.processes else replay.replay
-        kwargs = {"rate": args.rate} if args.processes else {}
+        kwargs = {"rate": args.rate} if args.processes else {"faults": args.faults}
         summary = run(args.bag, args.config, args.out, outages=args.outages,
                       progress=_progress(args), init_from_truth=args.init_from_truth, **kwargs)
     print(f"recorded {', '.join(summary['topics'])} into {args.out}")

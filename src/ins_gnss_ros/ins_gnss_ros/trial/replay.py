@@ -23,6 +23,9 @@ The graph is every node of :mod:`ins_gnss_ros.nodes.registry` that has a section
 
 GNSS outages (:mod:`ins_gnss_ros.trial.outages`) withhold every ``gnss/*`` message whose stamp
 falls in a window; the windows are written to ``OUT/replay.json`` with the run's other facts.
+A fault specification (:mod:`ins_gnss_ros.faults`, in-process :func:`replay` only) passes the
+bag's messages through a :class:`~ins_gnss_ros.faults.inject.FaultInjector` before they reach
+the nodes; what each fault did goes into ``replay.json`` under ``faults``.
 Output folder layout: ``OUT/bag`` (the recorded outputs, a bag) and ``OUT/replay.json``.
 """
 from __future__ import annotations
@@ -100,10 +103,11 @@ def load_profile(path) -> Profile:
     return Profile(path, sections, graph, ignored)
 
 
-def read_inputs(bag_path, plain=False) -> list:
-    """The messages of a bag the graph may see: all but ``truth/*`` (not even decoded)."""
+def read_inputs(bag_path, plain=False, decode=None) -> list:
+    """The messages of a bag the graph may see: all but ``truth/*`` (not even decoded); with
+    ``decode`` (topics) only those are decoded, the others come with ``msg`` None."""
     topics = [t for t in bagio.bag_topics(bag_path) if not t.startswith(TRUTH_PREFIX)]
-    return bagio.read_bag(bag_path, topics, plain) if topics else []
+    return bagio.read_bag(bag_path, topics, plain, decode) if topics else []
 
 
 def truth_init_parameters(bag_path) -> dict:
@@ -167,7 +171,7 @@ def _in_windows(t_ns, windows) -> bool:
 
 
 def replay(bag_path, profile_path, out, outages=None, progress=False,
-           init_from_truth=False) -> dict:
+           init_from_truth=False, faults=None) -> dict:
     """Run the profile's graph in-process over a bag as fast as possible (see module doc).
 
     Parameters
@@ -185,11 +189,20 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
     init_from_truth : bool
         Start the nodes from the bag's truth (:func:`profile_with_truth_init`); the derived
         profile is kept as ``OUT/profile.yaml``.
+    faults : path, optional
+        Fault specification (YAML, :mod:`ins_gnss_ros.faults.spec`) applied to the bag's
+        messages on their way to the nodes (after the outages are decided on the original
+        stream).
 
     Returns
     -------
     dict
         What ``replay.json`` holds.
+
+    Raises
+    ------
+    ins_gnss_ros.faults.spec.FaultSpecError
+        An unusable fault specification (before anything is written).
     """
     import rclpy
     from rclpy.exceptions import ParameterException
@@ -198,8 +211,19 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
     from ins_gnss_ros.nodes.base import InProcessBus, ParameterError
 
     profile = load_profile(profile_path)
+    injector = None
+    if faults is not None:
+        from ins_gnss_ros.faults import FaultInjector, load_fault_spec
+
+        injector = FaultInjector(load_fault_spec(faults))
     messages = read_inputs(bag_path)
     windows = gnss_windows(messages, outages)
+    stream = messages
+    if injector is not None:
+        # Outages are decided on the bag's own time; faults act on what is left.
+        stream = (bagio.BagMessage(topic, t_ns, msg) for t_ns, topic, msg in injector(
+            (m.t_ns, m.topic, m.msg) for m in messages
+            if not (m.topic.startswith(GNSS_PREFIX) and _in_windows(m.t_ns, windows))))
     out = _new_out(out)
     if init_from_truth:
         profile = load_profile(profile_with_truth_init(profile, bag_path, out / "profile.yaml"))
@@ -230,7 +254,8 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
                 raise ProfileError(f"{profile.path}: node {name}: "
                                    f"{bagio.first_line(err)}") from None
         next_diag = messages[0].t_ns + DIAGNOSTICS_PERIOD_NS if messages else 0
-        for m in tqdm(messages, disable=not progress, unit="msg", desc="replay"):
+        for m in tqdm(stream, disable=not progress, unit="msg", desc="replay",
+                      total=len(messages)):
             while m.t_ns >= next_diag:
                 bus.now_ns = next_diag
                 for node in nodes:
@@ -250,7 +275,11 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
             node.destroy_node()
         context.try_shutdown()
     writer.close()
-    return _write_summary(out, bag_path, profile, outages, windows, withheld, "in-process", 0.0)
+    if injector is not None:
+        withheld = sum(1 for m in messages
+                       if m.topic.startswith(GNSS_PREFIX) and _in_windows(m.t_ns, windows))
+    return _write_summary(out, bag_path, profile, outages, windows, withheld, "in-process", 0.0,
+                          faults=None if injector is None else injector.summary())
 
 
 def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progress=False,
@@ -463,7 +492,7 @@ def _new_out(out) -> Path:
 
 
 def _write_summary(out, bag_path, profile, outages, windows, withheld, mode, rate,
-                   graph=None) -> dict:
+                   graph=None, faults=None) -> dict:
     summary = {
         "input_bag": str(Path(bag_path).resolve()),
         "profile": str(profile.path.resolve()),
@@ -479,6 +508,8 @@ def _write_summary(out, bag_path, profile, outages, windows, withheld, mode, rat
         "output_bag": "bag",
         "topics": bagio.bag_topics(out / "bag") if (out / "bag").exists() else {},
     }
+    if faults is not None:
+        summary["faults"] = faults
     (out / "replay.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
 
@@ -535,7 +566,11 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
 
     profile = load_profile(profile_path)
     config = offline_config(profile)
-    messages = read_inputs(bag_path, plain=True)
+    # Every input keeps its place (the time origin t0 is the first input of any topic), but
+    # only what the navigator uses is decoded.
+    messages = read_inputs(bag_path, plain=True,
+                           decode=[t for t in bagio.bag_topics(bag_path)
+                                   if t in OFFLINE_IMU_TOPICS or t.startswith(GNSS_PREFIX)])
     windows = gnss_windows(messages, outages)
     out = _new_out(out)
     nav = navmod.Navigator(navmod.NavigatorConfig(
@@ -581,6 +616,10 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
     _write_navigator_output(out / "bag", result, t0)
     return _write_summary(out, bag_path, profile, outages, windows, withheld, "offline", 0.0,
                           graph=["navigator"])
+
+
+#: IMU topics the offline path reads (increments, or raw rates it integrates itself).
+OFFLINE_IMU_TOPICS = ("/imu/delta", "/imu/data_raw")
 
 
 def _xyz(v):
