@@ -148,6 +148,7 @@ def soak(duration: float, rate: float, profile: Path, warmup: float = 20.0) -> d
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
     from ins_gnss_ros.trial.bag import msg_class
+    from ins_gnss_ros.trial.replay import stop_processes
 
     names = graph_nodes(profile)
     if not names:
@@ -272,15 +273,7 @@ def soak(duration: float, rate: float, profile: Path, warmup: float = 20.0) -> d
         stop.set()
         if spinner is not None:
             spinner.join(5.0)
-        for p in procs.values():
-            if p.poll() is None:
-                p.send_signal(2)  # SIGINT: clean shutdown
-        for p in procs.values():
-            try:
-                p.wait(10.0)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        stop_processes(procs.values())
         executor.shutdown()
         node.destroy_node()
         context.try_shutdown()

@@ -8,11 +8,13 @@ import math
 
 import numpy as np
 import pytest
+import yaml
 
 from ins_gnss_ros.trial import bag as bagio
 from ins_gnss_ros.trial.bag import messages_equal
-from ins_gnss_ros.trial.replay import (ProfileError, gnss_windows, load_profile, replay,
-                                       replay_offline, replay_processes)
+from ins_gnss_ros.trial.replay import (ProfileError, gnss_windows, load_profile,
+                                       profile_with_truth_init, replay, replay_offline,
+                                       replay_processes)
 from ins_gnss_ros.trial.simulate import SimOptions, simulate
 
 DURATION = 6.0
@@ -83,6 +85,23 @@ def test_strapdown_on_the_bus_follows_the_truth(first_run, car_bag):
                  + s.orientation.y * t.orientation.y + s.orientation.z * t.orientation.z)
         assert 2 * math.acos(min(1.0, dq)) < math.radians(0.01)
     assert compared > 50
+
+
+def test_truth_init_goes_to_the_nodes_that_declare_it_without_yaml_aliases(car_bag, tmp_path):
+    # The ekf has init.* parameters of its own (sigmas): it must not be handed the strapdown's
+    # position, and the written file must be one rcl accepts (no YAML anchors/aliases).
+    path = tmp_path / "p.yaml"
+    path.write_text("strapdown:\n  ros__parameters:\n    init.latitude_deg: 0.0\n"
+                    "ekf:\n  ros__parameters:\n    init.position_sigma_m: 2.0\n")
+    written = profile_with_truth_init(load_profile(path), car_bag, tmp_path / "derived.yaml")
+    text = written.read_text()
+    assert "&" not in text and "*id" not in text
+    sections = yaml.safe_load(text)
+    truth = next(bagio.iter_bag(car_bag, ["truth/state"])).msg
+    strapdown = sections["/strapdown"]["ros__parameters"]
+    assert strapdown["init.latitude_deg"] == pytest.approx(math.degrees(truth.latitude))
+    assert len(strapdown["init.velocity_enu"]) == 3
+    assert sections["/ekf"]["ros__parameters"] == {"init.position_sigma_m": 2.0}
 
 
 def test_diagnostics_once_per_second_of_bag_time(first_run, car_bag):

@@ -123,7 +123,8 @@ class ErrorStateEKF:
     clock_psd : sequence of 3 float
         Receiver clock noise densities (layouts with a "clock" block).
     order : int
-        Picard order of the discretisation (>= 3 keeps Q positive semi-definite).
+        Picard order of the discretisation (order 2 gives a non-PSD Q; order 3 is not PSD for
+        MEMS models at dt >= 0.1 s either: the default 5 is, see discretize.DEFAULT_ORDER).
     joseph : bool
         Joseph-form covariance update (default) or the standard (I - K H) P.
     """

@@ -30,6 +30,7 @@ Output folder layout: ``OUT/bag`` (the recorded outputs, a bag) and ``OUT/replay
 """
 from __future__ import annotations
 
+import copy
 import json
 import os
 import subprocess
@@ -137,17 +138,22 @@ def truth_init_parameters(bag_path) -> dict:
 
 
 def profile_with_truth_init(profile: Profile, bag_path, path) -> Path:
-    """Write a copy of ``profile`` to ``path`` in which every graph node that has ``init.*``
-    parameters starts from the bag's first truth (a perfect initial alignment, for graphs that
-    do not align themselves). Generic: no node is named; the keys follow the strapdown's."""
+    """Write a copy of ``profile`` to ``path`` in which every graph node that declares the
+    truth's ``init.*`` parameters starts from the bag's first truth (a perfect initial
+    alignment, for graphs that do not align themselves). Generic: no node is named; the keys
+    follow the strapdown's, and a node takes those it declares."""
+    from ins_gnss_ros.nodes.registry import node_class
+
     params = truth_init_parameters(bag_path)
     if not params:
         raise ValueError("--init-from-truth: the bag has no truth/state")
     data = {}
     for name, section in profile.sections.items():
         section = dict(section)
-        if name in profile.graph and any(k.startswith("init.") for k in section):
-            section.update(params)
+        if name in profile.graph:
+            declared = {spec.name for spec in node_class(name).PARAMS}
+            # Copies, not shared lists: yaml would write an alias, which rcl refuses.
+            section.update({k: copy.deepcopy(v) for k, v in params.items() if k in declared})
         data["/" + name] = {"ros__parameters": section}
     path = Path(path)
     path.write_text(yaml.safe_dump(data, sort_keys=False))
@@ -344,8 +350,8 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
             def callback(msg):
                 with lock:
                     copies = played.get((topic, bagio.stamp_ns(msg)), [])
-                    for i, copy in enumerate(copies):
-                        if bagio.messages_equal(msg, copy):
+                    for i, sent in enumerate(copies):
+                        if bagio.messages_equal(msg, sent):
                             del copies[i]
                             return
                     writer.write(topic, msg)
@@ -374,15 +380,7 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
             pubs[m.topic].publish(m.msg)
         _wait_quiet(writer, lock, procs, quiet_s=1.0, timeout=timeout)
     finally:
-        for p in procs:
-            if p.poll() is None:
-                p.send_signal(2)  # SIGINT: the nodes shut down cleanly
-        for p in procs:
-            try:
-                p.wait(10.0)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        stop_processes(procs)
         executor.shutdown()
         node.destroy_node()
         context.try_shutdown()
@@ -481,6 +479,21 @@ def _wait_quiet(writer, lock, procs, quiet_s, timeout) -> None:
         elif time.monotonic() - since > quiet_s:
             return
         time.sleep(0.05)
+
+
+def stop_processes(procs, timeout=10.0) -> None:
+    """SIGINT every running node process (they shut down cleanly), then wait; kill what is
+    still running after ``timeout`` s."""
+    procs = list(procs)
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(2)
+    for p in procs:
+        try:
+            p.wait(timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
 
 
 def _new_out(out) -> Path:
