@@ -7,6 +7,8 @@ trial with truth. For every published ``nav/fix`` the error against the interpol
 
 * wrong: the filter's last ``nav/status`` says NAVIGATING and some ENU error component exceeds
   ``K_SIGMA`` standard deviations of the published covariance (a confident wrong answer);
+* beyond: the same bound exceeded in any mode (the covariance does not cover the error, even
+  if the mode says not to trust the solution);
 * lost: seconds of the trial after the first solution with no published solution (gaps longer
   than ``GAP_S``);
 * recover: s from the end of the last fault window until the filter reports NAVIGATING again
@@ -161,6 +163,7 @@ def integrity(outputs: Path, bag: Path, fault_end_ns: int | None = None) -> dict
     ratio = np.where(np.isnan(ratio), np.inf, ratio)
     navigating = modes == NAVIGATING
     wrong = navigating & (ratio > K_SIGMA)
+    beyond = (modes != ALIGNING) & (ratio > K_SIGMA)
     stamps = np.sort(t_fix)
     gaps = np.diff(np.concatenate([stamps, [tt[-1]]])) * 1e-9 if len(stamps) else [
         (tt[-1] - tt[0]) * 1e-9]
@@ -171,7 +174,8 @@ def integrity(outputs: Path, bag: Path, fault_end_ns: int | None = None) -> dict
         if len(after):
             recover = (st_t[after[0]] - fault_end_ns) * 1e-9
     return {"published": int(len(fixes)), "navigating": int(navigating.sum()),
-            "wrong": int(wrong.sum()), "lost_s": lost, "recover_s": recover,
+            "wrong": int(wrong.sum()), "beyond": int(beyond.sum()), "lost_s": lost,
+            "recover_s": recover,
             "max_ratio_navigating": float(np.max(ratio[navigating], initial=0.0)),
             "modes": {int(k): int(v) for k, v in zip(*np.unique(st_mode, return_counts=True))},
             "t0_ns": int(tt[0]),
@@ -205,13 +209,14 @@ def main() -> None:
     print(f"trial: car {args.duration:g} s, IMU {args.rate:g} Hz, graph {graph}; wrong ="
           f" NAVIGATING and error > {K_SIGMA:g} sigma of the published nav/fix covariance")
     print(f"{'fault class':20s} {'cases':>5s} {'published':>9s} {'navigating':>10s} "
-          f"{'wrong':>5s} {'lost s':>6s} {'recover s':>10s} {'max e/sigma':>11s} "
+          f"{'wrong':>5s} {'beyond':>6s} {'lost s':>6s} {'recover s':>10s} {'max e/sigma':>11s} "
           f"{'crash':>5s}  modes")
     rows = {}
     for name, runs in [("none", [[]])] + list(cases(args.duration).items()):
         if args.classes and name not in args.classes:
             continue
-        total = {"published": 0, "navigating": 0, "wrong": 0, "lost_s": 0.0, "recover": [],
+        total = {"published": 0, "navigating": 0, "wrong": 0, "beyond": 0, "lost_s": 0.0,
+                 "recover": [],
                  "max": 0.0, "modes": set(), "crashed": 0}
         t_run = time.perf_counter()
         for i, faults in enumerate(runs):
@@ -224,7 +229,7 @@ def main() -> None:
                 continue
             end = max((f["start"] + f.get("duration", 0.0) for f in faults), default=None)
             r = integrity(out / "bag", bag, None if end is None else t_bag0 + int(end * 1e9))
-            for key in ("published", "navigating", "wrong"):
+            for key in ("published", "navigating", "wrong", "beyond"):
                 total[key] += r[key]
             total["lost_s"] += r["lost_s"]
             total["recover"].append(r["recover_s"])
@@ -234,7 +239,8 @@ def main() -> None:
         rec_text = ("-" if not rec else f"{max(rec):.1f}") + (
             " never" if len(rec) < len(total["recover"]) and name != "none" else "")
         print(f"{name:20s} {len(runs):5d} {total['published']:9d} {total['navigating']:10d} "
-              f"{total['wrong']:5d} {total['lost_s']:6.1f} {rec_text:>10s} {total['max']:11.2f}"
+              f"{total['wrong']:5d} {total['beyond']:6d} {total['lost_s']:6.1f} {rec_text:>10s}"
+              f" {total['max']:11.2f}"
               f" {total['crashed']:5d}"
               f"  {sorted(total['modes'])}  ({time.perf_counter() - t_run:.0f} s)", flush=True)
         rows[name] = {k: (sorted(v) if isinstance(v, set) else v) for k, v in total.items()}

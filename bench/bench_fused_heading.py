@@ -26,7 +26,7 @@ The standalone row is the ``gnss/heading`` of the same run, over its FIXED epoch
 roll of the phase attitude; ``--grade tactical`` a FOG-class IMU instead of the MEMS one.
 
 Usage: ``.venv/bin/python bench/bench_fused_heading.py [--quick] [--antennas 2 4] [--seeds 1 2]
-[--grade NAME] [--fuse-tilt]``
+[--grade NAME] [--fuse-tilt] [--duration S] [--phase-param NAME=VALUE ...]``
 """
 from __future__ import annotations
 
@@ -175,8 +175,8 @@ class TiltEkfNode(EkfNode):
 
 
 def stamp(t: float) -> Time:
-    """Stamp of trajectory time t (s) in integer nanoseconds: a float sum with STAMP0_S would
-    jitter by ~100 ns, enough for the gnss_simulator node to skip an epoch now and then."""
+    """Stamp of trajectory time t (s) in integer nanoseconds (a float sum with STAMP0_S would
+    jitter by ~100 ns around the epoch grid; the gnss_simulator node tolerates 1 ms)."""
     ns = int(round(t * 1e9))
     return Time(sec=STAMP0_S + ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
@@ -195,7 +195,7 @@ def seed_angle_errors(q_est, q_true):
 
 
 def run_trial(seed, duration, antennas, settle_s=60.0, grade=MEMS_ADIS16405,
-              ekf_overrides=(), fuse_tilt=False, context=None) -> FusedTrial:
+              ekf_overrides=(), fuse_tilt=False, context=None, phase_overrides=()) -> FusedTrial:
     """One simulated sea trial through imu/gnss simulation, phase_heading, ekf and strapdown.
 
     Parameters
@@ -216,6 +216,8 @@ def run_trial(seed, duration, antennas, settle_s=60.0, grade=MEMS_ADIS16405,
         Run the prototype :class:`TiltEkfNode` (pitch and roll of the phase attitude fused too).
     context : rclpy.Context, optional
         Context of the nodes (default: the global one).
+    phase_overrides : sequence of Parameter
+        Extra phase_heading parameters.
     """
     wall = time.perf_counter()
     sc = scenarios.sea(duration=duration, seed=seed, rate=IMU_RATE, oversample=2)
@@ -237,7 +239,7 @@ def run_trial(seed, duration, antennas, settle_s=60.0, grade=MEMS_ADIS16405,
             Parameter("source", value="truth"), Parameter("lever_arms", value=arms),
             Parameter("rate_hz", value=GNSS_RATE), Parameter("seed", value=seed)]),
         PhaseHeadingNode(bus=bus, context=context, parameter_overrides=[
-            Parameter("antenna_positions", value=arms)]),
+            Parameter("antenna_positions", value=arms), *phase_overrides]),
     ]
     # nav/odom is published from the ins/state the ekf has just received: pair the two.
     last_state, fused_log, headings = [None], [], []
@@ -313,25 +315,32 @@ def main(argv=None) -> int:
     ap.add_argument("--antennas", type=int, choices=(2, 4), nargs="+", default=[2, 4])
     ap.add_argument("--grade", choices=sorted(GRADES), default=MEMS_ADIS16405.name,
                     help="simulated IMU and ekf noise model (sensor_errors.GRADES)")
+    ap.add_argument("--phase-param", action="append", default=[], metavar="NAME=FLOAT",
+                    help="phase_heading parameter override, e.g. multipath.phase_m=0")
     args = ap.parse_args(argv)
+    phase_overrides = [Parameter(name, value=float(value)) for name, value in
+                       (item.split("=", 1) for item in args.phase_param)]
     duration, seeds = (120.0, args.seeds[:1]) if args.quick else (args.duration, args.seeds)
-    variant = args.grade + (" + pitch/roll fusion" if args.fuse_tilt else "")
+    variant = args.grade + (" + pitch/roll fusion" if args.fuse_tilt else "") + "".join(
+        f"; phase_heading {item}" for item in args.phase_param)
     print(f"{variant}; sea scenario {duration:.0f} s per seed; errors after 60 s (deg RMS)\n")
     print("| run | fused heading | fused pitch | fused roll | heading NEES | standalone heading "
-          "| standalone pitch | standalone roll | FIXED | FIXED msgs: updates accepted/rejected "
-          "| wall s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "| standalone pitch | standalone roll | standalone heading NEES | FIXED "
+          "| FIXED msgs: updates accepted/rejected | wall s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     rclpy.init()
     try:
         configs = {2: ("2 ant. 1.5 m", TWO_ANTENNAS), 4: ("4 ant. 1.5 x 1.0 m", FOUR_ANTENNAS)}
         for label, antennas in (configs[n] for n in args.antennas):
             for seed in seeds:
                 r = run_trial(seed, duration, antennas, grade=GRADES[args.grade],
-                              fuse_tilt=args.fuse_tilt)
+                              fuse_tilt=args.fuse_tilt, phase_overrides=phase_overrides)
                 f, p = np.degrees(rms(r.fused)), np.degrees(rms(r.phase))
                 nees = np.mean((r.fused[:, 0] / r.fused_sigma[:, 0]) ** 2)
+                nees_phase = np.mean((r.phase[:, 0] / r.phase_sigma[:, 0]) ** 2)
                 print(f"| {label}, seed {seed} | {f[0]:.3f} | {f[1]:.3f} | {f[2]:.3f} | {nees:.2f} "
-                      f"| {p[0]:.3f} | {p[1]:.3f} | {p[2]:.3f} | {100 * r.fixed_fraction:.1f} % "
+                      f"| {p[0]:.3f} | {p[1]:.3f} | {p[2]:.3f} | {nees_phase:.3f} "
+                      f"| {100 * r.fixed_fraction:.1f} % "
                       f"| {r.fixed_total}: {r.heading_accepted}/{r.heading_rejected} "
                       f"| {r.wall_s:.0f} |",
                       flush=True)

@@ -4,10 +4,11 @@ A player in this process publishes `imu/delta` at 200 Hz (a vehicle at rest at 5
 rate and gravity) and `gnss/fix` + `gnss/vel` at 10 Hz, paced by the wall clock, and takes the
 time from publishing each increment to receiving the `ins/state` of the same stamp. Prints
 p50/p99/max latency over the data after a warm-up (the first WARMUP_S seconds load the numba
-kernels), lost states, CPU per process and the ekf's mode at the end (at rest with no heading
-source it stays ALIGNING: a MEMS heading needs motion).
+kernels), lost states, CPU time per process (in all, and per increment after the warm-up; the
+player's too) and the ekf's mode at the end (at rest with no heading source it stays ALIGNING:
+a MEMS heading needs motion).
 
-    .venv/bin/python bench/bench_latency.py [--duration 30]
+    .venv/bin/python bench/bench_latency.py [--duration 30] [--executor events|single] [--fifo 10]
 """
 
 from __future__ import annotations
@@ -34,22 +35,32 @@ def main() -> int:
     import rclpy
     from geometry_msgs.msg import TwistWithCovarianceStamped
     from ins_gnss_msgs.msg import FilterStatus, ImuDelta, InsState
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from sensor_msgs.msg import NavSatFix, NavSatStatus
 
     from ins_gnss_ros.nav.earth import earth_rate_enu, normal_gravity
-    from ins_gnss_ros.nodes.base import SENSOR_QOS, STATE_QOS
+    from ins_gnss_ros.nodes.base import EXECUTOR_ENV, EXECUTORS, SENSOR_QOS, STATE_QOS, \
+        executor_kind
     from ins_gnss_ros.nodes.convert import sec_to_stamp, to_vector3
     from rosutil import NodeProcess, spin_until, wait_for_endpoints
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=30.0, help="seconds of data")
+    parser.add_argument("--executor", choices=tuple(EXECUTORS),
+                        help=f"executor of the nodes and the player (default: ${EXECUTOR_ENV} or "
+                        "events)")
+    parser.add_argument("--fifo", type=int, metavar="PRIORITY",
+                        help="run the strapdown and the player (all their threads) SCHED_FIFO at "
+                        "this priority, the ekf as it is (docs/results/latency.md; needs root or "
+                        "CAP_SYS_NICE)")
     args = parser.parse_args()
+    os.environ[EXECUTOR_ENV] = executor_kind(args.executor)  # inherited by the node processes
 
     rclpy.init()
     node = Node("latency_player")
-    executor = SingleThreadedExecutor()
+    # The player spins the same kind of executor as the nodes: it shares their two cores, and
+    # stands for a driver node.
+    executor = EXECUTORS[os.environ[EXECUTOR_ENV]]()
     executor.add_node(node)
     pub_delta = node.create_publisher(ImuDelta, "imu/delta", SENSOR_QOS)
     pub_fix = node.create_publisher(NavSatFix, "gnss/fix", SENSOR_QOS)
@@ -81,9 +92,16 @@ def main() -> int:
         wait_for_endpoints(node, executor, publishes=["/ins/state", "/nav/status"],
                            subscribes=["/imu/delta", "/gnss/fix", "/gnss/vel"])
         spin_until(executor, lambda: pub_delta.get_subscription_count() >= 2, 20, "subscribers")
+        procs = {"strapdown": strapdown.proc.pid, "ekf": ekf.proc.pid, "player": os.getpid()}
+        if args.fifo is not None:
+            for pid in (procs["strapdown"], procs["player"]):
+                set_fifo(pid, args.fifo)
         t0, wall0 = 1_750_000_000.0, time.perf_counter()
         n = int((args.duration + WARMUP_S) * RATE)
+        cpu0 = None
         for k in range(1, n + 1):
+            if k == int(WARMUP_S * RATE) + 1:
+                cpu0 = {name: proc_cpu(pid) for name, pid in procs.items()}
             while time.perf_counter() < wall0 + k * dt:  # pace by the wall clock
                 executor.spin_once(timeout_sec=max(0.0, wall0 + k * dt - time.perf_counter()))
             stamp = sec_to_stamp(t0 + k * dt)
@@ -105,7 +123,8 @@ def main() -> int:
         end = time.perf_counter() + 2.0
         while time.perf_counter() < end and sent:
             executor.spin_once(timeout_sec=0.05)
-        cpu = {name: proc_cpu(p.proc.pid) for name, p in (("strapdown", strapdown), ("ekf", ekf))}
+        cpu = {name: proc_cpu(pid) for name, pid in procs.items()}
+        steady = {name: cpu[name] - cpu0[name] for name in procs}
     node.destroy_node()
     rclpy.shutdown()
 
@@ -114,10 +133,14 @@ def main() -> int:
     measured = n - int(WARMUP_S * RATE)  # the increments stamped after the warm-up
     print(f"{measured} increments at {RATE:g} Hz after {WARMUP_S:g} s warm-up, GNSS at "
           f"{GNSS_RATE:g} Hz, {args.duration:g} s")
+    print(f"executor (nodes and player): {os.environ[EXECUTOR_ENV]}; strapdown and player "
+          + (f"SCHED_FIFO {args.fifo}" if args.fifo is not None else "at normal priority"))
     print(f"ins/state received {len(lat_ms)} (lost {measured - len(lat_ms)})")
     print(f"IMU-to-ins/state latency: p50 {np.percentile(lat_ms, 50):.2f} ms, "
           f"p99 {np.percentile(lat_ms, 99):.2f} ms, max {lat_ms.max():.2f} ms")
     print("process CPU time: " + ", ".join(f"{k} {v:.1f} s" for k, v in cpu.items()))
+    print("CPU per increment after the warm-up: " + ", ".join(
+        f"{k} {v / measured * 1e3:.2f} ms" for k, v in steady.items()))
     modes = {FilterStatus.MODE_ALIGNING: "ALIGNING", FilterStatus.MODE_NAVIGATING: "NAVIGATING",
              FilterStatus.MODE_DEAD_RECKONING: "DEAD_RECKONING"}
     if statuses:
@@ -125,6 +148,12 @@ def main() -> int:
               f"{statuses[-1].accepted_count} updates accepted, {statuses[-1].rejected_count} "
               "rejected")
     return 0
+
+
+def set_fifo(pid: int, priority: int) -> None:
+    """Real-time (SCHED_FIFO) scheduling for every thread of a process, DDS threads included."""
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        os.sched_setscheduler(int(tid), os.SCHED_FIFO, os.sched_param(priority))
 
 
 def proc_cpu(pid: int) -> float:

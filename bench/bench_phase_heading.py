@@ -4,7 +4,8 @@ Truth: the seed 004 Lab 2 ``sea`` scenario (vessel at 6-10 m/s with course chang
 :func:`ins_gnss_ros.sim.scenarios.sea`). Observations: :class:`~ins_gnss_ros.gnss.simulator.
 GnssSimulator` from real broadcast orbits (GPS L1 + Galileo E1, 10 deg mask, 2 mm + 2 mm/sin E
 phase noise, elevation-dependent Gauss-Markov multipath, Klobuchar + Saastamoinen, one receiver
-clock, half-cycle ambiguity resolved after 6 s of lock), turned into ``gnss/observations`` and
+clock; GPS L1 C/A phase valid once its half-cycle ambiguity is resolved after 6 s of lock, the
+pilot-tracked Galileo E1-C phase from lock), turned into ``gnss/observations`` and
 ``gnss/ephemeris`` messages as the ``gnss_simulator`` node publishes them (``nodes/gnss_convert``),
 and fed to a
 ``PhaseHeadingNode`` on the in-process bus. Nothing of the truth reaches the node.
@@ -14,7 +15,8 @@ equals the simulator's integer (DD of the true N of both antennas and both satel
 otherwise. Time to first fix counts from the first epoch (the receiver's half-cycle resolution
 included) and, separately, from the first epoch with valid carrier phases.
 
-Usage: ``.venv/bin/python bench/bench_phase_heading.py [--quick]``
+Usage: ``.venv/bin/python bench/bench_phase_heading.py [--quick] [--ratio R]
+[--param NAME=VALUE ...]``
 """
 from __future__ import annotations
 
@@ -60,8 +62,9 @@ class Trial:
     tilt_rejections: int = 0                         # fixes the node's max_tilt_deg check refused
 
 
-def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0):
-    """One simulated sea trial through the node; returns a :class:`Trial`."""
+def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0, overrides=()):
+    """One simulated sea trial through the node (``overrides``: more node Parameters);
+    returns a :class:`Trial`."""
     sc = scenarios.sea(duration=duration, seed=seed, rate=2 * rate, oversample=2)
     tr = sc.trajectory
     broadcast = ephemeris_data.load(tr.lon[0])
@@ -81,7 +84,7 @@ def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0):
     bus.recorders.append(lambda topic, msg: heads.append(msg) if topic == "/gnss/heading" else 0)
     node = PhaseHeadingNode(bus=bus, parameter_overrides=[
         Parameter("antenna_positions", value=[float(v) for a in antennas for v in a]),
-        Parameter("ratio_threshold", value=ratio)])
+        Parameter("ratio_threshold", value=ratio), *overrides])
     valid = {}
     out = Trial(slips=sim.config.slips)
     pending_slips = list(out.slips)
@@ -134,8 +137,7 @@ def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0):
 
 def held_ambiguities_true(node, epochs) -> bool:
     """Whether every ambiguity held by the node's solver is the simulator's integer."""
-    true = [dict(zip((o.sat_id for o in epochs[a].raw.obs), epochs[a].truth.ambiguity))
-            for a in node.order]     # in the core's antenna order
+    true = [dict(zip((o.sat_id for o in ep.raw.obs), ep.truth.ambiguity)) for ep in epochs]
     # The store is the solver's internal table (baseline, signal, reference) -> integer.
     for (k, s, r), n in node.solver.store._n.items():
         dd = (true[k][s] - true[0][s]) - (true[k][r] - true[0][r])
@@ -185,6 +187,10 @@ def summarise(trials, label):
     if ttff_phase:
         print(f"time to first fix from the first epoch with valid phases: median "
               f"{np.median(ttff_phase):.1f} s, max {np.max(ttff_phase):.1f} s")
+    nees_w, n_w = window_mean_nees(trials)
+    if n_w:
+        print(f"heading error averaged over 120 s windows: mean (mean err)^2 / (mean sigma^2 / n)"
+              f" = {nees_w:.2f} over {n_w} windows")
     names = ("heading", "pitch", "roll")
     for i, name in enumerate(names):
         if np.all(np.isnan(e[:, i])):
@@ -192,6 +198,26 @@ def summarise(trials, label):
             continue
         print(f"{name} RMS {rms[i]:.3f} deg, mean reported sigma {np.nanmean(s[:, i]):.3f} deg,"
               f" mean (err/sigma)^2 {nees[i]:.2f}, max |err| {np.nanmax(np.abs(e[:, i])):.3f} deg")
+
+
+def window_mean_nees(trials, window_s=120.0) -> tuple[float, int]:
+    """Heading error averaged over each ``window_s`` of FIXED epochs against the variance a
+    filter taking every epoch as independent assigns to that average (mean of σ² over n²):
+    the mean of their squared ratio and the number of windows. About 1 when the published
+    variances carry the time-correlated errors (a bit less for windows of a few τ); far above
+    when they are white-noise variances of a correlated error."""
+    ratios = []
+    for tr in trials:
+        t, st = np.array(tr.t), np.array(tr.status)
+        err, sig = np.array(tr.err)[:, 0], np.array(tr.sigma)[:, 0]
+        for start in np.arange(t[0], t[-1] - window_s + 1e-9, window_s):
+            inside = (t >= start) & (t < start + window_s)
+            sel = inside & (st == 2)
+            n = sel.sum()
+            if n < 0.9 * inside.sum():      # windows with most epochs FIXED only
+                continue
+            ratios.append(np.mean(err[sel]) ** 2 / (np.mean(sig[sel] ** 2) / n))
+    return (float(np.mean(ratios)) if ratios else math.nan), len(ratios)
 
 
 def print_slips(trials):
@@ -207,23 +233,30 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="short runs (smoke test)")
     ap.add_argument("--ratio", type=float, default=3.0, help="ratio_threshold of the node")
+    ap.add_argument("--param", action="append", default=[], metavar="NAME=FLOAT",
+                    help="node parameter override, e.g. multipath.phase_m=0")
     args = ap.parse_args(argv)
+    extra = [Parameter(name, value=float(value)) for name, value in
+             (item.split("=", 1) for item in args.param)]
     long_s, ttff_runs, ttff_s = (120.0, 3, 20.0) if args.quick else (600.0, 10, 30.0)
     rclpy.init()
     try:
         wall = time.perf_counter()
         print(f"ratio_threshold {args.ratio}; sea scenario; GPS L1 + Galileo E1; 10 deg mask; "
-              "2 mm + 2 mm/sin(E) phase noise + multipath; 5 Hz")
-        summarise([run_trial(100 + i, ttff_s, TWO_ANTENNAS, ratio=args.ratio)
+              "2 mm + 2 mm/sin(E) phase noise + multipath; 5 Hz"
+              + "".join(f"; {item}" for item in args.param))
+        summarise([run_trial(100 + i, ttff_s, TWO_ANTENNAS, ratio=args.ratio, overrides=extra)
                    for i in range(ttff_runs)],
                   f"time to first fix: {ttff_runs} runs x {ttff_s:.0f} s, 2 antennas, 1.5 m")
-        runs = [run_trial(seed, long_s, TWO_ANTENNAS, slip_every=30.0, ratio=args.ratio)
+        runs = [run_trial(seed, long_s, TWO_ANTENNAS, slip_every=30.0, ratio=args.ratio,
+                          overrides=extra)
                 for seed in (1, 2, 3, 4)]
         summarise(runs, f"2 antennas 1.5 m, 4 x {long_s:.0f} s, slips on antenna 1 every 30 s")
         print_slips(runs)
         n_ep = sum(len(r.t) for r in runs)
         print(f"node time per epoch: {1e3 * sum(r.seconds_node for r in runs) / n_ep:.2f} ms")
-        runs4 = [run_trial(seed, long_s, FOUR_ANTENNAS, slip_every=30.0, ratio=args.ratio)
+        runs4 = [run_trial(seed, long_s, FOUR_ANTENNAS, slip_every=30.0, ratio=args.ratio,
+                           overrides=extra)
                  for seed in (5, 6)]
         summarise(runs4, f"4 antennas (1.5 m x 1.0 m), 2 x {long_s:.0f} s, slips every 30 s")
         print_slips(runs4)

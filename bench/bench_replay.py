@@ -48,6 +48,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from ins_gnss_ros.trial import bag as bagio
+    from ins_gnss_ros.trial import cdr
     from ins_gnss_ros.trial.replay import replay, replay_offline
     from ins_gnss_ros.trial.simulate import SimOptions, simulate
 
@@ -67,6 +68,12 @@ def main() -> None:
     n = len(bagio.read_bag(bag))
     read = time.perf_counter() - t
     print(f"read + decode the bag alone: {read:.1f} s ({n / read:,.0f} msg/s)")
+    t = time.perf_counter()
+    rows = bagio.read_raw(bag)
+    cdr.decode("ins_gnss_msgs/msg/ImuDelta", [r.data for r in rows if r.topic == "/imu/delta"])
+    read = time.perf_counter() - t
+    print(f"read undecoded + bulk-decode imu/delta (the offline path's reading): {read:.1f} s "
+          f"({len(rows) / read:,.0f} msg/s)")
 
     runs = (("strapdown node alone, in-process", replay, bag, strapdown, "strapdown",
              {"init_from_truth": True}, 10.0),

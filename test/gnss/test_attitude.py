@@ -6,8 +6,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from ins_gnss_ros.gnss.attitude import (
-    AttitudeSolver, baseline_azimuth_elevation, estimate_mounting, solve_attitude, wahba_svd)
+    AttitudeSolver, baseline_azimuth_elevation, correlated_variance_factor, estimate_mounting,
+    solve_attitude, wahba_svd)
 from ins_gnss_ros.gnss.differences import form_double_differences
+from ins_gnss_ros.gnss.multipath import MultipathModel
 from ins_gnss_ros.nav.conventions import azimuth_from_yaw, wrap_pi
 from ins_gnss_ros.nav.rotations import dcm_from_euler
 from phase_sim import PhaseSim
@@ -192,3 +194,53 @@ def test_attitude_prior_gives_a_fix_from_the_first_epoch():
     for seed in range(5):
         _, status = _run(TWO, 60 + seed, 1, 1.0, _vessel, prior=True)
         assert status == ["FIXED"]
+
+
+def test_a_signal_without_phase_is_no_reference_and_is_used_once_valid():
+    # The highest GPS satellite has no phase on antenna 1 for 3 epochs (half-cycle ambiguity not
+    # yet resolved): the rest of its group is double differenced meanwhile, and it joins at once.
+    sim = PhaseSim(70, TWO)
+    solver = AttitudeSolver(TWO, noise=sim.noise)
+    R = dcm_from_euler(0.0, 0.0, 1.2)
+    gps = {s for s in sim.ids if s[0] == "G"}
+    highest = max(gps, key=lambda s: sim.los(0.0)[s][2])
+    for i in range(6):
+        obs = sim.observe(float(i), R)
+        if i < 3:
+            obs[1].phase[sim.ids.index(highest)] = np.nan
+        sol = solver.process(obs, sim.los(float(i)), float(i))
+        used = {s for s in sol.satellites if s[0] == "G"}
+        assert used == (gps - {highest} if i < 3 else gps)
+
+
+def test_correlated_variance_factor_equals_the_variance_of_an_ar1_mean():
+    a = np.exp(-0.2 / 30.0)
+    for n in (1, 2, 7, 300):
+        lags = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+        assert correlated_variance_factor(a, n) == pytest.approx(np.sum(a ** lags) / n, rel=1e-9)
+    assert correlated_variance_factor(a, np.inf) == pytest.approx(1 / np.tanh(0.1 / 30.0))
+    assert correlated_variance_factor(0.0, 50) == 1.0
+
+
+def test_published_variance_counts_the_correlated_part_for_the_averaging_time():
+    # The same epochs (5 Hz) through four solvers: white only; multipath (τ = 30 s) counted once
+    # (averaging time 0), for a 1 s average (5 epochs) and for an infinite one (coth(Δt/2τ) ≈
+    # 300 times). The first epoch, with no predecessor, counts it once. Fixing is unchanged.
+    sim = PhaseSim(80, TWO)
+    model = MultipathModel(phase_sigma0=0.01, phase_tau=30.0)
+    white = AttitudeSolver(TWO, noise=sim.noise)
+    solvers = [AttitudeSolver(TWO, noise=sim.noise, multipath=model, averaging_time=T)
+               for T in (0.0, 1.0, np.inf)]
+    a = np.exp(-0.2 / 30.0)
+    factors = [1.0, correlated_variance_factor(a, 5), 1.0 / np.tanh(0.1 / 30.0)]
+    for i in range(5):
+        t = 0.2 * i
+        obs, los = sim.observe(t, dcm_from_euler(0.0, 0.01, 0.9)), sim.los(t)
+        s0, *sols = (s.process(obs, los, t) for s in [white, *solvers])
+        assert {s.status for s in [s0, *sols]} == {"FIXED"}
+        assert sols[0].azimuth == pytest.approx(s0.azimuth, abs=1e-12)
+        extra = sols[0].var_azimuth - s0.var_azimuth
+        assert extra > 0.05 * s0.var_azimuth
+        for sol, f in zip(sols[1:], factors[1:]):
+            assert sol.var_azimuth - s0.var_azimuth == pytest.approx(extra * (f if i else 1.0),
+                                                                     rel=1e-9)

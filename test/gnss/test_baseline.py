@@ -125,6 +125,29 @@ def test_fixed_baseline_error_is_consistent_with_its_covariance():
     assert not fixed_baselines(dd, truth, 2).consistent()
 
 
+def test_correlated_error_is_propagated_through_the_fixed_solution():
+    # Errors drawn from dd.cov_correlated added to the DD phases move the fixed baselines with
+    # the covariance fixed_baselines reports for them (Monte Carlo, 3000 draws).
+    ant = np.array([[0, 0, 0], [1.5, 0, 0], [0.2, -1.0, 0.05]])
+    sim = PhaseSim(31, ant)
+    dd, _ = _epoch(sim, 0.0, dcm_from_euler(0.02, 0.01, 0.7))
+    rng = np.random.default_rng(8)
+    a = rng.normal(size=(dd.phase.size, dd.phase.size))
+    dd.cov_correlated = 0.02 * a @ a.T / dd.phase.size + 0.01 * dd.cov_phase
+    truth = _true_dd_ambiguities(sim, dd)
+    fb = fixed_baselines(dd, truth, 2)
+    phase = dd.phase.copy()
+    moved = []
+    for e in rng.multivariate_normal(np.zeros(phase.size), dd.cov_correlated, 3000):
+        dd.phase = phase + e
+        moved.append((fixed_baselines(dd, truth, 2).baselines - fb.baselines).ravel())
+    emp = np.cov(np.array(moved).T)
+    scale = np.sqrt(np.outer(np.diag(fb.cov_correlated), np.diag(fb.cov_correlated)))
+    assert np.max(np.abs(emp - fb.cov_correlated) / scale) < 0.1
+    assert not np.allclose(fb.cov_correlated, fb.cov * np.trace(fb.cov_correlated)
+                           / np.trace(fb.cov), rtol=0.1)   # not merely a scaled P
+
+
 def test_store_rereferencing_keeps_ambiguities_valid():
     sim = PhaseSim(9, ANT)
     dd, refs = _epoch(sim, 0.0, np.eye(3))

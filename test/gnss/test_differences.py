@@ -5,6 +5,7 @@ import pytest
 from ins_gnss_ros.gnss.differences import (
     AntennaEpoch, NoiseModel, elevation_sigma, form_double_differences, second_differences,
     select_references)
+from ins_gnss_ros.gnss.multipath import MultipathModel
 from phase_sim import WL1, PhaseSim
 
 
@@ -49,6 +50,25 @@ def test_dd_covariance_matches_monte_carlo():
     assert np.max(np.abs(emp - dd.cov_phase) / scale) < 0.05
     # Correlations through the reference and the master are present (not a diagonal model).
     assert np.max(np.abs(dd.cov_phase / scale - np.eye(len(dd.pairs)))) > 0.2
+
+
+def test_correlated_dd_covariance_written_out_for_one_baseline():
+    # One baseline: var DD(i, r) = 2 (s_i² + s_r²), cov(DD(i, r), DD(j, r)) = 2 s_r² (both
+    # antennas of the common reference), with s the undifferenced multipath sigma in cycles.
+    ant = np.array([[0, 0, 0], [1.5, 0, 0]])
+    sim = PhaseSim(4, ant)
+    los = sim.los(0.0)
+    el = np.arcsin(np.array([los[s][2] for s in sim.ids]))
+    refs = select_references(sim.ids, el, np.full(el.size, WL1))
+    model = MultipathModel(phase_sigma0=0.01, elevation_scale=np.radians(20.0))
+    dd = form_double_differences(sim.observe(0.0, np.eye(3)), los, refs, sim.noise,
+                                 multipath=model)
+    assert form_double_differences(sim.observe(0.0, np.eye(3)), los, refs).cov_correlated is None
+    s = dict(zip(sim.ids, model.phase_sigma0 * np.exp(-el / model.elevation_scale) / WL1))
+    expect = np.array([[2 * (s[a] ** 2 + s[r] ** 2) if (a, r) == (b, q) else
+                        2 * s[r] ** 2 if r == q else 0.0
+                        for b, q in dd.pairs] for a, r in dd.pairs])
+    np.testing.assert_allclose(dd.cov_correlated, expect, rtol=1e-12)
 
 
 def test_reference_selection_rules():

@@ -289,18 +289,23 @@ def test_same_seed_same_output_and_reacquisition_after_outage(broadcast):
 
 
 def test_half_cycle_flags_and_lock_time(broadcast):
+    # GPS L1 C/A (data channel): half-cycle ambiguity until 6 s of lock; Galileo E1-C (pilot):
+    # none, the phase is valid and integer from the first epoch.
     cfg = dataclasses.replace(EXACT, half_cycle_resolve_s=6.0, seed=3)
     epochs = [e for (e,) in _static(GnssSimulator(broadcast, cfg), 10)]
     offsets = set()
     for e in epochs:
+        assert {o.system for o in e.raw.obs} == {"G", "E"}
         for o, n in zip(e.raw.obs, e.truth.ambiguity):
-            assert o.half_cycle_valid == (e.t >= 6.0)
+            data = o.system == "G"
+            assert o.half_cycle_valid == (e.t >= 6.0 or not data)
             assert o.lock_ms == pytest.approx(e.t * 1000.0)
             frac = n - math.floor(n)
-            offsets.add(frac if e.t < 6.0 else None)
-            if e.t >= 6.0:
+            if data and e.t < 6.0:
+                offsets.add(frac)
+            else:
                 assert frac == 0.0
-    assert 0.5 in offsets and 0.0 in offsets   # some channels started on the inverted phase
+    assert offsets == {0.0, 0.5}     # some GPS channels started on the inverted phase
     last = epochs[-1]
     first = dict(zip([o.sat_id for o in epochs[0].raw.obs], epochs[0].truth.ambiguity))
     for o in last.raw.obs:

@@ -16,7 +16,7 @@ def _checker(rate=RATE, **kw):
 
 
 def test_classifies_injected_faults():
-    chk = _checker(max_bridge=3)
+    chk = _checker(max_bridge=3, max_identical=0)  # constant readings (frozen: tested below)
     g, a = np.array([0.1, 0.0, 0.0]), np.array([0.0, 0.0, 9.8])
     dt = 1 / RATE
     seq = [  # (stamp, gyro, accel, expected reason, expected ok)
@@ -37,8 +37,32 @@ def test_classifies_injected_faults():
         r = chk.check(stamp, gy, ac)
         assert (r.reason, r.ok) == (reason, ok), stamp / dt
     expected = {"ok": 4, "non_finite": 2, "saturated": 2, "duplicate_stamp": 1,
-                "backwards_stamp": 1, "gap_bridged": 1, "gap": 1}
+                "backwards_stamp": 1, "frozen": 0, "gap_bridged": 1, "gap": 1}
     assert dict(chk.counts) == expected
+
+
+def test_frozen_sensor_is_rejected_until_its_readings_change():
+    """White noise changes every channel between samples: 5 bit-identical samples in a row (new
+    stamps) are a stuck sensor; the 5th and later ones are rejected, and the first sample that
+    differs is accepted again, after a gap the caller sees."""
+    rng = np.random.default_rng(1)
+    dt = 1 / RATE
+    chk = _checker(max_bridge=3)
+    noisy = [(0.01 * rng.standard_normal(3), [0, 0, 9.8] + 0.01 * rng.standard_normal(3))
+             for _ in range(20)]
+    reasons = [chk.check(k * dt, *noisy[k]).reason for k in range(10)]
+    stuck = noisy[9]
+    reasons += [chk.check(k * dt, *stuck).reason for k in range(10, 30)]   # 20 more repeats
+    reasons += [chk.check(k * dt, *noisy[k - 30]).reason for k in range(30, 33)]
+    assert reasons[:13] == ["ok"] * 13          # 1 original + 3 repeats pass
+    assert reasons[13:30] == ["frozen"] * 17
+    assert reasons[30:] == ["gap", "ok", "ok"]  # 17 samples missing > max_bridge
+    assert chk.counts["frozen"] == 17
+    # Off, or noise that never repeats: nothing is frozen; 1 would reject every repeat.
+    off = _checker(max_identical=0)
+    assert all(off.check(k * dt, *stuck).reason == "ok" for k in range(20))
+    with pytest.raises(ValueError, match="max_identical"):
+        _checker(max_identical=1)
 
 
 @pytest.mark.parametrize("mode", ["interpolate", "hold"])

@@ -1,14 +1,16 @@
-"""The node base: parameter validation, diagnostics, sim time and signal handling."""
+"""The node base: parameter validation, diagnostics, sim time, executors and signal handling."""
 
 from __future__ import annotations
 
+import os
 import signal
+import subprocess
 
 import pytest
 from rclpy.parameter import Parameter
 
-from ins_gnss_ros.nodes.base import NavNode, Param, ParameterError
-from rosutil import NodeProcess, spin_until
+from ins_gnss_ros.nodes.base import EXECUTOR_ENV, EXECUTORS, NavNode, Param, ParameterError
+from rosutil import VENV_BIN, NodeProcess, spin_until
 
 
 def test_param_validation_names_the_parameter():
@@ -55,11 +57,41 @@ def test_diagnostics_report_counts_and_use_sim_time(executor, probe, ros_context
     assert [a for a in arrays if a.status[0].values][-1].header.stamp.sec == 1234
 
 
+@pytest.mark.parametrize("kind", EXECUTORS)
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_node_process_shuts_down_cleanly_on_signal(sig, probe, executor):
+def test_node_process_shuts_down_cleanly_on_signal(sig, kind, probe, executor, monkeypatch):
+    monkeypatch.setenv(EXECUTOR_ENV, kind)
     with NodeProcess("strapdown") as proc:
         proc.wait_on_graph(probe, executor)
         assert proc.stop(sig) == 0, proc.output()
+
+
+def test_unknown_executor_is_a_one_line_error():
+    env = dict(os.environ, **{EXECUTOR_ENV: "fastest"})
+    done = subprocess.run([str(VENV_BIN / "strapdown")], env=env, capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        f"error: executor 'fastest' ({EXECUTOR_ENV}) is not one of events, single"]
+
+
+def test_default_executor_serves_timers_and_parameter_services(probe, executor):
+    """The events executor (default) fires the diagnostics timer and answers parameter requests."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rcl_interfaces.srv import GetParameters
+
+    arrays: list[DiagnosticArray] = []
+    probe.create_subscription(DiagnosticArray, "/diagnostics", arrays.append, 10)
+    client = probe.create_client(GetParameters, "/strapdown/get_parameters")
+    with NodeProcess("strapdown", "-p", "history_s:=7.5") as proc:
+        proc.wait_on_graph(probe, executor)
+        spin_until(executor, lambda: any(a.status[0].hardware_id == "strapdown" for a in arrays),
+                   what="/diagnostics from the strapdown's 1 Hz timer")
+        spin_until(executor, client.service_is_ready, what="the parameter service")
+        future = client.call_async(GetParameters.Request(names=["history_s"]))
+        spin_until(executor, future.done, what="the parameter reply")
+        assert future.result().values[0].double_value == 7.5
+        assert proc.stop() == 0, proc.output()
 
 
 def test_in_process_bus_delivers_in_order_and_records(ros_context):

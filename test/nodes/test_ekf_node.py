@@ -247,3 +247,47 @@ def test_tight_coupling_with_three_satellites_through_the_nodes(ros_context):
         errors.append(np.hypot(dp[0], dp[1]))
     # (free inertial drifts far beyond this: test/gnss/test_ranges.py compares the two)
     assert max(errors) < 5.0
+
+
+def test_imu_gap_is_bridged_and_a_long_one_restarts_the_alignment(ros_context):
+    """At rest: a 0.5 s gap in imu/delta is bridged by holding the next increment's rates (no
+    free fall: the solution stays at rest) with the velocity covariance widened; a 4 s gap loses
+    the IMU: the filter starts again from ALIGNING and nav/fix waits for a new synchronisation."""
+    from ins_gnss_ros.nav.earth import earth_rate_enu, normal_gravity
+    from ins_gnss_ros.nodes.ekf_node import EkfNode
+
+    lat, lon, h = np.radians(60.0), np.radians(30.0), 10.0
+    node = EkfNode(context=ros_context, bus=InProcessBus())
+    S = node.navigator.space
+
+    def delta(t):
+        msg = ImuDelta(dt=0.01)
+        msg.header.stamp = sec_to_stamp(T0 + t)
+        msg.delta_angle = to_vector3(earth_rate_enu(lat) * 0.01)  # body axes = ENU
+        msg.delta_velocity = to_vector3([0.0, 0.0, normal_gravity(lat, h) * 0.01])
+        return msg
+
+    def run(t_from, t_to):
+        for k in range(int(round(t_from * 100)), int(round(t_to * 100))):
+            node.on_delta(delta(k / 100))
+            if k % 25 == 0:
+                node.on_fix(_fix_msg(k / 100, lat, lon, h, np.zeros(3)))
+                node.on_vel(_vel_msg(k / 100, np.zeros(3), np.zeros(3)))
+
+    run(0.01, 5.0)
+    assert node.navigator.nav is not None
+    sigma_v = np.sqrt(np.diag(node.navigator.ekf.P)[S["vel"]])
+    node.on_delta(delta(5.5))                         # 0.49 s lost before 5.5 s
+    node.on_delta(delta(5.51))                        # (the segment's end is known)
+    assert node.diag.counts["gap in increments: bridged by holding the rates"] == 1
+    # imu_gap.accel_sigma_mps2 (1 m/s^2) held over 0.49 s
+    assert np.all(np.sqrt(np.diag(node.navigator.ekf.P)[S["vel"]]) > sigma_v + 0.4)
+    run(5.52, 8.0)
+    assert np.abs(node.navigator.nav.v_enu).max() < 0.1  # held gravity: no free fall
+    sequence = node.sequence
+    run(12.0, 12.01)                                  # 4 s lost: the IMU was lost
+    assert node.diag.counts["imu lost: gap in increments beyond max_imu_gap_s, aligning again"] == 1
+    assert node.navigator.nav is None and node.sequence == sequence + 1
+    run(12.01, 15.0)
+    assert node.navigator.nav is not None  # aligned again on the new data
+    node.destroy_node()

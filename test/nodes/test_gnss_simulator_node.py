@@ -72,12 +72,41 @@ def test_observations_per_antenna_at_the_epoch_rate(bus_run):
         assert abs(a.gps_week * 604800.0 + a.time_of_week - t_true) < 1e-3
         # 1.5 m baseline: code ranges differ by the baseline projection plus noise.
         assert np.max(np.abs(np.subtract(a.pseudorange, b.pseudorange))) < 15.0
-    # Half-cycle ambiguity: phase NaN for the first second, then valid and flagged once.
-    first_valid = next(i for i, m in enumerate(obs) if not math.isnan(m.carrier_phase[0]))
+    # Half-cycle ambiguity of GPS L1 C/A (data channel): phase NaN for the first second, then
+    # valid and flagged once; Galileo E1-C (pilot) has none: valid from the first epoch.
+    gps = [i for i, s in enumerate(obs[0].system) if s == 0]
+    gal = [i for i, s in enumerate(obs[0].system) if s == 2]
+    assert all(math.isfinite(obs[0].carrier_phase[i]) for i in gal)
+    first_valid = next(i for i, m in enumerate(obs) if not math.isnan(m.carrier_phase[gps[0]]))
     assert stamp_to_sec(obs[first_valid].header.stamp) == pytest.approx(1001.0)
-    assert all(obs[first_valid].loss_of_lock)
+    assert all(math.isfinite(obs[first_valid].carrier_phase[i]) for i in gps)
+    assert all(obs[first_valid].loss_of_lock[i] for i in gps)
+    assert not any(obs[first_valid].loss_of_lock[i] for i in gal)
     assert not any(obs[first_valid + 2].loss_of_lock)
     assert sum(node.diag.counts.values()) == 0
+
+
+def test_truth_stamps_a_little_off_the_epoch_grid_still_give_every_epoch(ros_context):
+    from builtin_interfaces.msg import Time
+
+    from ins_gnss_ros.nodes.base import InProcessBus
+
+    bus = InProcessBus()
+    obs = []
+    bus.subscribe("gnss/observations", obs.append)
+    node = _node(ros_context, bus, lever_arms=[0.0, 0.0, 1.0])
+    # Truth at the 5 Hz epoch rate, stamps rounded a few ns either side of the grid (as float
+    # seconds give them); one sample 2 ms early is not an epoch, the grid point after it is.
+    offsets_ns = [0, 200_000_000 - 3, 400_000_000 + 3, 598_000_000, 600_000_000,
+                  800_000_000 - 250]
+    for off in offsets_ns:
+        msg = _truth(1000.0)
+        msg.header.stamp = Time(sec=1000, nanosec=off)
+        bus.publish("sim/truth", msg)
+    bus.drain()
+    stamps = [m.header.stamp.nanosec for m in obs]
+    assert stamps == [0, 200_000_000 - 3, 400_000_000 + 3, 600_000_000, 800_000_000 - 250]
+    node.destroy_node()
 
 
 def test_fix_velocity_ephemeris_and_time_reference_against_truth(bus_run):

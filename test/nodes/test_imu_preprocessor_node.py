@@ -86,9 +86,13 @@ class _Graph:
 
 @pytest.fixture
 def graph(ros_context):
+    """Nodes on a bus. Most streams here repeat one exact reading, which the frozen-sensor check
+    would reject: it is off unless a test sets max_identical_samples."""
     graphs = []
 
     def make(*params):
+        if not any(p.name == "max_identical_samples" for p in params):
+            params = (Parameter("max_identical_samples", value=0), *params)
         g = _Graph(ros_context, list(params))
         graphs.append(g)
         return g
@@ -256,6 +260,26 @@ def test_short_gap_is_bridged_long_gap_restarts(graph):
     deltas = g.out["/imu/delta"]
     assert len(deltas) == 8
     np.testing.assert_allclose([d.dt for d in deltas], 0.01, rtol=1e-9)  # no 0.25 s increment
+    _finite_outputs(g)
+
+
+def test_frozen_sensor_is_rejected_then_a_gap(graph):
+    """A stuck sensor keeps sending its last reading with new stamps (fault class freeze): from
+    the 5th identical sample on they are rejected and counted, and the gap they leave restarts
+    the integration when the readings change again."""
+    g = graph(Parameter("max_identical_samples", value=5))
+    rng = np.random.default_rng(3)
+    t = T0_NS
+    for k in range(60):
+        t += DT_NS
+        frozen = 20 <= k < 50
+        noise = 1e-3 * rng.standard_normal(6) if not frozen else noise
+        g.imu(t, GOOD_W + noise[:3], G_UP + noise[3:])
+    # The sample before the freeze and its first 3 repeats pass; the other 27 repeats do not.
+    assert g.node.diag.counts["imu sample rejected: frozen"] == 27
+    assert g.node.diag.counts[
+        "imu gap longer than max_bridge_samples: integration restarted"] == 1
+    assert len(g.out["/imu/data"]) == 60 - 27
     _finite_outputs(g)
 
 

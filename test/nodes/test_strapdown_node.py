@@ -72,6 +72,39 @@ def test_bad_increments_are_counted_not_used(node):
     assert sum(node.diag.counts.values()) == 2
 
 
+def test_gap_is_bridged_by_held_rates_and_a_long_gap_loses_the_imu(node):
+    """At rest (constant increments) holding the rates over a 0.5 s gap is exact: the state
+    stays at rest. A gap beyond max_imu_gap_s (2.5 s) starts a new run: ins/state is INVALID until
+    a correction of this run arrives; a correction of the old run is ignored."""
+    from ins_gnss_msgs.msg import InsCorrection, InsState
+
+    published = []
+    node.pub.publish = published.append  # the messages, without the DDS round trip
+    t0 = 1000.0
+    for k in range(1, 51):
+        node.on_delta(_delta(t0 + k * DT))
+    node.on_delta(_delta(t0 + 1.0))                  # 0.49 s of increments lost
+    assert node.diag.counts["gap in increments: bridged by holding the rates"] == 1
+    assert node.ins.state.t == pytest.approx(t0 + 1.0)
+    assert np.abs(node.ins.state.v_enu).max() < 1e-3  # without holding: 4.8 m/s of free fall
+    assert published[-1].mode == InsState.MODE_DEAD_RECKONING
+    node.on_delta(_delta(t0 + 5.0))                  # 4 s lost: the IMU was lost
+    assert node.diag.counts["imu lost: gap in increments beyond max_imu_gap_s, new run"] == 1
+    assert published[-1].mode == InsState.MODE_INVALID
+    old = InsCorrection(sequence=1)
+    old.header.stamp = sec_to_stamp(t0 + 0.5)
+    node.on_correction(old)
+    assert node.diag.counts["correction older than this run ignored"] == 1
+    node.on_delta(_delta(t0 + 5.0 + DT))
+    assert published[-1].mode == InsState.MODE_INVALID
+    new = InsCorrection(sequence=2)
+    new.header.stamp = sec_to_stamp(t0 + 5.0)
+    node.on_correction(new)
+    node.on_delta(_delta(t0 + 5.0 + 2 * DT))
+    assert published[-1].mode == InsState.MODE_NAVIGATING
+    assert published[-1].correction_sequence == 2
+
+
 def test_publishes_ins_state_over_ros(node, probe, executor):
     from ins_gnss_msgs.msg import ImuDelta, InsState
 

@@ -28,7 +28,8 @@ from ..nav.rotations import dcm_from_euler, dcm_to_quat, quat_from_rotvec, quat_
     quat_to_euler, skew
 from .baseline import AmbiguityStore, fix_ambiguities, fixed_baselines, float_solution
 from .cycle_slip import detect_slips_dd, detect_slips_doppler
-from .differences import NoiseModel, form_double_differences, select_references
+from .differences import NoiseModel, common_signals, form_double_differences, select_references
+from .multipath import MultipathModel
 
 
 def baseline_azimuth_elevation(b_enu, cov=None):
@@ -239,6 +240,22 @@ def estimate_mounting(b_enu, C_nb) -> MountingCalibration:
     return MountingCalibration(u, az0, float(np.arcsin(u[2])), std)
 
 
+def correlated_variance_factor(a: float, n: float) -> float:
+    """How many times to count the variance σ² of a first-order Gauss-Markov error sampled with
+    correlation ``a`` = exp(-Δt/τ) between epochs, for a consumer that averages ``n`` epochs as
+    if they were independent.
+
+    The mean of n samples of an AR(1) sequence has the variance (σ²/n) [1 + 2 Σ_{k<n} (1 - k/n)
+    aᵏ] = (σ²/n) [(1 + a)/(1 - a) - 2a (1 - aⁿ) / (n (1 - a)²)]; n independent samples of
+    variance f σ² give f σ²/n, so f is the bracket: 1 for n = 1 (one epoch), (1 + a)/(1 - a) =
+    coth(Δt/2τ) ≈ 2τ/Δt for n → ∞ (the long-run variance; 300 at 5 Hz with τ = 30 s).
+    """
+    if a <= 0.0:
+        return 1.0
+    tail = 0.0 if np.isinf(n) else 2.0 * a * (1.0 - a ** n) / (n * (1.0 - a) ** 2)
+    return float((1.0 + a) / (1.0 - a) - tail)
+
+
 @dataclass
 class AttitudeSolution:
     """Output of :meth:`AttitudeSolver.process` (fields of ins_gnss_msgs/Heading).
@@ -298,11 +315,20 @@ class AttitudeSolver:
     window : int
         Epochs accumulated in the float solution while ambiguities are unfixed (1 = single
         epoch); emptied at every detected slip or gap.
+    multipath : MultipathModel, optional
+        Time-correlated phase error (σ(el), correlation time ``phase_tau``) besides ``noise``.
+        It leaves the fixing alone and enters the FIXED attitude covariance.
+    averaging_time : float
+        Time over which the consumer of the attitude averages it (s), taking every epoch as an
+        independent measurement: the correlated part of the covariance is counted so that the
+        average over that time has the right variance (:func:`correlated_variance_factor`).
+        0: once (the variance of one epoch); inf: the long-run limit ≈ 2τ/Δt.
     """
 
     def __init__(self, antennas_flu, noise=NoiseModel(), ratio_threshold=3.0,
                  sigma_length=0.002, elevation_mask=np.radians(10.0), slip_threshold=1.0,
-                 w_critical=4.0, max_gap=5.0, window=5):
+                 w_critical=4.0, max_gap=5.0, window=5, multipath: MultipathModel | None = None,
+                 averaging_time=0.0):
         ant = np.asarray(antennas_flu, float)
         self.b_body = ant[1:] - ant[0]
         self.lengths = np.linalg.norm(self.b_body, axis=1)
@@ -313,6 +339,9 @@ class AttitudeSolver:
         self.slip_threshold = slip_threshold
         self.w_critical = w_critical
         self.max_gap = max_gap
+        self.multipath = multipath
+        self.averaging_time = averaging_time
+        self._t_last = None     # last epoch processed; reset() keeps it (the output goes on)
         self.store = AmbiguityStore()
         self._refs: dict = {}
         self._ratio = {}
@@ -354,9 +383,10 @@ class AttitudeSolver:
         los = {s: np.asarray(e, float) / np.linalg.norm(e) for s, e in los_enu.items()
                if np.arcsin(e[2] / np.linalg.norm(e)) >= self.elevation_mask}
         slipped = self._detect_doppler(epochs, t)
-        ids = sorted(los)
+        # Only signals with a phase on every antenna: one without (e.g. its half-cycle ambiguity
+        # still unresolved) must not become a reference and silence its whole group.
+        ids = common_signals(epochs, los)
         lam0 = dict(zip(epochs[0].signal_ids, epochs[0].wavelength))
-        ids = [s for s in ids if s in lam0]
         el = [np.arcsin(los[s][2]) for s in ids]
         self.store.forget(signals=slipped)
         preferred = set().union(*(self.store.known_signals(r) for r in self._refs.values())) \
@@ -367,7 +397,9 @@ class AttitudeSolver:
             if old is not None and old != r:
                 self.store.rereference(old, r, keep_old=old not in slipped)
         self._refs = refs
-        dd = form_double_differences(epochs, los, refs, self.noise)
+        dd = form_double_differences(epochs, los, refs, self.noise, multipath=self.multipath)
+        interval = t - self._t_last if self._t_last is not None else np.inf
+        self._t_last = t
         self.store.retain({s for p in dd.pairs for s in p})
         if dd.phase.size == 0:
             self._prev = None
@@ -403,7 +435,8 @@ class AttitudeSolver:
         sats = tuple(sorted({s for p in dd.pairs for s in p}))
         if fixed is not None:
             self._prev = (t, epochs, dd, fixed.baselines)
-            return self._solution("FIXED", fixed.baselines, fixed.cov, sats, slipped,
+            return self._solution("FIXED", fixed.baselines, self._published_cov(fixed, interval),
+                                  sats, slipped,
                                   min(self._ratio.values()) if self._ratio else np.nan)
         held = self.store.lookup(dd)
         floats = [float_solution(dd, k, held, priors[k - 1]) for k in range(1, K + 1)]
@@ -416,6 +449,18 @@ class AttitudeSolver:
             cov[3 * k:3 * k + 3, 3 * k:3 * k + 3] = f.cov[:3, :3]
         self._prev = (t, epochs, dd, b)
         return self._solution("FLOAT", b, cov, sats, slipped, np.nan)
+
+    def _published_cov(self, fixed, interval: float) -> np.ndarray:
+        """Baseline covariance for the published attitude: the white part plus the correlated
+        part times :func:`correlated_variance_factor` for the epoch interval, the correlation
+        time and ``averaging_time``."""
+        if fixed.cov_correlated is None:
+            return fixed.cov
+        a, n = 0.0, 1.0          # the first epoch (no predecessor): the variance once
+        if 0.0 < interval < np.inf:
+            a = np.exp(-interval / self.multipath.phase_tau)
+            n = max(self.averaging_time / interval, 1.0)
+        return fixed.cov + correlated_variance_factor(a, n) * fixed.cov_correlated
 
     def _detect_doppler(self, epochs, t) -> set:
         slipped = set()

@@ -313,12 +313,16 @@ class FixedBaselines:
         Weighted sum of squared phase residuals.
     dof : int
         Its degrees of freedom.
+    cov_correlated : ndarray, shape (3K, 3K), or None
+        Covariance the time-correlated phase errors (``dd.cov_correlated``) add to ``cov``
+        (m²); None when not modelled.
     """
 
     baselines: np.ndarray
     cov: np.ndarray
     chi2: float
     dof: int
+    cov_correlated: np.ndarray | None = None
 
     def consistent(self, alpha=1e-3) -> bool:
         """Residual χ² test at false-alarm probability alpha (a wrong fix fails it)."""
@@ -339,7 +343,9 @@ def fixed_baselines(dd: DoubleDifferences, ambiguities, n_baselines: int):
     Returns
     -------
     FixedBaselines or None
-        None if a baseline has fewer than 3 fixed rows.
+        None if a baseline has fewer than 3 fixed rows. The weights are ``dd.cov_phase``; the
+        correlated errors ``dd.cov_correlated``, if any, are propagated through the same
+        estimator, x̂ = P Aᵀ C⁻¹ y: P Aᵀ C⁻¹ C_c C⁻¹ A P.
     """
     use = np.flatnonzero(np.isfinite(ambiguities))
     A = np.zeros((use.size, 3 * n_baselines))
@@ -351,15 +357,20 @@ def fixed_baselines(dd: DoubleDifferences, ambiguities, n_baselines: int):
         return None
     y = dd.phase[use] - ambiguities[use]
     Cc = cho_factor(dd.cov_phase[np.ix_(use, use)])
-    Nmat = A.T @ cho_solve(Cc, A)
+    CiA = cho_solve(Cc, A)
+    Nmat = A.T @ CiA
     try:
         P = np.linalg.inv(Nmat)
     except np.linalg.LinAlgError:
         return None
-    x = P @ (A.T @ cho_solve(Cc, y))
+    x = P @ (CiA.T @ y)
     r = y - A @ x
+    cov_correlated = None
+    if dd.cov_correlated is not None:
+        gain = P @ CiA.T
+        cov_correlated = gain @ dd.cov_correlated[np.ix_(use, use)] @ gain.T
     return FixedBaselines(x.reshape(n_baselines, 3), P, float(r @ cho_solve(Cc, r)),
-                          use.size - 3 * n_baselines)
+                          use.size - 3 * n_baselines, cov_correlated)
 
 
 class AmbiguityStore:

@@ -22,7 +22,10 @@ form one-satellite groups and drop out.
 Noise: every undifferenced phase has variance σ² = a² + b²/sin²(el) (the elevation model of
 e.g. RTKLIB's manual and Groves §9.4.1.3, a = b = 2-3 mm), independent between antennas and
 signals; the DD covariance is D Σ Dᵀ, correlated through the reference satellite and, with
-several baselines, through the master antenna.
+several baselines, through the master antenna. Multipath (:mod:`multipath`, correlated in time)
+can be given as well: its DD covariance is kept apart (``cov_correlated``), so the fixing keeps
+its weights and the attitude covariance can count it for the consumer
+(:class:`~ins_gnss_ros.gnss.attitude.AttitudeSolver`).
 """
 from __future__ import annotations
 
@@ -30,6 +33,8 @@ from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
+
+from .multipath import MultipathModel
 
 
 @dataclass
@@ -163,6 +168,9 @@ class DoubleDifferences:
     cov_code : ndarray, shape (m, m)
         Covariance of ``code`` (m²).
     references : dict group -> reference id
+    cov_correlated : ndarray, shape (m, m), or None
+        Covariance of the time-correlated part of the phase errors (multipath), not included
+        in ``cov_phase`` (cycles²); None when not modelled.
     """
 
     pairs: list
@@ -174,6 +182,7 @@ class DoubleDifferences:
     cov_phase: np.ndarray
     cov_code: np.ndarray
     references: dict = field(default_factory=dict)
+    cov_correlated: np.ndarray | None = None
 
     def rows(self, k: int) -> np.ndarray:
         """Indices of the rows of baseline k."""
@@ -195,7 +204,8 @@ def common_signals(epochs: Sequence[AntennaEpoch], los_enu: Mapping[str, np.ndar
 
 def form_double_differences(epochs: Sequence[AntennaEpoch], los_enu: Mapping[str, np.ndarray],
                             references: Mapping, noise: NoiseModel = NoiseModel(),
-                            exclude=()) -> DoubleDifferences:
+                            exclude=(), multipath: MultipathModel | None = None
+                            ) -> DoubleDifferences:
     """Double differences of all baselines from antenna 0, with their joint covariance.
 
     Parameters
@@ -210,6 +220,9 @@ def form_double_differences(epochs: Sequence[AntennaEpoch], los_enu: Mapping[str
         Undifferenced noise model.
     exclude : collection of str
         Signals to leave out (not as the reference).
+    multipath : MultipathModel, optional
+        Time-correlated phase error of every undifferenced phase, independent between antennas
+        and signals, σ(el) = ``multipath.sigma(el)[1]``: gives ``cov_correlated``.
 
     Returns
     -------
@@ -253,6 +266,10 @@ def form_double_differences(epochs: Sequence[AntennaEpoch], los_enu: Mapping[str
     sig_pr = np.tile(elevation_sigma(el, noise.code_a, noise.code_b), n_ant)
     iref = np.array([r for _, _, r in rows], int)
     isig = np.array([i for _, i, _ in rows], int)
+    cov_correlated = None
+    if multipath is not None:
+        sig_mp = np.tile(multipath.sigma(el)[1] / lam, n_ant)
+        cov_correlated = (D * sig_mp ** 2) @ D.T
     return DoubleDifferences(
         pairs=pairs,
         baseline=np.array(base, int),
@@ -263,6 +280,7 @@ def form_double_differences(epochs: Sequence[AntennaEpoch], los_enu: Mapping[str
         cov_phase=(D * sig_ph ** 2) @ D.T,
         cov_code=(D * sig_pr ** 2) @ D.T,
         references=dict(references),
+        cov_correlated=cov_correlated,
     )
 
 

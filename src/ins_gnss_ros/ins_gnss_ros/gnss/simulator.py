@@ -23,11 +23,25 @@ RINEX signs: phase grows with range, Doppler positive when the satellite approac
 * m: multipath (:mod:`multipath`); ε: white noise of σ² = a² + b²/sin²E
   (:func:`ins_gnss_ros.gnss.differences.elevation_sigma`), code, phase and Doppler.
 * N: integer ambiguity per antenna and satellite, drawn at each (re)acquisition and changed by
-  cycle slips; h: half a cycle until the half-cycle ambiguity is resolved (Costas loop).
+  cycle slips; h: half a cycle until the half-cycle ambiguity is resolved, on data channels only
+  (:data:`SIGNALS`).
 
 The receiver tags an epoch with its own clock: time of week = true GPS time + δt_r, so
 ``RawEpoch.t_gps`` is what a real receiver reports and the SPP of the pseudoranges returns
-c δt_r as its clock estimate. Signals: GPS L1 C/A and Galileo E1 (RINEX "1C", same carrier).
+c δt_r as its clock estimate. Signals: GPS L1 C/A and Galileo E1-C (RINEX "1C", same carrier).
+
+Half-cycle ambiguity. A receiver tracking a channel that carries navigation data uses a Costas
+loop, which is insensitive to the data bit sign and so locks on either of two carrier phases
+half a cycle apart; the phase is reported valid once the sign is known from the polarity of the
+message preamble. GPS L1 C/A carries the 50 bit/s LNAV message whose 6 s subframes each begin
+with the 8-bit TLM preamble (IS-GPS-200, §20.3.2 and §20.3.3.1), so the half cycle is resolved
+within one subframe of lock: ``SimulatorConfig.half_cycle_resolve_s`` (6 s) of lock time. A
+pilot channel carries no data (only a known secondary code, acquired with the primary code), so
+a pure PLL tracks it with no half-cycle ambiguity and the phase is valid from lock: Galileo E1
+is tracked on its pilot E1-C (Galileo OS SIS ICD, Issue 2.0, §2.3 and §3.4: E1-C is the
+data-free component with the 25-chip secondary code CS25_1), as are GPS L1C-P, L2C CL and L5-Q
+and BeiDou B1C and B2a pilots; u-blox receivers set the RXM-RAWX trkStat halfCyc bit at once
+for pilot-tracked signals.
 
 Masking: elevation mask, outage windows (nothing tracked) and shading windows that keep at
 most ``max_satellites`` of the receiver's satellites: the highest ones at the window's first
@@ -57,10 +71,24 @@ from .observations import RawEpoch, SatObs
 from .spp import SppConfig, solve_position, solve_velocity
 from .time import leap_seconds, gps_to_utc, week_tow
 
-#: Simulated signal per system: (RINEX code, carrier [Hz]).
-SIGNALS = {GPS: ("1C", FREQ_L1), GALILEO: ("1C", FREQ_E1)}
 #: Step of the central differences giving the ionosphere and troposphere rates [s].
 _ATMOSPHERE_RATE_STEP = 0.5
+
+
+@dataclass(frozen=True)
+class SimSignal:
+    """A simulated signal: RINEX 3 observation code, carrier [Hz] and whether the receiver
+    tracks a data channel (half-cycle ambiguity until the preamble is found) or a pilot."""
+
+    code: str
+    frequency: float
+    data_channel: bool
+
+
+#: Simulated signal per system (module docstring: GPS L1 C/A is a data channel, Galileo E1-C
+#: a pilot).
+SIGNALS = {GPS: SimSignal("1C", FREQ_L1, data_channel=True),
+           GALILEO: SimSignal("1C", FREQ_E1, data_channel=False)}
 
 
 @dataclass(frozen=True)
@@ -112,7 +140,8 @@ class SimulatorConfig:
     slip_rate : float
         Random cycle slips per satellite-antenna per second (jump 1..5 cycles, random sign).
     half_cycle_resolve_s : float
-        Lock time after which the half-cycle ambiguity is resolved [s] (0: never present).
+        Lock time after which the half-cycle ambiguity of a data-channel signal (GPS L1 C/A)
+        is resolved [s] (0: never present). Pilot-channel signals (Galileo E1-C) have none.
     shading : tuple of ShadingWindow
         (:class:`ins_gnss_ros.sim.scenarios.ShadingWindow`; times on the trajectory's axis).
     outages : tuple of (float, float)
@@ -374,12 +403,18 @@ class GnssSimulator:
             if self.multipath is not None:
                 self.multipath.reset(key)
 
-    def _channel(self, key, t) -> _Channel:
+    def _half_cycle_resolve_s(self, signal: SimSignal) -> float:
+        """Lock time until the half-cycle ambiguity of ``signal`` is resolved [s], 0 if it has
+        none (a pilot channel, module docstring)."""
+        return self.config.half_cycle_resolve_s if signal.data_channel else 0.0
+
+    def _channel(self, key, t, signal: SimSignal) -> _Channel:
         """The tracking state of (antenna, sat), acquiring it if new; applies the slips."""
         cfg = self.config
         ch = self.channels.get(key)
         if ch is None:
-            half = 0.5 * self.rng_ambiguity.integers(0, 2) if cfg.half_cycle_resolve_s > 0 else 0.0
+            half = (0.5 * self.rng_ambiguity.integers(0, 2)
+                    if self._half_cycle_resolve_s(signal) > 0 else 0.0)
             ch = _Channel(int(self.rng_ambiguity.integers(-10 ** 6, 10 ** 6)), half, t, t)
             self.channels[key] = ch
             return ch
@@ -412,7 +447,8 @@ class GnssSimulator:
         obs, lol, rows = [], [], []
         for sat_id in sat_ids:
             eph = self.ephemerides[sat_id]
-            signal, freq = SIGNALS[eph.system]
+            signal = SIGNALS[eph.system]
+            freq = signal.frequency
             lam = C_LIGHT / freq
             sat, sat_vel, tau, sat_clock, sat_drift = light_time(eph, t_gps, ant.xyz,
                                                                  tau0=ref[sat_id][2], iterations=2)
@@ -426,7 +462,7 @@ class GnssSimulator:
             iono_rate, tropo_rate = (np.subtract(after, before) / (2 * step)).tolist()
             gd = C_LIGHT * group_delay(eph, freq)
             key = (a, sat_id)
-            ch = self._channel(key, t)
+            ch = self._channel(key, t, signal)
             mp_code, mp_phase = (self.multipath.step(key, t, el) if self.multipath is not None
                                  else (0.0, 0.0))
             sig_code = float(elevation_sigma(el, cfg.noise.code_a, cfg.noise.code_b))
@@ -435,8 +471,7 @@ class GnssSimulator:
             e_code, e_phase, e_dop = self.rng.standard_normal(3) * (sig_code, sig_phase, sig_dop)
 
             lock = t - ch.lock_t
-            resolved = (cfg.half_cycle_resolve_s <= 0
-                        or t - ch.acquired_t >= cfg.half_cycle_resolve_s)
+            resolved = t - ch.acquired_t >= self._half_cycle_resolve_s(signal)
             ambiguity = ch.ambiguity + (0.0 if resolved else ch.half)
             common = rho + clock[0] - C_LIGHT * sat_clock + tropo
             pseudorange = common + gd + iono + mp_code + e_code
@@ -446,7 +481,7 @@ class GnssSimulator:
             mp_sigma = (cfg.multipath.sigma(el) if cfg.multipath is not None else (0.0, 0.0))
             cn0 = cfg.cn0_horizon + (cfg.cn0_zenith - cfg.cn0_horizon) * max(math.sin(el), 0.0)
             obs.append(SatObs(
-                eph.system, eph.prn, 0, signal, freq, pseudorange, doppler, phase, cn0,
+                eph.system, eph.prn, 0, signal.code, freq, pseudorange, doppler, phase, cn0,
                 lock * 1000.0, math.hypot(sig_code, mp_sigma[0]),
                 math.hypot(sig_phase, mp_sigma[1]) / lam, sig_dop,
                 half_cycle_valid=resolved,
@@ -555,5 +590,5 @@ def time_reference(sim_epoch: SimEpoch, sigma_s: float, rng: np.random.Generator
 
 
 __all__ = ["AntennaTruth", "Fix", "GnssSimulator", "SIGNALS", "SignalTruth", "SimEpoch",
-           "SimulatorConfig", "SlipEvent", "antenna_truth", "default_start", "light_time",
-           "range_rate", "solve_fix", "time_reference"]
+           "SimSignal", "SimulatorConfig", "SlipEvent", "antenna_truth", "default_start",
+           "light_time", "range_rate", "solve_fix", "time_reference"]

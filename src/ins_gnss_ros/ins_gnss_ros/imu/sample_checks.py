@@ -4,9 +4,10 @@ The strapdown integration assumes a regular stream of finite, in-range samples o
 increasing time scale (seed 004 §1.5, §2.11: fixed sensor step dt, stamps tied to PPS). Real
 streams break that: NaN words after a bus error, saturated channels during shocks (ISON-2's
 sensing block is limited to ±150 °/s and ±30 m/s², seed 004 §1.3c), repeated or reordered
-packets, and dropped samples. :class:`SampleChecker` classifies every sample and keeps a count
-per reason; short gaps are bridged so that the integrator keeps its nominal step, longer ones are
-reported so that the caller can restart integration.
+packets, dropped samples, and a stuck sensor or driver that keeps sending its last reading with
+new stamps. :class:`SampleChecker` classifies every sample and keeps a count per reason; short gaps
+are bridged so that the integrator keeps its nominal step, longer ones are reported so that the
+caller can restart integration.
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 #: Reasons returned by :meth:`SampleChecker.check`; "ok" and the two gap reasons are usable samples.
-REASONS = ("ok", "non_finite", "saturated", "duplicate_stamp", "backwards_stamp",
+REASONS = ("ok", "non_finite", "saturated", "duplicate_stamp", "backwards_stamp", "frozen",
            "gap_bridged", "gap")
 
 
@@ -45,9 +46,15 @@ class CheckResult:
 class SampleChecker:
     """Classifies raw IMU samples one at a time and bridges short gaps.
 
-    A rejected sample (non-finite, saturated, bad stamp) is treated as missing: the next good
-    sample then sees a gap, which is bridged if it is short. Stamps are compared with the last
+    A rejected sample (non-finite, saturated, bad stamp, frozen) is treated as missing: the next
+    good sample then sees a gap, which is bridged if it is short. Stamps are compared with the last
     *accepted* sample.
+
+    Frozen: the white noise of a working MEMS or fibre-optic sensor changes the least significant
+    bits of every channel from one sample to the next, so `max_identical` consecutive samples with
+    new stamps and bit-identical readings on all six channels mean a stuck sensor or a driver
+    repeating its last packet; from the `max_identical`-th on they are rejected until the
+    readings change.
 
     Parameters
     ----------
@@ -63,12 +70,18 @@ class SampleChecker:
         Linear interpolation between the neighbours, or repetition of the last good sample.
     gap_factor : float
         An interval longer than gap_factor / rate_hz counts as a gap (jitter tolerance).
+    max_identical : int
+        This many consecutive bit-identical samples count as frozen (>= 2; 0 disables the check,
+        for noise-free simulated or coarsely quantised streams).
     """
 
     def __init__(self, rate_hz: float, gyro_range: float, accel_range: float,
-                 max_bridge: int = 5, bridge: str = "interpolate", gap_factor: float = 1.5):
+                 max_bridge: int = 5, bridge: str = "interpolate", gap_factor: float = 1.5,
+                 max_identical: int = 5):
         if bridge not in ("interpolate", "hold"):
             raise ValueError(f"bridge: {bridge!r}, expected 'interpolate' or 'hold'")
+        if max_identical == 1 or max_identical < 0:
+            raise ValueError(f"max_identical: {max_identical}, expected 0 (off) or >= 2")
         if not (rate_hz > 0 and gyro_range > 0 and accel_range > 0 and gap_factor > 1):
             raise ValueError("rate_hz, gyro_range, accel_range must be > 0 and gap_factor > 1")
         self.rate_hz = float(rate_hz)
@@ -77,8 +90,11 @@ class SampleChecker:
         self.max_bridge = int(max_bridge)
         self.bridge = bridge
         self.gap_factor = float(gap_factor)
+        self.max_identical = int(max_identical)
         self.counts: Counter = Counter({r: 0 for r in REASONS})
         self._last = None  # (stamp, gyro, accel) of the last accepted sample
+        self._previous = None  # (gyro, accel) of the last sample with a usable stamp
+        self._identical = 0   # consecutive samples equal to their predecessor
 
     def _reject(self, reason: str) -> CheckResult:
         self.counts[reason] += 1
@@ -101,22 +117,33 @@ class SampleChecker:
         if np.any(np.abs(gyro) >= self.gyro_range) or np.any(np.abs(accel) >= self.accel_range):
             return self._reject("saturated")
         result = CheckResult(True, "ok")
+        dt = 0.0
         if self._last is not None:
-            t0, g0, a0 = self._last
-            dt = stamp - t0
+            dt = stamp - self._last[0]
             if dt == 0.0:
                 return self._reject("duplicate_stamp")
             if dt < 0.0:
                 return self._reject("backwards_stamp")
-            if dt > self.gap_factor / self.rate_hz:
-                missing = int(round(dt * self.rate_hz)) - 1
-                if 0 < missing <= self.max_bridge:
-                    result = self._fill(t0, g0, a0, stamp, gyro, accel, missing)
-                else:
-                    result = CheckResult(True, "gap")
+        if self._frozen(gyro, accel):
+            return self._reject("frozen")
+        if dt > self.gap_factor / self.rate_hz:
+            missing = int(round(dt * self.rate_hz)) - 1
+            if 0 < missing <= self.max_bridge:
+                result = self._fill(*self._last, stamp, gyro, accel, missing)
+            else:
+                result = CheckResult(True, "gap")
         self._last = (float(stamp), gyro, accel)
         self.counts[result.reason] += 1
         return result
+
+    def _frozen(self, gyro, accel) -> bool:
+        """Count this sample's repetition of its predecessor; True from `max_identical` in a row."""
+        prev, self._previous = self._previous, (gyro, accel)
+        if prev is not None and np.array_equal(prev[0], gyro) and np.array_equal(prev[1], accel):
+            self._identical += 1
+        else:
+            self._identical = 0
+        return 0 < self.max_identical <= self._identical + 1
 
     def _fill(self, t0, g0, a0, t1, g1, a1, missing: int) -> CheckResult:
         frac = np.arange(1, missing + 1) / (missing + 1)

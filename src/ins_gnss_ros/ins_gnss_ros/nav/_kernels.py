@@ -117,6 +117,29 @@ def mech_step(lat, lon, h, v, q, dth, dv, dt, ell_par, h_ref, k1, k2, out_v, out
 
 
 @njit(cache=True)
+def correct(lat, lon, h, v, q, dpos, dv, phi, a, e2, out_v, out_q):
+    """Remove position, velocity and attitude errors; see
+    :func:`ins_gnss_ros.nav.strapdown.apply_correction`. Writes the velocity and quaternion
+    into out_v, out_q and returns (lat, lon, h)."""
+    rm, rn = _radii(lat, a, e2)
+    lat1 = lat - dpos[1] / (rm + h)
+    lon1 = lon - dpos[0] / ((rn + h) * math.cos(lat))
+    for j in range(3):
+        out_v[j] = v[j] - dv[j]
+    # q_true = q(phi) ⊗ q_computed, normalised with w >= 0. The same operations in the same
+    # order as rotations.quat_normalize (a division by the norm), so that the result is
+    # bit-identical to the numpy formulation: a filter decision (gate, mode) can hinge on the
+    # last bit.
+    rw, rx, ry, rz = _quat_rotvec(phi[0], phi[1], phi[2])
+    tw, tx, ty, tz = _qmul(rw, rx, ry, rz, q[0], q[1], q[2], q[3])
+    s = math.sqrt(tw * tw + tx * tx + ty * ty + tz * tz)
+    if tw < 0.0:
+        s = -s
+    out_q[0], out_q[1], out_q[2], out_q[3] = tw / s, tx / s, ty / s, tz / s
+    return lat1, lon1, h - dpos[2]
+
+
+@njit(cache=True)
 def mech_run(lat, lon, h, v0, q0, dths, dvs, dt, ell_par, h_ref, k1, k2):
     """Run :func:`mech_step` over N increments; returns arrays with N + 1 rows."""
     n = dths.shape[0]

@@ -11,7 +11,7 @@ import numpy as np
 
 from .earth import (WGS84, Ellipsoid, earth_rate_enu, ecef_to_enu_matrix, ecef_to_geodetic,
                     geodetic_to_ecef)
-from .rotations import quat_rotate
+from .rotations import cross, quat_rotate
 
 
 def lever_arm_position(lat, lon, h, q_nb, l_b, ell: Ellipsoid = WGS84):
@@ -65,5 +65,5 @@ def lever_arm_velocity(v_enu, q_nb, omega_ib_b, l_b, lat, ell: Ellipsoid = WGS84
     ndarray, shape (..., 3)
     """
     l_n = quat_rotate(q_nb, l_b)
-    return (np.asarray(v_enu, float) + quat_rotate(q_nb, np.cross(omega_ib_b, l_b))
-            - np.cross(earth_rate_enu(lat, ell), l_n))
+    return (np.asarray(v_enu, float) + quat_rotate(q_nb, cross(omega_ib_b, l_b))
+            - cross(earth_rate_enu(lat, ell), l_n))

@@ -56,13 +56,12 @@ dpos and dv and rotates the attitude by q(phi) ⊗ q_nb.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import _kernels
 from .earth import WGS84, Ellipsoid, normal_gravity, radii
-from .rotations import quat_from_rotvec, quat_mul, quat_normalize
 
 
 @dataclass
@@ -222,13 +221,20 @@ def apply_correction(state: NavState, dpos_enu_m, dv_enu, phi_enu,
     NavState
         Corrected state: position and velocity minus their errors, q_nb = q(phi) ⊗ q_nb.
     """
-    dpos = np.asarray(dpos_enu_m, float)
-    rm, rn = radii(state.lat, ell)
-    lat = state.lat - dpos[1] / (rm + state.h)
-    lon = state.lon - dpos[0] / ((rn + state.h) * np.cos(state.lat))
-    q = quat_normalize(quat_mul(quat_from_rotvec(phi_enu), state.q_nb))
-    return replace(state, lat=float(lat), lon=float(lon), h=float(state.h - dpos[2]),
-                   v_enu=state.v_enu - np.asarray(dv_enu, float), q_nb=q)
+    v = np.empty(3)
+    q = np.empty(4)
+    # Compiled: the filter corrects the state at every accepted update, where numpy's
+    # per-call overhead on 3- and 4-vectors was most of the cost.
+    lat, lon, h = _kernels.correct(
+        float(state.lat), float(state.lon), float(state.h), state.v_enu, state.q_nb,
+        _vector(dpos_enu_m), _vector(dv_enu), _vector(phi_enu), ell.a, ell.e2, v, q)
+    return NavState(lat, lon, h, v, q, state.t)
+
+
+def _vector(x) -> np.ndarray:
+    """A 3-vector as a contiguous float64 array (no copy if it is one): one compiled
+    signature of the kernel."""
+    return np.ascontiguousarray(x, dtype=float)
 
 
 class Strapdown:

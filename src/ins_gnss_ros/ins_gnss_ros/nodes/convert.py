@@ -1,6 +1,13 @@
-"""Message <-> core-type conversions shared by the nodes (no behaviour, only field mapping)."""
+"""Message <-> core-type conversions shared by the nodes (no behaviour, only field mapping).
+
+The ``set_*``/``fill_*`` helpers write into the sub-messages a message already has: a generated
+message's constructor is plain Python (a few microseconds per sub-message), and ``ins/state`` is
+built 200 times a second.
+"""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -14,19 +21,36 @@ def stamp_to_sec(stamp: Time) -> float:
 
 
 def sec_to_stamp(t: float) -> Time:
-    sec = int(np.floor(t))
+    stamp = Time()
+    set_stamp(stamp, t)
+    return stamp
+
+
+def set_stamp(stamp: Time, t: float) -> None:
+    """Write t (s) into an existing stamp."""
+    sec = math.floor(t)
     nanosec = int(round((t - sec) * 1e9))
     if nanosec >= 1_000_000_000:  # rounding carried into the next second
         sec, nanosec = sec + 1, nanosec - 1_000_000_000
-    return Time(sec=sec, nanosec=nanosec)
+    stamp.sec, stamp.nanosec = sec, nanosec
 
 
 def vec(v: Vector3) -> np.ndarray:
     return np.array([v.x, v.y, v.z])
 
 
+def finite_vector3(*vectors: Vector3) -> bool:
+    """True if every component of the Vector3 messages is finite (no numpy on 3-vectors)."""
+    return all(math.isfinite(c) for v in vectors for c in (v.x, v.y, v.z))
+
+
 def to_vector3(a) -> Vector3:
     return Vector3(x=float(a[0]), y=float(a[1]), z=float(a[2]))
+
+
+def set_vector3(v: Vector3, a: np.ndarray) -> None:
+    """Write a 3-vector (numpy array) into an existing Vector3."""
+    v.x, v.y, v.z = a.tolist()
 
 
 def quat(q: Quaternion) -> np.ndarray:
@@ -46,7 +70,8 @@ def nav_state_from_msg(msg) -> NavState:
 
 def fill_ins_state(msg, state: NavState) -> None:
     """Write a NavState into an ins_gnss_msgs/InsState (other fields untouched)."""
-    msg.header.stamp = sec_to_stamp(state.t)
+    set_stamp(msg.header.stamp, state.t)
     msg.latitude, msg.longitude, msg.altitude = float(state.lat), float(state.lon), float(state.h)
-    msg.velocity = to_vector3(state.v_enu)
-    msg.orientation = to_quaternion(state.q_nb)
+    set_vector3(msg.velocity, state.v_enu)
+    q = msg.orientation
+    q.w, q.x, q.y, q.z = state.q_nb.tolist()

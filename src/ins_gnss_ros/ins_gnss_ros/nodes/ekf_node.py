@@ -18,10 +18,21 @@ same epochs are never both used (the same data would count twice).
 
 Outputs: ``nav/odom`` (ENU ``map`` frame around a datum, covariance from the filter),
 ``nav/fix``, ``nav/status`` (mode, coupling, every update with innovation, NIS and verdict).
+
+Integrity: a measurement kind rejected at the gate for 2 s is forced in with its innovation
+admitted on both sides (the navigator's ``_update``); until the noise floor this leaves decays
+(``forced.*``), ``nav/status`` says ``MODE_DEAD_RECKONING`` (degraded: the solution is not
+confirmed by its aiding), the published covariances include the floor, and /diagnostics
+counts ``<kind> forced in: degraded until confirmed``.
+A gap in ``imu/delta`` of up to ``max_imu_gap_s`` is bridged by holding the rates of the
+increment after it, with the covariance widened by ``imu_gap.*`` (as the ``strapdown`` node
+bridges it); a longer gap loses the IMU and the filter aligns again. After either, ``nav/fix``
+is withheld until the filter has re-synchronised the strapdown.
 """
 
 from __future__ import annotations
 
+import bisect
 import sys
 from collections import deque
 
@@ -38,13 +49,13 @@ from ..nav.earth import ecef_to_enu, geodetic_to_ecef
 from ..nav.ekf import ExtraState
 from ..nav.error_model import LAYOUTS, nav_error
 from ..nav.navigator import (ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, GnssVelocity,
-                             HeadingFix, Navigator, NavigatorConfig, SpeedLog)
+                             HeadingFix, ImuGap, Navigator, NavigatorConfig, SpeedLog)
 from ..nav.rotations import quat_to_dcm
 from ..nav.strapdown import NavState
 from ..nav.sensor_errors import GRADES, BlockNoise, FilterNoise, filter_noise
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
-from .convert import (nav_state_from_msg, sec_to_stamp, stamp_to_sec, to_quaternion,
-                      to_vector3, vec)
+from .convert import (finite_vector3, nav_state_from_msg, sec_to_stamp, stamp_to_sec,
+                      to_quaternion, to_vector3, vec)
 from .gnss_convert import kepler_from_msg, raw_epoch_from_msg
 
 MODES = {ALIGNING: FilterStatus.MODE_ALIGNING, NAVIGATING: FilterStatus.MODE_NAVIGATING,
@@ -121,6 +132,17 @@ class EkfNode(NavNode):
         Param("dead_reckoning_after_s", 2.0, "no accepted aiding for this long: DEAD_RECKONING, s",
               0.1, 3600.0),
         Param("history_s", 3.0, "how late a measurement may arrive and still be used, s", 0.1, 60.0),
+        Param("forced.floor_tau_s", 30.0, "time constant of the noise floor a measurement kind "
+              "keeps after it was forced in (decays while the kind is accepted), s", 0.1, 3600.0),
+        Param("forced.degraded_ratio", 3.0, "the mode is DEAD_RECKONING (degraded) while a forced "
+              "kind's floor exceeds this many times its own standard deviation, -", 0.0, 1000.0),
+        Param("max_imu_gap_s", 2.5, "longest gap in imu/delta bridged by holding the rates of the "
+              "increment after it; a longer one loses the IMU and the filter aligns again, s",
+              0.0, 60.0),
+        Param("imu_gap.accel_sigma_mps2", 1.0, "over a bridged imu/delta gap: sigma of the "
+              "difference between the held and the true specific force, m/s^2", 0.0, 100.0),
+        Param("imu_gap.rate_sigma_dps", 5.0, "over a bridged imu/delta gap: sigma of the "
+              "difference between the held and the true angular rate, deg/s", 0.0, 1000.0),
         Param("sync.min_interval_s", 0.1, "shortest interval between two corrections, s", 0.0, 10.0),
         Param("sync.resend_after_s", 1.0,
               "send a correction against the newest ins/state if none matched for this long, s",
@@ -168,6 +190,9 @@ class EkfNode(NavNode):
             sigma_tilt0=np.radians(p["init.tilt_sigma_deg"]), align_speed=p["align.speed_mps"],
             static_speed=p["align.static_speed_mps"], dr_timeout=p["dead_reckoning_after_s"],
             nhc_sigma=nhc if min(nhc) > 0.0 else None, history=p["history_s"],
+            floor_tau=p["forced.floor_tau_s"], degraded_ratio=p["forced.degraded_ratio"],
+            gap_accel_sigma=p["imu_gap.accel_sigma_mps2"],
+            gap_rate_sigma=np.radians(p["imu_gap.rate_sigma_dps"]),
             store_covariance=False, record=False)
         self.navigator = Navigator(self.config)
         self.datum = None
@@ -175,6 +200,7 @@ class EkfNode(NavNode):
             self.datum = (np.radians(p["datum.latitude_deg"]), np.radians(p["datum.longitude_deg"]),
                           p["datum.altitude_m"])
         self.sequence = 0
+        self.last_delta_t = np.inf  # stamp of the last imu/delta, s
         self.last_sync_t = -np.inf
         self.last_match_t = -np.inf
         self.synced_updates = 0
@@ -219,11 +245,29 @@ class EkfNode(NavNode):
 
     # -- inputs --------------------------------------------------------------------------------
     def on_delta(self, msg: ImuDelta) -> None:
-        dtheta, dv = vec(msg.delta_angle), vec(msg.delta_velocity)
-        if not (np.isfinite(dtheta).all() and np.isfinite(dv).all()):
+        if not finite_vector3(msg.delta_angle, msg.delta_velocity):
             self.diag.count("non-finite increment dropped")
             return
-        self.navigator.add_imu(stamp_to_sec(msg.header.stamp), dtheta, dv)
+        dtheta, dv = vec(msg.delta_angle), vec(msg.delta_velocity)
+        t = stamp_to_sec(msg.header.stamp)
+        interval = t - self.last_delta_t
+        if msg.dt > 0.0 and interval - msg.dt > 0.5 * msg.dt:
+            if interval > self.p["max_imu_gap_s"] + msg.dt:
+                self.diag.count("imu lost: gap in increments beyond max_imu_gap_s, aligning again")
+                self.navigator.reset()
+            else:
+                # The increment covers only its dt: hold its rates over the whole gap (free
+                # fall otherwise) and widen the covariance by what holding them may miss.
+                self.diag.count("gap in increments: bridged by holding the rates")
+                # Applied after the measurements of the gap (their extrapolated states do not
+                # know it), before the covariance is propagated over it.
+                self.navigator.add_measurement(ImuGap(t - 0.5 * msg.dt, interval - msg.dt))
+                dtheta, dv = dtheta * (interval / msg.dt), dv * (interval / msg.dt)
+            # The strapdown publishes its state after the gap before this filter has widened
+            # its covariance: nav/fix waits for the next synchronisation.
+            self.sequence += 1
+        self.last_delta_t = t
+        self.navigator.add_imu(t, dtheta, dv)
         self.after_filter()
 
     def on_fix(self, msg: NavSatFix) -> None:
@@ -351,12 +395,22 @@ class EkfNode(NavNode):
         if updated and due:
             self.synchronise()
 
+    def ins_state_at(self, t_ns: int) -> InsState | None:
+        """The newest kept ins/state within 1 ms of t_ns carrying the current sequence, or None.
+
+        The kept states are in stamp order: bisection finds the 1 ms window instead of a scan of
+        all of them, which ran on every message while a synchronisation was waiting.
+        """
+        states, key = self.ins_states, (lambda entry: entry[0])
+        lo = bisect.bisect_right(states, t_ns - 1e6, key=key)
+        hi = bisect.bisect_left(states, t_ns + 1e6, lo=lo, key=key)
+        return next((states[i][1] for i in range(hi - 1, lo - 1, -1)
+                     if states[i][1].correction_sequence == self.sequence), None)
+
     def synchronise(self) -> None:
         """Send the difference between the strapdown and the filter at a common epoch."""
         nav = self.navigator
-        t_ns = int(round(nav.nav.t * 1e9))
-        match = next((m for s, m in reversed(self.ins_states)
-                      if abs(s - t_ns) < 1e6 and m.correction_sequence == self.sequence), None)
+        match = self.ins_state_at(int(round(nav.nav.t * 1e9)))
         if match is not None:
             self.last_match_t = nav.nav.t
         elif self.ins_states and nav.nav.t - self.last_match_t > self.p["sync.resend_after_s"]:
@@ -395,7 +449,10 @@ class EkfNode(NavNode):
         updates = nav.updates_since(self.reported_updates)
         if updates:
             self.reported_updates = nav.update_count
-            self.publish_status(updates[-1].t, updates)
+            # Stamped with the filter's time: the mode is the current one, also when the last
+            # update was a measurement refused as too old (a looped or restarted source).
+            t = updates[-1].t if nav.nav is None else max(updates[-1].t, nav.nav.t)
+            self.publish_status(t, updates)
 
     def publish_status(self, t: float, updates) -> None:
         nav = self.navigator
@@ -408,6 +465,8 @@ class EkfNode(NavNode):
             self.rejected += not u.accepted
             if not u.accepted and u.reason not in ("aligning",):
                 self.diag.count(f"{u.name} rejected: {u.reason}", log=False)
+            elif u.reason == "forced":
+                self.diag.count(f"{u.name} forced in: degraded until confirmed")
             status.updates.append(MeasurementUpdate(
                 name=u.name, stamp=sec_to_stamp(u.t),
                 innovation=[float(x) for x in u.innovation],
@@ -417,13 +476,14 @@ class EkfNode(NavNode):
         if nav.ekf is not None:
             status.state_names = [f"{name}[{i}]" for name in nav.space.blocks
                                   for i in range(nav.space[name].stop - nav.space[name].start)]
-            status.state_std = np.sqrt(np.diag(nav.ekf.P)).tolist()
+            status.state_std = np.sqrt(np.diag(nav.covariance())).tolist()
         status.accepted_count, status.rejected_count = self.accepted, self.rejected
         self.pub_status.publish(status)
 
     def publish_solution(self, st: NavState, ins: InsState) -> None:
-        """nav/fix and nav/odom: the synchronised strapdown state with the filter covariance."""
-        P, S = self.navigator.ekf.P, self.navigator.space
+        """nav/fix and nav/odom: the synchronised strapdown state with the filter covariance
+        (with the noise floors of forced measurement kinds: Navigator.covariance)."""
+        P, S = self.navigator.covariance(), self.navigator.space
         stamp = ins.header.stamp
         fix = NavSatFix()
         fix.header.stamp, fix.header.frame_id = stamp, "base_link"

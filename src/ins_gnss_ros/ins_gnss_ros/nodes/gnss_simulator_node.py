@@ -7,7 +7,7 @@ seed 004 scenario (``source: scenario``, :mod:`ins_gnss_ros.sim.scenarios`). Eve
 epoch per antenna and the node publishes
 
 * ``gnss/observations``: one GnssObservations per antenna (``antenna_id`` = index in
-  ``lever_arms``), GPS L1 C/A and Galileo E1 (u-blox gnssId/sigId numbering);
+  ``lever_arms``), GPS L1 C/A and Galileo E1-C (u-blox gnssId/sigId numbering);
 * ``gnss/fix`` and ``gnss/vel``: the single-point solution of antenna 0's simulated pseudoranges
   and Dopplers (:func:`~ins_gnss_ros.gnss.simulator.solve_fix`, the project's SPP), not truth
   plus noise, so shading below 5 satellites leaves no fix, as on a real receiver;
@@ -19,8 +19,11 @@ Stamps: with ``source: truth`` the truth's stamp of the epoch (the sensor time a
 time of the first epoch is ``start_gps_time_s``; with ``source: scenario`` the GNSS time itself
 on the ROS (UTC) axis. ``time_of_week`` is the receiver's time tag (true GNSS time plus its clock
 offset), as a receiver reports it. A carrier phase whose half-cycle ambiguity is not yet resolved
-is published as NaN (GnssObservations has no half-cycle flag); the epoch it becomes valid is
-flagged ``loss_of_lock``.
+(GPS L1 C/A, a data channel, for ``half_cycle_resolve_s`` after lock; the pilot-tracked Galileo
+E1-C never, see :mod:`ins_gnss_ros.gnss.simulator`) is published as NaN (GnssObservations has no
+half-cycle flag); the epoch it becomes valid is flagged ``loss_of_lock``. Epochs fall on a grid
+of ``1 / rate_hz`` from the first truth; a truth stamp up to 1 ms before a grid point is taken
+for it (float rounding of stamps).
 """
 
 from __future__ import annotations
@@ -51,6 +54,11 @@ from .gnss_convert import ephemeris_msg, gps_to_posix
 from .gnss_convert import observations_msg as raw_observations_msg
 
 NS = 1_000_000_000
+#: A truth stamp this close before the next epoch of the grid is taken as that epoch [ns]: stamps
+#: computed in float seconds land up to a few hundred ns either side of the grid (a double holds
+#: POSIX seconds to 0.24 µs), and without it an epoch would wait for the next truth sample or,
+#: with truth at the epoch rate, be lost.
+EPOCH_TOLERANCE_NS = 1_000_000
 
 
 def observations_msg(epoch, stamp: Time, newly_valid) -> GnssObservations:
@@ -121,7 +129,8 @@ class GnssSimulatorNode(NavNode):
         Param("slip_rate_per_s", 0.0, "random cycle slips per satellite and antenna, 1/s",
               0.0, 1.0),
         Param("half_cycle_resolve_s", 6.0,
-              "lock time before the half-cycle ambiguity is resolved (phase NaN before), s",
+              "lock time before the half-cycle ambiguity of GPS L1 C/A (a data channel) is "
+              "resolved, phase NaN before (Galileo E1-C, a pilot, has none); 0: none, s",
               0.0, 600.0),
         Param("shading.enabled", False,
               "limit the satellites in view by the seed 004 Lab 1 schedule (times from the "
@@ -231,10 +240,10 @@ class GnssSimulatorNode(NavNode):
         if self.sim is None:
             self._start(msg.longitude, stamp_to_sec(msg.header.stamp))
             self.next_epoch_ns = t_ns
-        if t_ns < self.next_epoch_ns:
+        if t_ns < self.next_epoch_ns - EPOCH_TOLERANCE_NS:
             return
         period_ns = int(round(NS / self.p["rate_hz"]))
-        while self.next_epoch_ns <= t_ns:
+        while self.next_epoch_ns <= t_ns + EPOCH_TOLERANCE_NS:
             self.next_epoch_ns += period_ns
         q = quat(msg.orientation)
         self.simulate(stamp_to_sec(msg.header.stamp), msg.latitude, msg.longitude, msg.altitude,

@@ -3,9 +3,11 @@
 Per raw ``imu/data_raw`` sample (sensor frame, any mounting, any rate that is an integer
 multiple of the navigation rate, e.g. 1200 Hz for seed 004's ISON-1):
 
-1. :class:`~ins_gnss_ros.imu.sample_checks.SampleChecker` rejects NaN/inf, saturated readings and
-   duplicated or backwards stamps (counted on /diagnostics, never passed on), bridges gaps of up
-   to ``max_bridge_samples`` and reports longer ones, after which integration restarts;
+1. :class:`~ins_gnss_ros.imu.sample_checks.SampleChecker` rejects NaN/inf, saturated readings,
+   duplicated or backwards stamps and a frozen sensor (``max_identical_samples`` bit-identical
+   readings in a row) (counted on /diagnostics, never passed on), bridges gaps of up to
+   ``max_bridge_samples`` and reports longer ones, after which integration restarts (the
+   ``strapdown`` and ``ekf`` then see the gap in ``imu/delta`` and bridge or restart);
 2. :class:`~ins_gnss_ros.imu.calibration.ImuCalibration` removes bias, scale factor,
    non-orthogonality and g-sensitivity (with the temperature from ``imu/temperature`` if
    enabled) and rotates into ``base_link`` (seed 004 §2.3); optionally the filter's residual
@@ -106,6 +108,10 @@ class ImuPreprocessorNode(NavNode):
               "integration, samples", 0, 10000),
         Param("bridge", "interpolate", "how missing samples are synthesised",
               choices=("interpolate", "hold")),
+        Param("max_identical_samples", 5,
+              "this many consecutive samples with bit-identical readings on all six channels are "
+              "a frozen sensor: rejected (counted) until the readings change; 0 disables the "
+              "check (noise-free simulated streams), 1 is not allowed, samples", 0, 100000),
         Param("use_temperature", False,
               "subscribe imu/temperature (sensor_msgs/Temperature, degC) for the temperature "
               "polynomials; false: T_ref"),
@@ -135,8 +141,12 @@ class ImuPreprocessorNode(NavNode):
         except ValueError as err:
             raise ParameterError(f"parameter 'coning_method': {err} (rate_hz / nav_rate_hz = "
                                  f"{int(round(n_sub))}; use one_sample)") from None
-        self.checker = SampleChecker(p["rate_hz"], np.radians(p["gyro_range_dps"]),
-                                     p["accel_range_mps2"], p["max_bridge_samples"], p["bridge"])
+        try:
+            self.checker = SampleChecker(p["rate_hz"], np.radians(p["gyro_range_dps"]),
+                                         p["accel_range_mps2"], p["max_bridge_samples"],
+                                         p["bridge"], max_identical=p["max_identical_samples"])
+        except ValueError as err:
+            raise ParameterError(f"parameter 'max_identical_samples': {err}") from None
         self.residual = ResidualErrors()
         self.offset_ns = int(round(p["time_offset_s"] * NS))
         self.temperature: float | None = None

@@ -22,6 +22,11 @@ Per GNSS epoch the node
    azimuth of the body x axis, pitch nose-up positive (the message's convention: the negative of
    the core's ROS pitch), roll (NaN with one baseline), their variances, the master→antenna-1
    baseline length, satellites used, the smallest ratio of the fixes in use and the status.
+   The FIXED variances include the time-correlated multipath (``multipath.*``: σ(E) = σ0
+   exp(-E/E0), correlation time τ), once by default (the variance of one epoch), or, with
+   ``multipath.averaging_time_s`` T > 0, as many times as makes the average over T of epochs
+   taken as independent honest (up to 2τ/Δt for T ≫ τ;
+   :func:`~ins_gnss_ros.gnss.attitude.correlated_variance_factor`).
    FIXED always; FLOAT only with ``publish_float`` (with the float solution's own variance,
    degrees rather than tenths); otherwise, with ``publish_none``, a status-NONE message with NaN
    angles so that consumers see the node is alive.
@@ -48,6 +53,7 @@ from ..gnss.attitude import AttitudeSolution, AttitudeSolver
 from ..gnss.constants import BEIDOU, C_LIGHT, GALILEO, GPS, SECONDS_PER_WEEK, UBX_GNSS_ID
 from ..gnss.differences import AntennaEpoch, NoiseModel
 from ..gnss.ephemeris import KeplerEphemeris, satellite_at_reception
+from ..gnss.multipath import MultipathModel
 from ..gnss.observations import RawEpoch
 from ..gnss.spp import DEFAULT_SIGNALS, SppConfig, solve_position
 from ..nav.earth import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
@@ -153,6 +159,18 @@ class PhaseHeadingNode(NavNode):
               "undifferenced carrier-phase noise a = b in sigma^2 = a^2 + b^2/sin^2(E), m",
               1e-4, 0.05),
         Param("noise.code_m", 0.3, "undifferenced pseudorange noise a = b, m", 0.01, 100.0),
+        Param("multipath.phase_m", 0.01,
+              "time-correlated (multipath) phase error sigma at 0 deg elevation, m; it "
+              "falls by e every multipath.elevation_scale_deg; 0: none (white variances)",
+              0.0, 0.05),
+        Param("multipath.elevation_scale_deg", 20.0,
+              "elevation over which the multipath sigma falls by e, deg", 1.0, 90.0),
+        Param("multipath.tau_s", 30.0, "multipath correlation time, s", 0.1, 3600.0),
+        Param("multipath.averaging_time_s", 0.0,
+              "time over which the heading consumer (a filter taking every epoch as independent) "
+              "averages it, s: the multipath variance is counted so that this average is "
+              "honest; 0: once (per-epoch variance, for a MEMS-class ekf); for a FOG-class ekf "
+              "that holds the heading for minutes, 10 tau or more", 0.0, 1.0e6),
         Param("ratio_threshold", 3.0,
               "ratio test threshold to accept a fix (5 with fewer than ~7 double differences "
               "per baseline or time-correlated multipath)", 1.0, 100.0),
@@ -211,12 +229,17 @@ class PhaseHeadingNode(NavNode):
             raise ParameterError("parameters 'gps', 'galileo', 'beidou': enable at least one")
         noise = NoiseModel(p["noise.phase_m"], p["noise.phase_m"], p["noise.code_m"],
                            p["noise.code_m"])
+        multipath = (MultipathModel(0.0, p["multipath.phase_m"],
+                                    math.radians(p["multipath.elevation_scale_deg"]),
+                                    phase_tau=p["multipath.tau_s"])
+                     if p["multipath.phase_m"] > 0.0 else None)
         self.solver = AttitudeSolver(
             self.antennas, noise,
             ratio_threshold=p["ratio_threshold"], sigma_length=p["baseline_length_sigma_m"],
             elevation_mask=math.radians(p["elevation_mask_deg"]),
             slip_threshold=p["slip_threshold_cycles"], max_gap=p["max_gap_s"],
-            window=p["float_window"])
+            window=p["float_window"], multipath=multipath,
+            averaging_time=p["multipath.averaging_time_s"])
         self.pending: dict[float, dict] = {}     # epoch GNSS time -> {antenna_id: msg}
         self.last_epoch = -math.inf               # GNSS time of the last epoch handled
         self.newest = -math.inf

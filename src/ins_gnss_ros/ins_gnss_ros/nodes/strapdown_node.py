@@ -7,10 +7,18 @@ epoch. Sensor-error estimates in a correction (bias and scale-factor increments)
 and applied to every increment from that epoch on, unless ``apply_sensor_corrections`` is false
 (when the ``imu_preprocessor`` applies them instead: exactly one of the two must).
 Without corrections the node keeps navigating (dead reckoning) and says so in ``mode``.
+
+A gap in ``imu/delta`` (samples lost before or in the ``imu_preprocessor``) of up to
+``max_imu_gap_s`` is bridged by holding the rates of the increment after it over the whole gap
+(that increment alone covers only its ``dt``: integrated over the gap it would be free fall). A
+longer gap means the IMU was lost: the node starts a new run at the next increment, as if
+restarted (kept history and older corrections dropped), and reports ``MODE_INVALID`` until the
+filter has re-synchronised it.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -21,7 +29,7 @@ from ..nav.conventions import yaw_from_azimuth
 from ..nav.rotations import quat_from_euler
 from ..nav.strapdown import NavState, Strapdown
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, run
-from .convert import fill_ins_state, stamp_to_sec, to_vector3, vec
+from .convert import fill_ins_state, finite_vector3, set_vector3, stamp_to_sec, vec
 
 
 @dataclass
@@ -71,6 +79,9 @@ class StrapdownNode(NavNode):
         Param("dead_reckoning_after_s", 2.0,
               "report DEAD_RECKONING when no correction arrived for this long, s", 0.1, 3600.0),
         Param("publish_every", 1, "publish ins/state every n-th increment", 1, 1000),
+        Param("max_imu_gap_s", 2.5, "longest gap in imu/delta bridged by holding the rates of the "
+              "increment after it; a longer one loses the IMU (state INVALID until the filter "
+              "re-synchronises it), s", 0.0, 60.0),
     )
 
     def __init__(self, **kwargs):
@@ -87,28 +98,38 @@ class StrapdownNode(NavNode):
         self.last_correction_t = -np.inf
         self.t_start = np.inf  # start of the first increment of this run, s
         self.correction_sequence = 0
+        self.lost = False  # the IMU was lost (gap beyond max_imu_gap_s), no correction since
         self.count = 0
+        self.last_compensated = None  # (dtheta, dv, dt) of the latest step, sensor-corrected
         self.pub = self.publisher(InsState, "ins/state", SENSOR_QOS)
         self.subscribe(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS)
         self.subscribe(InsCorrection, "ins/correction", self.on_correction, STATE_QOS)
 
     # -- increments ----------------------------------------------------------------------------
     def on_delta(self, msg: ImuDelta) -> None:
-        t = stamp_to_sec(msg.header.stamp)
-        dtheta, dv = vec(msg.delta_angle), vec(msg.delta_velocity)
-        if not (np.isfinite(dtheta).all() and np.isfinite(dv).all() and np.isfinite(msg.dt)
-                and msg.dt > 0.0):
+        if not (math.isfinite(msg.dt) and msg.dt > 0.0
+                and finite_vector3(msg.delta_angle, msg.delta_velocity)):
             self.diag.count("non-finite or non-positive increment dropped")
             return
+        t = stamp_to_sec(msg.header.stamp)
+        dtheta, dv = vec(msg.delta_angle), vec(msg.delta_velocity)
         state = self.ins.state
-        if np.isnan(state.t):  # first increment fixes the time axis
+        interval = t - state.t
+        if interval > self.p["max_imu_gap_s"] + msg.dt:
+            self.diag.count("imu lost: gap in increments beyond max_imu_gap_s, new run")
+            self.lost = not np.isnan(state.t)
+            self.history.clear()
+            state = NavState(state.lat, state.lon, state.h, state.v_enu, state.q_nb, np.nan)
+        if np.isnan(state.t):  # first increment (of this run) fixes the time axis
             self.t_start = t - msg.dt
             self.ins.state = NavState(state.lat, state.lon, state.h, state.v_enu, state.q_nb, t - msg.dt)
         elif t <= state.t:
             self.diag.count("increment stamp not after the previous one: dropped")
             return
-        elif abs((t - state.t) - msg.dt) > 0.5 * msg.dt:
-            self.diag.count("gap in increments: dt bridged by the stamps")
+        elif interval - msg.dt > 0.5 * msg.dt:
+            # Hold the increment's rates over the interval its stamp says it covers.
+            self.diag.count("gap in increments: bridged by holding the rates")
+            dtheta, dv = dtheta * (interval / msg.dt), dv * (interval / msg.dt)
         self._step(dtheta, dv, t - self.ins.state.t)
         self.count += 1
         if self.count % self.p["publish_every"] == 0:
@@ -117,6 +138,7 @@ class StrapdownNode(NavNode):
     def _step(self, dtheta, dv, dt) -> None:
         comp_dtheta, comp_dv = self._compensate(dtheta, dv, dt)
         self.ins.step(comp_dtheta, comp_dv, dt)
+        self.last_compensated = (comp_dtheta, comp_dv, dt)
         self.history.append(_Step(dtheta, dv, dt, self.ins.state))
         while self.history and self.history[-1].state.t - self.history[0].state.t > self.p["history_s"]:
             self.history.popleft()
@@ -161,22 +183,23 @@ class StrapdownNode(NavNode):
                 self._step(step.dtheta, step.dv, step.dt)
         self.correction_sequence = msg.sequence
         self.last_correction_t = t_c
+        self.lost = False
 
     def publish_state(self) -> None:
         state = self.ins.state
         msg = InsState()
         msg.header.frame_id = "map"
         fill_ins_state(msg, state)
-        last = self.history[-1]
-        dtheta, dv = self._compensate(last.dtheta, last.dv, last.dt)
-        msg.angular_velocity = to_vector3(dtheta / last.dt)
-        msg.specific_force = to_vector3(dv / last.dt)
-        msg.gyro_bias = to_vector3(self.sensor.gyro_bias)
-        msg.accel_bias = to_vector3(self.sensor.accel_bias)
-        msg.gyro_scale_factor = to_vector3(self.sensor.gyro_scale)
-        msg.accel_scale_factor = to_vector3(self.sensor.accel_scale)
+        dtheta, dv, dt = self.last_compensated
+        set_vector3(msg.angular_velocity, dtheta / dt)
+        set_vector3(msg.specific_force, dv / dt)
+        set_vector3(msg.gyro_bias, self.sensor.gyro_bias)
+        set_vector3(msg.accel_bias, self.sensor.accel_bias)
+        set_vector3(msg.gyro_scale_factor, self.sensor.gyro_scale)
+        set_vector3(msg.accel_scale_factor, self.sensor.accel_scale)
         silent = state.t - self.last_correction_t > self.p["dead_reckoning_after_s"]
-        msg.mode = InsState.MODE_DEAD_RECKONING if silent else InsState.MODE_NAVIGATING
+        msg.mode = InsState.MODE_INVALID if self.lost else (
+            InsState.MODE_DEAD_RECKONING if silent else InsState.MODE_NAVIGATING)
         msg.correction_sequence = self.correction_sequence
         self.pub.publish(msg)
 

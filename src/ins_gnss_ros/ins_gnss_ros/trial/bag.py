@@ -6,6 +6,9 @@ serialised by rclpy itself (``rclpy.serialization``, the code path rosbag2 uses)
 into the rclpy message classes, so a replay feeds the nodes the same objects DDS would deliver.
 ``rosbags`` is used only for the container: its typestore supplies the message definitions that
 MCAP stores as schemas (the project's own ``ins_gnss_msgs`` are registered from their .msg files).
+Readers for which speed matters (the offline replay) take the undecoded rows (:func:`read_raw`;
+a one-file MCAP bag is parsed here directly) and decode fixed-layout topics in bulk
+(:mod:`ins_gnss_ros.trial.cdr`); :meth:`BagWriter.write_raw` takes payloads encoded that way.
 
 The log time of every message is its header stamp (sensor time; CONTRACT.md "Stamps"); messages
 are written in stamp order and a reader returns them in stamp order, ties in writing order.
@@ -14,11 +17,12 @@ from __future__ import annotations
 
 import math
 import os
+import struct
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib import import_module
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any, Iterable, Iterator, NamedTuple
 
 import numpy as np
 from rclpy.serialization import deserialize_message, serialize_message
@@ -130,12 +134,15 @@ class BagWriter:
 
     def write(self, topic: str, msg, t_ns: int | None = None) -> None:
         """Queue ``msg`` on ``topic`` at log time ``t_ns`` (default: its header stamp)."""
+        self.write_raw(topic, msgtype_of(msg), stamp_ns(msg) if t_ns is None else t_ns,
+                       serialize_message(msg))
+
+    def write_raw(self, topic: str, msgtype: str, t_ns: int, data: bytes) -> None:
+        """Queue a serialised (CDR) message of type ``msgtype`` on ``topic`` at ``t_ns``."""
         topic = resolve(topic)
-        msgtype = msgtype_of(msg)
         if self._types.setdefault(topic, msgtype) != msgtype:
             raise BagError(f"topic {topic} carries {self._types[topic]}, not {msgtype}")
-        t = stamp_ns(msg) if t_ns is None else int(t_ns)
-        self._rows.append((t, len(self._rows), topic, serialize_message(msg)))
+        self._rows.append((int(t_ns), len(self._rows), topic, data))
 
     def __len__(self) -> int:
         return len(self._rows)
@@ -173,9 +180,8 @@ def bag_topics(path) -> dict[str, str]:
         return {c.topic: c.msgtype for c in reader.connections}
 
 
-def read_bag(path, topics: Iterable[str] | None = None, plain: bool = False,
-             decode: Iterable[str] | None = None) -> list[BagMessage]:
-    """All messages of a bag (or of ``topics``), decoded, in stamp order.
+def read_bag(path, topics: Iterable[str] | None = None) -> list[BagMessage]:
+    """All messages of a bag (or of ``topics``), decoded into rclpy messages, in stamp order.
 
     Parameters
     ----------
@@ -183,51 +189,129 @@ def read_bag(path, topics: Iterable[str] | None = None, plain: bool = False,
         Bag folder.
     topics : iterable of str, optional
         Only these topics (relative names are taken as absolute).
-    plain : bool
-        Decode into the typestore's plain dataclasses (same field names and constants, about
-        twice as fast) instead of rclpy messages: for readers that only look at fields, such
-        as the offline filter path; a node must get rclpy messages.
-    decode : iterable of str, optional
-        Decode only these topics; the other messages keep their place and stamp with ``msg``
-        None (a reader that needs the stamp order of a topic but not its content: decoding is
-        most of the cost of reading).
 
     Raises
     ------
     BagError
         One line naming the bag and what is wrong with it.
     """
-    return list(iter_bag(path, topics, plain, decode))
+    return list(iter_bag(path, topics))
 
 
-def iter_bag(path, topics: Iterable[str] | None = None, plain: bool = False,
-             decode: Iterable[str] | None = None) -> Iterator[BagMessage]:
-    """Like :func:`read_bag`, decoding lazily (rows are sorted by stamp first)."""
+def iter_bag(path, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
+    """Like :func:`read_bag`, decoding lazily (rows are read and sorted by stamp first)."""
+    for raw in read_raw(path, topics):
+        yield BagMessage(raw.topic, raw.t_ns, decode_message(raw, path))
+
+
+class RawMessage(NamedTuple):
+    """One undecoded message: absolute topic, log time (ns), type name and CDR payload (a
+    named tuple: a bag has a few hundred thousand of them)."""
+
+    topic: str
+    t_ns: int
+    msgtype: str
+    data: bytes
+
+
+def read_raw(path, topics: Iterable[str] | None = None) -> list[RawMessage]:
+    """The messages of a bag (or of ``topics``) undecoded, in stamp order, ties in writing
+    order: for readers that decode in bulk (:mod:`ins_gnss_ros.trial.cdr`) or not at all."""
     wanted = None if topics is None else {resolve(t) for t in topics}
-    decoded = None if decode is None else {resolve(t) for t in decode}
     try:
         with _open(path) as reader:
             connections = [c for c in reader.connections if wanted is None or c.topic in wanted]
-            classes = {c.id: c.msgtype if plain else msg_class(c.msgtype) for c in connections}
-            rows = [(t, i, c.topic, c.id, data) for i, (c, t, data)
-                    in enumerate(reader.messages(connections=connections))] if connections else []
+            rows = _mcap_rows(reader, connections) if connections else []
+            if rows is None:
+                rows = [(t, i, c.topic, c.msgtype, data) for i, (c, t, data)
+                        in enumerate(reader.messages(connections=connections))]
     except BagError:
         raise
     except Exception as err:  # rosbags, mcap and yaml raise many types on a damaged file
         raise BagError(f"{path}: unreadable bag ({type(err).__name__}: {first_line(err)})") \
             from None
     rows.sort(key=lambda row: row[:2])
-    deserialize = typestore().deserialize_cdr if plain else deserialize_message
-    for t, _, topic, cid, data in rows:
-        if decoded is not None and topic not in decoded:
-            yield BagMessage(topic, t, None)
-            continue
-        try:
-            msg = deserialize(bytes(data), classes[cid])
-        except Exception as err:
-            raise BagError(f"{path}: message on {topic} at {t} ns does not decode "
-                           f"({first_line(err)})") from None
-        yield BagMessage(topic, t, msg)
+    return [RawMessage(topic, t, msgtype, data) for t, _, topic, msgtype, data in rows]
+
+
+#: MCAP file magic and the record opcodes read here (MCAP specification, "Records").
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+_OP_FOOTER, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_DATA_END = 0x02, 0x04, 0x05, 0x06, 0x0F
+
+
+def _mcap_rows(reader, connections) -> list | None:
+    """Rows (t, index, topic, type, data) of a one-file MCAP bag in file order, parsed here.
+
+    rosbags' reader costs several microseconds per message (a stream object per record and a
+    heap merge across chunks), about twice what this costs, which was a sizeable part of the
+    offline replay (docs/results/replay.md); this walks the records of the data section directly (MCAP specification: a record is an opcode
+    byte, a uint64 length and its content; a chunk holds compressed records; a message is
+    channel id u16, sequence u32, log time u64, publish time u64 and the payload). Stable
+    sorting by time afterwards gives rosbags' order (time, then file order). None (use
+    rosbags) for other storage, several files or a topic with several types. The file was
+    opened and checked by rosbags first.
+    """
+    from rosbags.rosbag2.storage_mcap import McapReader, decompress
+
+    # The file rosbags opened (its reader's attributes; anything unexpected: rosbags reads).
+    files = getattr(getattr(reader, "storage", None), "storages", None) or []
+    types = {}
+    if len(files) != 1 or not isinstance(files[0], McapReader) or any(
+            types.setdefault(c.topic, c.msgtype) != c.msgtype for c in connections):
+        return None
+    data = Path(files[0].path).read_bytes()
+    if not data.startswith(_MCAP_MAGIC):
+        raise BagError(f"{files[0].path}: not an MCAP file")
+    channels: dict[int, str] = {}
+    rows: list = []
+
+    def walk(buf, pos, end):
+        unpack = struct.unpack_from
+        while pos < end:
+            op = buf[pos]
+            body = pos + 9
+            pos = body + unpack("<Q", buf, pos + 1)[0]
+            if pos > end:
+                raise BagError(f"{reader.path}: truncated MCAP record")
+            if op == _OP_MESSAGE:
+                channel, _, t = unpack("<HIQ", buf, body)
+                if channel in channels:
+                    topic = channels[channel]
+                    rows.append((t, len(rows), topic, types[topic], buf[body + 22:pos]))
+            elif op == _OP_CHANNEL:
+                channel, _, size = unpack("<HHI", buf, body)
+                topic = buf[body + 8:body + 8 + size].decode()
+                if topic in types:
+                    channels[channel] = topic
+            elif op == _OP_CHUNK:
+                _, _, size, crc, n = unpack("<QQQII", buf, body)
+                compression = buf[body + 32:body + 32 + n].decode()
+                start = body + 32 + n + 8
+                length = unpack("<Q", buf, start - 8)[0]
+                chunk = decompress(buf[start:start + length], compression, size, crc)
+                walk(chunk, 0, len(chunk))
+            elif op in (_OP_DATA_END, _OP_FOOTER):
+                return
+
+    walk(data, len(_MCAP_MAGIC), len(data))
+    return rows
+
+
+def decode_message(raw: RawMessage, path="bag"):
+    """The rclpy message of a :class:`RawMessage`.
+
+    Raises
+    ------
+    BagError
+        The payload does not decode (``path`` names the bag in the message).
+    """
+    try:
+        return deserialize_message(bytes(raw.data), msg_class(raw.msgtype))
+    except BagError:
+        raise
+    except Exception as err:
+        raise BagError(f"{path}: message on {raw.topic} at {raw.t_ns} ns does not decode "
+                       f"({first_line(err)})") from None
 
 
 def _open(path):

@@ -104,11 +104,14 @@ def load_profile(path) -> Profile:
     return Profile(path, sections, graph, ignored)
 
 
-def read_inputs(bag_path, plain=False, decode=None) -> list:
-    """The messages of a bag the graph may see: all but ``truth/*`` (not even decoded); with
-    ``decode`` (topics) only those are decoded, the others come with ``msg`` None."""
-    topics = [t for t in bagio.bag_topics(bag_path) if not t.startswith(TRUTH_PREFIX)]
-    return bagio.read_bag(bag_path, topics, plain, decode) if topics else []
+def read_inputs(bag_path) -> list:
+    """The messages of a bag the graph may see: all but ``truth/*`` (not even decoded)."""
+    topics = _input_topics(bag_path)
+    return bagio.read_bag(bag_path, topics) if topics else []
+
+
+def _input_topics(bag_path) -> list:
+    return [t for t in bagio.bag_topics(bag_path) if not t.startswith(TRUTH_PREFIX)]
 
 
 def truth_init_parameters(bag_path) -> dict:
@@ -580,50 +583,39 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
     profile = load_profile(profile_path)
     config = offline_config(profile)
     # Every input keeps its place (the time origin t0 is the first input of any topic), but
-    # only what the navigator uses is decoded.
-    messages = read_inputs(bag_path, plain=True,
-                           decode=[t for t in bagio.bag_topics(bag_path)
-                                   if t in OFFLINE_IMU_TOPICS or t.startswith(GNSS_PREFIX)])
-    windows = gnss_windows(messages, outages)
+    # only what the navigator uses is decoded: the IMU topics in bulk, gnss/* one by one.
+    topics = _input_topics(bag_path)
+    rows = bagio.read_raw(bag_path, topics) if topics else []
+    windows = gnss_windows(rows, outages)
     out = _new_out(out)
     nav = navmod.Navigator(navmod.NavigatorConfig(
         noise=filter_noise(GRADES[config["imu_grade"]], config["bias_model"]),
         layout=config["layout"], lever_arm_b=np.asarray(config["lever_arm"], float)))
     c_mount = dcm_from_euler(*np.radians(np.asarray(config["mounting_rpy_deg"], float)))
-    t0 = messages[0].t_ns if messages else 0
-    imu_t, imu_th, imu_dv = [], [], []
-    last_raw = None
-    withheld = 0
-
-    def flush_imu():
-        if imu_t:
-            nav.add_imu(np.array(imu_t), np.array(imu_th), np.array(imu_dv))
-            imu_t.clear(), imu_th.clear(), imu_dv.clear()
+    t0 = rows[0].t_ns if rows else 0
+    imu_at, imu_t, imu_th, imu_dv = _imu_increments(rows, t0, c_mount)
+    gnss_at = [k for k, m in enumerate(rows) if m.topic.startswith(GNSS_PREFIX)]
+    t_gnss = np.array([rows[k].t_ns for k in gnss_at], np.int64)
+    inside = np.any((windows[:, :1] <= t_gnss) & (t_gnss < windows[:, 1:]), axis=0)
+    withheld = int(inside.sum())
+    used = [k for k, out_of_window in zip(gnss_at, ~inside)
+            if out_of_window and rows[k].topic in OFFLINE_GNSS_TOPICS]
+    measurements = _gnss_measurements(rows, used, t0, config)
+    done = 0
 
     from tqdm import tqdm
 
-    for m in tqdm(messages, disable=not progress, unit="msg", desc="offline"):
-        t = (m.t_ns - t0) * 1e-9
-        msg = m.msg
-        if m.topic == "/imu/delta":
-            imu_t.append(t), imu_th.append(_xyz(msg.delta_angle)), imu_dv.append(
-                _xyz(msg.delta_velocity))
-        elif m.topic == "/imu/data_raw":
-            if last_raw is not None and t > last_raw:
-                dt = t - last_raw
-                imu_t.append(t)
-                imu_th.append(c_mount @ _xyz(msg.angular_velocity) * dt)
-                imu_dv.append(c_mount @ _xyz(msg.linear_acceleration) * dt)
-            last_raw = t
-        elif m.topic.startswith(GNSS_PREFIX):
-            if _in_windows(m.t_ns, windows):
-                withheld += 1
-                continue
-            measurement = _measurement(m.topic, msg, t, config)
-            if measurement is not None:
-                flush_imu()
-                nav.add_measurement(measurement)
-    flush_imu()
+    for k, measurement in tqdm(zip(used, measurements), disable=not progress, unit="msg",
+                               desc="offline", total=len(used)):
+        if measurement is not None:
+            # The IMU samples before it in the stream go first, in one batch.
+            end = int(np.searchsorted(imu_at, k))
+            if end > done:
+                nav.add_imu(imu_t[done:end], imu_th[done:end], imu_dv[done:end])
+                done = end
+            nav.add_measurement(measurement)
+    if len(imu_t) > done:
+        nav.add_imu(imu_t[done:], imu_th[done:], imu_dv[done:])
     nav.flush()
     result = nav.output()
     _write_navigator_output(out / "bag", result, t0)
@@ -633,37 +625,116 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
 
 #: IMU topics the offline path reads (increments, or raw rates it integrates itself).
 OFFLINE_IMU_TOPICS = ("/imu/delta", "/imu/data_raw")
+#: GNSS topics it turns into measurements (:func:`_gnss_measurements`).
+OFFLINE_GNSS_TOPICS = ("/gnss/fix", "/gnss/vel", "/gnss/heading")
 
 
-def _xyz(v):
-    return np.array([v.x, v.y, v.z])
+def _imu_increments(rows, t0, c_mount):
+    """IMU increments of the offline path from the bag rows, decoded in bulk.
+
+    ``imu/delta`` as is; ``imu/data_raw`` rotated by ``c_mount`` into base_link and integrated
+    over the stamp intervals (rate x dt; a sample not later than its predecessor is dropped).
+
+    Returns
+    -------
+    at : (N,) int
+        Position of each sample's message in ``rows``, increasing.
+    t : (N,) s after ``t0`` (ns); dtheta, dv : (N, 3) rad, m/s
+    """
+    from ins_gnss_ros.trial import cdr
+
+    parts = []
+    for topic in OFFLINE_IMU_TOPICS:
+        at = np.array([k for k, m in enumerate(rows) if m.topic == topic], np.int64)
+        if not len(at):
+            continue
+        try:
+            cols = cdr.decode(rows[at[0]].msgtype, [rows[k].data for k in at])
+        except cdr.CdrLayoutError as err:
+            raise bagio.BagError(f"{topic}: {err}") from None
+        t = (np.array([rows[k].t_ns for k in at], np.int64) - t0) * 1e-9
+        if topic == "/imu/delta":
+            parts.append((at, t, _vectors(cols, "delta_angle"), _vectors(cols, "delta_velocity")))
+            continue
+        dt = np.diff(t)
+        keep = np.flatnonzero(dt > 0.0) + 1
+        dt = dt[keep - 1, None]
+        parts.append((at[keep], t[keep],
+                      _rotate(c_mount, _vectors(cols, "angular_velocity")[keep]) * dt,
+                      _rotate(c_mount, _vectors(cols, "linear_acceleration")[keep]) * dt))
+    if not parts:
+        return np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))
+    order = np.argsort(np.concatenate([p[0] for p in parts]), kind="stable")
+    return tuple(np.concatenate([p[i] for p in parts])[order] for i in range(4))
 
 
-def _measurement(topic, msg, t, config):
-    """Navigator measurement of a gnss/* message (None: not used or not valid)."""
-    from ins_gnss_ros.nav import navigator as navmod
+def _rotate(c, v):
+    """c @ v[k] (or c[k] @ v[k] for a stack c of (n, 3, 3)) for every row of v (n, 3), as a
+    stack of matrix-vector products: bit-identical to the per-row product."""
+    return np.matmul(c, v[..., None])[..., 0]
 
-    if topic == "/gnss/fix":
-        if msg.status.status < 0 or not np.isfinite([msg.latitude, msg.longitude,
-                                                     msg.altitude]).all():
-            return None
-        var = np.asarray(msg.position_covariance)[[0, 4, 8]]
-        if msg.position_covariance_type == 0 or not np.all(np.isfinite(var) & (var > 0)):
-            var = np.full(3, config["gnss_sigma_m"] ** 2)
-        return navmod.GnssFix(t, np.radians(msg.latitude), np.radians(msg.longitude),
-                              msg.altitude, np.diag(var))
-    if topic == "/gnss/vel":
-        v = _xyz(msg.twist.twist.linear)
-        var = np.asarray(msg.twist.covariance)[[0, 7, 14]]
-        if not (np.all(np.isfinite(v)) and np.all(np.isfinite(var) & (var > 0))):
-            return None
-        return navmod.GnssVelocity(t, v, np.diag(var))
-    if topic == "/gnss/heading" and config["heading"]:
-        if not (np.isfinite(msg.azimuth) and msg.azimuth_variance > 0):
-            return None
-        return navmod.HeadingFix(t, msg.azimuth, msg.azimuth_variance,
-                                 magnetic=msg.reference == REFERENCE_MAGNETIC)
-    return None
+
+def _vectors(columns, prefix):
+    """(n, 3) array of the x, y, z columns of a Vector3 field from :func:`cdr.decode`."""
+    return np.stack([columns[f"{prefix}.{c}"] for c in "xyz"], -1)
+
+
+def _gnss_measurements(rows, at, t0, config) -> list:
+    """Navigator measurements of the gnss/* rows at positions ``at`` (None where the topic is
+    not used or the message not valid), decoded in bulk per topic."""
+    from ins_gnss_ros.trial import cdr
+
+    out = [None] * len(at)
+    for topic, convert in (("/gnss/fix", _fixes), ("/gnss/vel", _velocities),
+                           ("/gnss/heading", _headings)):
+        sel = [i for i, k in enumerate(at) if rows[k].topic == topic]
+        if not sel or (topic == "/gnss/heading" and not config["heading"]):
+            continue
+        try:
+            cols = cdr.decode(rows[at[sel[0]]].msgtype, [rows[at[i]].data for i in sel])
+        except cdr.CdrLayoutError as err:
+            raise bagio.BagError(f"{topic}: {err}") from None
+        t = ((np.array([rows[at[i]].t_ns for i in sel], np.int64) - t0) * 1e-9).tolist()
+        for i, measurement in zip(sel, convert(cols, t, config)):
+            out[i] = measurement
+    return out
+
+
+def _fixes(c, t, config):
+    """GnssFix of NavSatFix columns: its ENU covariance diagonal, or ``gnss_sigma_m``."""
+    from ins_gnss_ros.nav.navigator import GnssFix
+
+    position = np.stack([c["latitude"], c["longitude"], c["altitude"]], -1)
+    valid = (c["status.status"] >= 0) & np.all(np.isfinite(position), axis=1)
+    var = c["position_covariance"][:, [0, 4, 8]]
+    given = (c["position_covariance_type"] != 0) & np.all(np.isfinite(var) & (var > 0), axis=1)
+    var = np.where(given[:, None], var, config["gnss_sigma_m"] ** 2)
+    lat, lon = np.radians(c["latitude"]).tolist(), np.radians(c["longitude"]).tolist()
+    h = c["altitude"].tolist()
+    return [GnssFix(t[k], lat[k], lon[k], h[k], np.diag(var[k])) if valid[k] else None
+            for k in range(len(t))]
+
+
+def _velocities(c, t, config):
+    """GnssVelocity of TwistWithCovarianceStamped columns (valid: finite, positive variances)."""
+    from ins_gnss_ros.nav.navigator import GnssVelocity
+
+    v = np.stack([c[f"twist.twist.linear.{x}"] for x in "xyz"], -1)
+    var = c["twist.covariance"][:, [0, 7, 14]]
+    valid = np.all(np.isfinite(v), axis=1) & np.all(np.isfinite(var) & (var > 0), axis=1)
+    return [GnssVelocity(t[k], v[k].copy(), np.diag(var[k])) if valid[k] else None
+            for k in range(len(t))]
+
+
+def _headings(c, t, config):
+    """HeadingFix of Heading columns (valid: finite azimuth, positive variance)."""
+    from ins_gnss_ros.nav.navigator import HeadingFix
+
+    valid = np.isfinite(c["azimuth"]) & (c["azimuth_variance"] > 0)
+    azimuth, variance = c["azimuth"].tolist(), c["azimuth_variance"].tolist()
+    magnetic = (c["reference"] == REFERENCE_MAGNETIC).tolist()
+    return [HeadingFix(t[k], azimuth[k], variance[k], magnetic=magnetic[k]) if valid[k]
+            else None for k in range(len(t))]
 
 
 #: ins_gnss_msgs/Heading.REFERENCE_MAGNETIC.
@@ -673,45 +744,54 @@ _MODES = {"ALIGNING": 0, "NAVIGATING": 1, "DEAD_RECKONING": 2}
 
 
 def _write_navigator_output(path, result, t0):
-    """ins/state and nav/odom (map = ENU at the first epoch) of a NavigatorOutput."""
-    from geometry_msgs.msg import Point, Quaternion
-    from nav_msgs.msg import Odometry
-
+    """ins/state and nav/odom (map = ENU at the first epoch) of a NavigatorOutput, serialised
+    in bulk (:mod:`ins_gnss_ros.trial.cdr`; the fields of :func:`bagio.ins_state_msg`)."""
     from ins_gnss_ros.nav.earth import ecef_to_enu, geodetic_to_ecef
     from ins_gnss_ros.nav.rotations import quat_to_dcm
+    from ins_gnss_ros.trial import cdr
 
     writer = bagio.BagWriter(path)
-    if len(result.t) == 0:
+    n = len(result.t)
+    if n == 0:
         return writer.close()
     stamps = bagio.seconds_to_ns(result.t, t0)
     enu = ecef_to_enu(geodetic_to_ecef(result.lat, result.lon, result.h),
                       result.lat[0], result.lon[0], result.h[0])
-    space = result.space
-    c_nb = quat_to_dcm(result.q_nb)
-    for k, t in enumerate(stamps):
-        state = bagio.ins_state_msg(t, result.lat[k], result.lon[k], result.h[k],
-                                    result.v_enu[k], result.q_nb[k])
-        state.mode = _MODES.get(str(result.mode[k]), 3)
-        writer.write("ins/state", state)
-        odom = Odometry(child_frame_id="base_link")
-        odom.header.stamp, odom.header.frame_id = bagio.to_stamp(t), "map"
-        odom.pose.pose.position = Point(x=float(enu[k, 0]), y=float(enu[k, 1]),
-                                        z=float(enu[k, 2]))
-        q = result.q_nb[k]
-        odom.pose.pose.orientation = Quaternion(w=float(q[0]), x=float(q[1]), y=float(q[2]),
-                                                z=float(q[3]))
-        v_body = c_nb[k].T @ result.v_enu[k]
-        odom.twist.twist.linear.x, odom.twist.twist.linear.y, odom.twist.twist.linear.z = (
-            float(x) for x in v_body)
-        if result.P is not None:
-            P = result.P[k]
-            pose = np.zeros((6, 6))
-            pose[:3, :3] = P[space["pos"], space["pos"]]
-            pose[3:, 3:] = P[space["att"], space["att"]]
-            twist = np.full((6, 6), 0.0)
-            twist[:3, :3] = c_nb[k].T @ P[space["vel"], space["vel"]] @ c_nb[k]
-            twist[3:, 3:] = -np.eye(3)  # angular rate not estimated
-            odom.pose.covariance = pose.ravel().tolist()
-            odom.twist.covariance = twist.ravel().tolist()
-        writer.write("nav/odom", odom)
+    q, c_nb = result.q_nb, quat_to_dcm(result.q_nb)
+    c_bn = c_nb.transpose(0, 2, 1)
+    sec, nanosec = np.divmod(stamps, 1_000_000_000)
+    header = {"header.stamp.sec": sec, "header.stamp.nanosec": nanosec}
+    orientation = {f"orientation.{c}": q[:, i] for i, c in enumerate("wxyz")}
+    unknown = np.full((n, 3), np.nan)
+    state = dict(header, latitude=result.lat, longitude=result.lon, altitude=result.h,
+                 mode=[_MODES.get(str(mode), 3) for mode in result.mode],
+                 correction_sequence=0, **_fields("velocity", result.v_enu), **orientation,
+                 **_fields("angular_velocity", unknown), **_fields("specific_force", unknown),
+                 **_fields("gyro_bias", unknown), **_fields("accel_bias", unknown),
+                 **_fields("gyro_scale_factor", np.zeros((n, 3))),
+                 **_fields("accel_scale_factor", np.zeros((n, 3))))
+    pose, twist = np.zeros((n, 6, 6)), np.zeros((n, 6, 6))
+    if result.P is not None:
+        space = result.space
+        pose[:, :3, :3] = result.P[:, space["pos"], space["pos"]]
+        pose[:, 3:, 3:] = result.P[:, space["att"], space["att"]]
+        twist[:, :3, :3] = c_bn @ result.P[:, space["vel"], space["vel"]] @ c_nb
+        twist[:, 3:, 3:] = -np.eye(3)  # angular rate not estimated
+    odom = dict(header, **_fields("pose.pose.position", enu),
+                **{"pose.pose." + k: v for k, v in orientation.items()},
+                **_fields("twist.twist.linear", _rotate(c_bn, result.v_enu)),
+                **_fields("twist.twist.angular", np.zeros((n, 3))),
+                **{"pose.covariance": pose.reshape(n, 36),
+                   "twist.covariance": twist.reshape(n, 36)})
+    states = cdr.encode("ins_gnss_msgs/msg/InsState", state, {"header.frame_id": "map"})
+    odoms = cdr.encode("nav_msgs/msg/Odometry", odom,
+                       {"header.frame_id": "map", "child_frame_id": "base_link"})
+    for t, state_data, odom_data in zip(stamps.tolist(), states, odoms):
+        writer.write_raw("ins/state", "ins_gnss_msgs/msg/InsState", t, state_data)
+        writer.write_raw("nav/odom", "nav_msgs/msg/Odometry", t, odom_data)
     return writer.close()
+
+
+def _fields(prefix, xyz):
+    """x, y, z columns of a Vector3/Point field for :func:`cdr.encode` from (n, 3) values."""
+    return {f"{prefix}.{c}": xyz[:, i] for i, c in enumerate("xyz")}
