@@ -36,7 +36,7 @@ from ins_gnss_ros.gnss.atmosphere import tropo_delay
 from ins_gnss_ros.gnss.constants import C_LIGHT
 from ins_gnss_ros.gnss.ephemeris import elevation_azimuth, satellite_at_reception
 from ins_gnss_ros.gnss.nav_decode import NavDataAssembler
-from ins_gnss_ros.gnss.observations import NavSubframe, PvtFix, RawEpoch
+from ins_gnss_ros.gnss.observations import PvtFix, RawEpoch
 from ins_gnss_ros.gnss.spp import SppConfig, select_measurements, solve_position
 from ins_gnss_ros.gnss.stream import decode_file
 from ins_gnss_ros.gnss.time import GPS_EPOCH
@@ -59,15 +59,10 @@ NAD83 = dict(t=(1.0039, -1.90961, -0.54117), dt=(0.79e-3, -0.70e-3, -1.24e-3),
 def load(folder):
     """RawEpochs, NAV-PVT fixes, ephemerides and the .pos reference of the walk."""
     records, _ = decode_file(folder / "gnss_1730.ubx")
-    assembler, t_gps = NavDataAssembler(), None
-    for record in records:
-        if isinstance(record, RawEpoch):
-            t_gps = record.t_gps
-        elif isinstance(record, NavSubframe) and t_gps is not None:
-            assembler.add(record, t_gps)
     epochs = [r for r in records if isinstance(r, RawEpoch)]
     pvts = [r for r in records if isinstance(r, PvtFix)]
-    return epochs, pvts, assembler.ephemerides, read_pos(folder / "gnss_1730_sf.pos")
+    return epochs, pvts, NavDataAssembler().add_records(records), \
+        read_pos(folder / "gnss_1730_sf.pos")
 
 
 def spp_errors(epochs, pvts, ephemerides, config, systems):

@@ -10,7 +10,7 @@ from conftest import shared_path
 from ins_gnss_ros.gnss.atmosphere import tropo_delay
 from ins_gnss_ros.gnss.ephemeris import group_delay, sat_position
 from ins_gnss_ros.gnss.nav_decode import NavDataAssembler
-from ins_gnss_ros.gnss.observations import NavSubframe, PvtFix, RawEpoch, SatObs
+from ins_gnss_ros.gnss.observations import PvtFix, RawEpoch, SatObs
 from ins_gnss_ros.gnss.spp import SppConfig, solve_position, solve_velocity
 from ins_gnss_ros.gnss.stream import Decoder
 
@@ -30,13 +30,7 @@ def recorded():
     """Records of the walk stream and the ephemerides broadcast in it."""
     data = shared_path("data", "walk_0827", "gnss_1730.ubx").read_bytes()
     records = Decoder().feed(data)
-    assembler, t_gps = NavDataAssembler(), None
-    for record in records:
-        if isinstance(record, RawEpoch):
-            t_gps = record.t_gps
-        elif isinstance(record, NavSubframe) and t_gps is not None:
-            assembler.add(record, t_gps)
-    return records, assembler.ephemerides
+    return records, NavDataAssembler().add_records(records)
 
 
 def _simulate(ephemerides, clocks, vel_enu=(0.0, 0.0, 0.0), drift=0.0, faults=None):

@@ -420,6 +420,20 @@ class NavDataAssembler:
             return self._add_glonass(unit, t_gps, leap_s)
         return []
 
+    def add_records(self, records):
+        """Assemble every `NavSubframe` of a decoded stream (records in stream order), each
+        with the GPS time and leap seconds of the last RXM-RAWX epoch before it (units before
+        the first epoch cannot be dated and are skipped). Returns :attr:`ephemerides`."""
+        from .observations import NavSubframe, RawEpoch
+
+        t_gps, leap = None, 18
+        for record in records:
+            if isinstance(record, RawEpoch):
+                t_gps, leap = record.t_gps, record.leap_s
+            elif isinstance(record, NavSubframe) and t_gps is not None:
+                self.add(record, t_gps, leap)
+        return self.ephemerides
+
     def _store(self, key, part, value):
         parts = self._parts.setdefault(key, {})
         parts[part] = value
