@@ -382,3 +382,33 @@ def test_strapdown_node_survives_corrupted_increments(ros_context):
     assert faulty.velocity.z == pytest.approx(clean.velocity.z, abs=1e-6)
     assert faulty.altitude == pytest.approx(clean.altitude, abs=1e-6)
     assert faulty.mode == clean.mode
+
+
+@pytest.mark.parametrize("node_name", ["strapdown", "ekf"])
+def test_absurd_increments_fed_directly_are_dropped(ros_context, node_name):
+    """Without the imu_preprocessor's range checks in front of them, the strapdown and the ekf
+    still refuse increments beyond any IMU (here 1e12 rad per 10 ms) and count them."""
+    from ins_gnss_msgs.msg import ImuDelta
+
+    from ins_gnss_ros.nodes.base import InProcessBus
+    from ins_gnss_ros.nodes.registry import node_class
+
+    spec = load_fault_spec("faults: [{kind: absurd, topic: imu/delta, start: 0.5, duration: 0.3, "
+                           "field: delta_angle.x}]", text=True)  # value: 1e12 rad
+    bus = InProcessBus()
+    node = node_class(node_name)(bus=bus, context=ros_context, start_parameter_services=False)
+
+    def deltas():
+        for k in range(1, 201):
+            t = T0 + k * S // 100
+            m = ImuDelta(dt=0.01)
+            m.header.stamp = to_stamp(t)
+            m.delta_velocity.z = 9.819 * 0.01
+            yield t, "/imu/delta", m
+
+    for t, topic, msg in inject(deltas(), spec):
+        bus.now_ns = t
+        bus.publish(topic, msg)
+        bus.drain()
+    assert node.diag.counts["implausible increment dropped"] == 30
+    node.destroy_node()

@@ -44,6 +44,26 @@ def finite_vector3(*vectors: Vector3) -> bool:
     return all(math.isfinite(c) for v in vectors for c in (v.x, v.y, v.z))
 
 
+#: Bounds of a physically possible increment: angular rate (rad/s, ~5700 deg/s) and specific
+#: force (m/s^2, ~1000 g), far beyond any navigation IMU's range. A value past them is a corrupt
+#: message: integrated, it would wreck the state and the filter's covariance (a 1e12 rad
+#: increment made the ekf's innovation covariance non-positive-definite).
+MAX_RATE, MAX_SPECIFIC_FORCE = 100.0, 1e4
+
+
+def increment_problem(msg) -> str | None:
+    """Why an ImuDelta cannot be integrated (non-finite, non-positive dt, beyond MAX_RATE or
+    MAX_SPECIFIC_FORCE), or None."""
+    if not (math.isfinite(msg.dt) and msg.dt > 0.0
+            and finite_vector3(msg.delta_angle, msg.delta_velocity)):
+        return "non-finite or non-positive increment dropped"
+    a, v = msg.delta_angle, msg.delta_velocity
+    if (math.sqrt(a.x * a.x + a.y * a.y + a.z * a.z) > MAX_RATE * msg.dt
+            or math.sqrt(v.x * v.x + v.y * v.y + v.z * v.z) > MAX_SPECIFIC_FORCE * msg.dt):
+        return "implausible increment dropped"
+    return None
+
+
 def to_vector3(a) -> Vector3:
     return Vector3(x=float(a[0]), y=float(a[1]), z=float(a[2]))
 

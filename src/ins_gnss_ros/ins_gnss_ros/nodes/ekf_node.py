@@ -54,7 +54,7 @@ from ..nav.rotations import quat_to_dcm
 from ..nav.strapdown import NavState
 from ..nav.sensor_errors import GRADES, BlockNoise, FilterNoise, filter_noise
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
-from .convert import (finite_vector3, nav_state_from_msg, sec_to_stamp, stamp_to_sec,
+from .convert import (increment_problem, nav_state_from_msg, sec_to_stamp, stamp_to_sec,
                       to_quaternion, to_vector3, vec)
 from .gnss_convert import kepler_from_msg, raw_epoch_from_msg
 
@@ -245,8 +245,9 @@ class EkfNode(NavNode):
 
     # -- inputs --------------------------------------------------------------------------------
     def on_delta(self, msg: ImuDelta) -> None:
-        if not finite_vector3(msg.delta_angle, msg.delta_velocity):
-            self.diag.count("non-finite increment dropped")
+        problem = increment_problem(msg)
+        if problem is not None:
+            self.diag.count(problem)
             return
         dtheta, dv = vec(msg.delta_angle), vec(msg.delta_velocity)
         t = stamp_to_sec(msg.header.stamp)

@@ -18,7 +18,6 @@ filter has re-synchronised it.
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -29,7 +28,7 @@ from ..nav.conventions import yaw_from_azimuth
 from ..nav.rotations import quat_from_euler
 from ..nav.strapdown import NavState, Strapdown
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, run
-from .convert import fill_ins_state, finite_vector3, set_vector3, stamp_to_sec, vec
+from .convert import fill_ins_state, increment_problem, set_vector3, stamp_to_sec, vec
 
 
 @dataclass
@@ -107,9 +106,9 @@ class StrapdownNode(NavNode):
 
     # -- increments ----------------------------------------------------------------------------
     def on_delta(self, msg: ImuDelta) -> None:
-        if not (math.isfinite(msg.dt) and msg.dt > 0.0
-                and finite_vector3(msg.delta_angle, msg.delta_velocity)):
-            self.diag.count("non-finite or non-positive increment dropped")
+        problem = increment_problem(msg)
+        if problem is not None:
+            self.diag.count(problem)
             return
         t = stamp_to_sec(msg.header.stamp)
         dtheta, dv = vec(msg.delta_angle), vec(msg.delta_velocity)
