@@ -340,24 +340,27 @@ def test_summary_is_plain_data():
     assert rec["last_ns"] == T0 + 4 * S
 
 
+def _stationary_deltas():
+    """2 s of 100 Hz imu/delta at rest (gravity only, no rotation), from T0."""
+    from ins_gnss_msgs.msg import ImuDelta
+
+    for k in range(1, 201):
+        t = T0 + k * S // 100
+        m = ImuDelta(dt=0.01)
+        m.header.stamp = to_stamp(t)
+        m.delta_velocity.z = 9.819 * 0.01
+        yield t, "/imu/delta", m
+
+
 def test_strapdown_node_survives_corrupted_increments(ros_context):
     """Through the in-process bus: NaN increments are counted and skipped, the state stays finite,
     and the gap they leave is bridged by holding the rates of the next increment: on this
     stationary stream (constant increments) that is exact, so nothing is lost. Integrating the
     one increment after the gap over the whole gap instead would lose the reaction to gravity
     of the skipped 0.3 s: free fall, g * 0.3 s of vertical velocity."""
-    from ins_gnss_msgs.msg import ImuDelta
 
     from ins_gnss_ros.nodes.base import InProcessBus
     from ins_gnss_ros.nodes.strapdown_node import StrapdownNode
-
-    def deltas():
-        for k in range(1, 201):
-            t = T0 + k * S // 100
-            m = ImuDelta(dt=0.01)
-            m.header.stamp = to_stamp(t)
-            m.delta_velocity.z = 9.819 * 0.01
-            yield t, "/imu/delta", m
 
     spec = load_fault_spec("faults: [{kind: nan, topic: imu/delta, start: 0.5, duration: 0.3, "
                            "field: delta_angle.x}]", text=True)
@@ -367,7 +370,7 @@ def test_strapdown_node_survives_corrupted_increments(ros_context):
         node = StrapdownNode(bus=bus, context=ros_context, start_parameter_services=False)
         states = []
         bus.subscribe("/ins/state", states.append)
-        src = deltas() if faults is None else inject(deltas(), faults)
+        src = _stationary_deltas() if faults is None else inject(_stationary_deltas(), faults)
         for t, topic, msg in src:
             bus.now_ns = t
             bus.publish(topic, msg)
@@ -388,7 +391,6 @@ def test_strapdown_node_survives_corrupted_increments(ros_context):
 def test_absurd_increments_fed_directly_are_dropped(ros_context, node_name):
     """Without the imu_preprocessor's range checks in front of them, the strapdown and the ekf
     still refuse increments beyond any IMU (here 1e12 rad per 10 ms) and count them."""
-    from ins_gnss_msgs.msg import ImuDelta
 
     from ins_gnss_ros.nodes.base import InProcessBus
     from ins_gnss_ros.nodes.registry import node_class
@@ -398,15 +400,8 @@ def test_absurd_increments_fed_directly_are_dropped(ros_context, node_name):
     bus = InProcessBus()
     node = node_class(node_name)(bus=bus, context=ros_context, start_parameter_services=False)
 
-    def deltas():
-        for k in range(1, 201):
-            t = T0 + k * S // 100
-            m = ImuDelta(dt=0.01)
-            m.header.stamp = to_stamp(t)
-            m.delta_velocity.z = 9.819 * 0.01
-            yield t, "/imu/delta", m
 
-    for t, topic, msg in inject(deltas(), spec):
+    for t, topic, msg in inject(_stationary_deltas(), spec):
         bus.now_ns = t
         bus.publish(topic, msg)
         bus.drain()
