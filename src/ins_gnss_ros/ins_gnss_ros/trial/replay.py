@@ -33,6 +33,7 @@ from __future__ import annotations
 import copy
 import json
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -490,7 +491,7 @@ def stop_processes(procs, timeout=10.0) -> None:
     procs = list(procs)
     for p in procs:
         if p.poll() is None:
-            p.send_signal(2)
+            p.send_signal(signal.SIGINT)
     for p in procs:
         try:
             p.wait(timeout)

@@ -114,14 +114,8 @@ class Supervisor:
         return 0
 
     def _shutdown(self, timeout=10.0) -> None:
-        running = [r.process for r in self.nodes.values()
-                   if r.process is not None and r.process.poll() is None]
-        for process in running:
-            process.send_signal(signal.SIGINT)
-        for process in running:
-            try:
-                process.wait(timeout)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait()
+        from .replay import stop_processes
+
+        stop_processes([r.process for r in self.nodes.values() if r.process is not None],
+                       timeout)
         self.report("stopped")
