@@ -11,7 +11,11 @@ replayed as fast as possible
 and the wall time of each replay, bag reading and writing included, is compared with the 600 s
 of the trial. Targets: >= 10x for the graph, >= 100x for the offline path.
 
-    .venv/bin/python bench/bench_replay.py [--duration 600] [--keep DIR]
+    .venv/bin/python bench/bench_replay.py [--duration 600] [--keep DIR] [--offline-only]
+
+``--offline-only`` times the offline path alone (after an untimed offline replay of a 10 s
+trial, which loads the numba kernels as the graph replays do before it in the full bench): the
+quick A/B of filter-code changes, alternating two source trees on PYTHONPATH.
 """
 from __future__ import annotations
 
@@ -45,6 +49,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=600.0, help="trial length, s")
     parser.add_argument("--keep", default=None, help="work folder to keep (default: temporary)")
+    parser.add_argument("--offline-only", action="store_true",
+                        help="time only the offline filter path (warmed up on a 10 s trial)")
     args = parser.parse_args()
 
     from ins_gnss_ros.trial import bag as bagio
@@ -59,28 +65,33 @@ def main() -> None:
     full.write_text(FULL_GRAPH)
     t = time.perf_counter()
     bag = simulate("car", args.duration, 1, work / "car", SimOptions(imu_topic="delta"))
-    raw = simulate("car", args.duration, 1, work / "car_raw")
-    print(f"simulated {args.duration:.0f} s car trial twice (200 Hz imu/delta, imu/data_raw; "
-          f"5 Hz GNSS) in {time.perf_counter() - t:.1f} s: "
-          f"{sum(1 for _ in bagio.iter_bag(bag))} messages each")
-
-    t = time.perf_counter()
-    n = len(bagio.read_bag(bag))
-    read = time.perf_counter() - t
-    print(f"read + decode the bag alone: {read:.1f} s ({n / read:,.0f} msg/s)")
-    t = time.perf_counter()
-    rows = bagio.read_raw(bag)
-    cdr.decode("ins_gnss_msgs/msg/ImuDelta", [r.data for r in rows if r.topic == "/imu/delta"])
-    read = time.perf_counter() - t
-    print(f"read undecoded + bulk-decode imu/delta (the offline path's reading): {read:.1f} s "
-          f"({len(rows) / read:,.0f} msg/s)")
-
-    runs = (("strapdown node alone, in-process", replay, bag, strapdown, "strapdown",
-             {"init_from_truth": True}, 10.0),
-            ("full graph imu_preprocessor+strapdown+ekf, in-process", replay, raw, full, "full",
-             {"init_from_truth": True}, 10.0),
-            ("offline filter path (navigator)", replay_offline, bag, strapdown, "offline", {},
-             100.0))
+    offline = ("offline filter path (navigator)", replay_offline, bag, strapdown, "offline", {},
+               100.0)
+    if args.offline_only:
+        # Loads the numba kernels (compiled machine code from the cache), untimed.
+        replay_offline(simulate("car", 10.0, 1, work / "car_warmup", SimOptions(imu_topic="delta")),
+                       strapdown, work / "warmup")
+        runs = (offline,)
+    else:
+        raw = simulate("car", args.duration, 1, work / "car_raw")
+        print(f"simulated {args.duration:.0f} s car trial twice (200 Hz imu/delta, imu/data_raw; "
+              f"5 Hz GNSS) in {time.perf_counter() - t:.1f} s: "
+              f"{sum(1 for _ in bagio.iter_bag(bag))} messages each")
+        t = time.perf_counter()
+        n = len(bagio.read_bag(bag))
+        read = time.perf_counter() - t
+        print(f"read + decode the bag alone: {read:.1f} s ({n / read:,.0f} msg/s)")
+        t = time.perf_counter()
+        rows = bagio.read_raw(bag)
+        cdr.decode("ins_gnss_msgs/msg/ImuDelta", [r.data for r in rows if r.topic == "/imu/delta"])
+        read = time.perf_counter() - t
+        print(f"read undecoded + bulk-decode imu/delta (the offline path's reading): {read:.1f} s "
+              f"({len(rows) / read:,.0f} msg/s)")
+        runs = (("strapdown node alone, in-process", replay, bag, strapdown, "strapdown",
+                 {"init_from_truth": True}, 10.0),
+                ("full graph imu_preprocessor+strapdown+ekf, in-process", replay, raw, full,
+                 "full", {"init_from_truth": True}, 10.0),
+                offline)
     for name, function, trial, profile, folder, kwargs, target in runs:
         out = work / folder
         t, cpu = time.perf_counter(), time.process_time()
@@ -91,7 +102,6 @@ def main() -> None:
         print(f"{name}: {wall:.1f} s wall ({cpu:.1f} s CPU) for {args.duration:.0f} s of trial = "
               f"{args.duration / wall:.1f}x real time ({args.duration / cpu:.1f}x per CPU "
               f"second; target >= {target:g}x), {outputs} output messages")
-
 
 if __name__ == "__main__":
     main()

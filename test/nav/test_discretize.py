@@ -199,3 +199,25 @@ def test_mems_at_10_hz_needs_order_5():
     for nu in (5, 6):
         assert dz.psd_margin(dz.picard_process_noise(F, Q, 0.1, nu)) > 0.0
     assert dz.DEFAULT_ORDER >= 5
+
+
+def test_compiled_series_equal_the_dense_formulas():
+    # The compiled series against the plain numpy formulas of Babich eqs. 2.5-2.9 and 4.5.
+    F, Q = seed_case()
+    rng = np.random.default_rng(4)
+    A = rng.normal(size=F.shape) * 1e-2
+    P = A @ A.T + np.eye(F.shape[0]) * 1e-4
+    dt, order = 0.1, 5
+    phi, term = np.eye(len(F)), np.eye(len(F))
+    K, Pk = P.copy(), P.copy()
+    for i in range(1, order + 1):
+        term = term @ F * (dt / i)
+        phi += term
+        K = F @ K + K @ F.T + (Q if i == 1 else 0.0)
+        Pk += K * dt ** i / np.prod(np.arange(1, i + 1))
+    np.testing.assert_allclose(dz.picard_transition(F, dt, order), phi, rtol=1e-13, atol=1e-16)
+    np.testing.assert_allclose(dz.picard_predict(P, F, Q, dt, order), Pk, rtol=1e-12,
+                               atol=1e-18)
+    # Any array layout is accepted (the kernels are compiled for C-contiguous float64).
+    np.testing.assert_array_equal(dz.picard_transition(np.asfortranarray(F), dt, order),
+                                  dz.picard_transition(F, dt, order))

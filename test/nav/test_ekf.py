@@ -100,3 +100,41 @@ def test_nis_and_gate_values():
     nu = np.array([1.0, -2.0])
     assert normalised_innovation(nu, S) == pytest.approx(nu @ np.linalg.solve(S, nu))
     assert chi2_gate(3, 0.99) == pytest.approx(11.344866730144373)
+
+
+def test_update_matches_textbook_joseph_form():
+    # The compiled update (Cholesky NIS and gain, products skipping H's zero columns) against
+    # the plain formulas: K = P H^T S^-1, x + K nu, (I - K H) P (I - K H)^T + K R K^T.
+    rng = np.random.default_rng(5)
+    space = StateSpace(make_layout("21", NOISE), {"td": ExtraState(1, 0.01)})
+    n = space.size
+    A = rng.standard_normal((n, n))
+    P = A @ A.T + np.eye(n)
+    x = rng.normal(0.0, 0.1, n)
+    H = np.zeros((3, n))
+    H[:, 3:9] = rng.standard_normal((3, 6))   # velocity and attitude columns only
+    H[:, space["bg"]] = rng.standard_normal((3, 3))
+    R = np.diag([0.5, 1.0, 2.0])
+    z = rng.standard_normal(3)
+    ekf = ErrorStateEKF(space, NOISE, P)
+    ekf.x = x.copy()
+    res = ekf.update("m", 0.0, z, H, R, gate_prob=None)
+    nu = z - H @ x
+    S = H @ P @ H.T + R
+    K = P @ H.T @ np.linalg.inv(S)
+    I_KH = np.eye(n) - K @ H
+    assert res.accepted
+    np.testing.assert_allclose(res.innovation, nu, rtol=1e-14)
+    np.testing.assert_allclose(res.s_diag, np.diag(S), rtol=1e-14)
+    assert res.nis == pytest.approx(nu @ np.linalg.solve(S, nu), rel=1e-12)
+    np.testing.assert_allclose(ekf.x, x + K @ nu, rtol=1e-11, atol=1e-14)
+    np.testing.assert_allclose(ekf.P, I_KH @ P @ I_KH.T + K @ R @ K.T, rtol=1e-11, atol=1e-13)
+    np.testing.assert_array_equal(ekf.P, ekf.P.T)
+
+
+def test_update_refuses_an_indefinite_innovation_covariance():
+    ekf, space = scalar_filter(1.0)
+    H = np.zeros((1, space.size))
+    H[0, 9] = 1.0
+    with pytest.raises(np.linalg.LinAlgError):
+        ekf.update("c", 0.0, [1.0], H, [[-5.0]])  # S = 1 - 5 < 0, as np.linalg.cholesky does

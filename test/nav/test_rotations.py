@@ -79,3 +79,16 @@ def test_angle_between():
     dq = rot.quat_from_rotvec([0.0, 0.0, 0.25])
     assert rot.quat_angle_between(q1, rot.quat_mul(q1, dq)) == pytest.approx(0.25, abs=1e-15)
     assert rot.quat_angle_between(q1, -q1) == pytest.approx(0.0, abs=1e-15)
+
+
+def test_single_vectors_equal_rows_of_stacks(rand):
+    # skew, cross and quat_to_dcm take Python floats for one vector (faster): the results must
+    # be bit-identical to those of a stack, in either broadcasting position.
+    _, q = rand
+    a, b = np.random.default_rng(3).normal(size=(2, 20, 3))
+    for k in range(20):
+        np.testing.assert_array_equal(rot.quat_to_dcm(q[k]), rot.quat_to_dcm(q[:20])[k])
+        np.testing.assert_array_equal(rot.skew(a[k]), rot.skew(a)[k])
+        np.testing.assert_array_equal(rot.cross(a[k], b[k]), rot.cross(a, b)[k])
+        np.testing.assert_array_equal(rot.cross(a[k], b), rot.cross(a[k][None], b))
+    assert rot.cross(a[0], b[0]).shape == (3,) and rot.skew(a[0]).shape == (3, 3)

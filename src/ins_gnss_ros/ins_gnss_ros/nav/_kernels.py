@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import guvectorize, njit
 
 from . import earth
 
@@ -219,3 +219,252 @@ def coning_sculling_run(dtheta, dv, prev_th, prev_v, two_sample, phi, dv_nav):
             dv_nav[k, j] = ups[j] + scu[j]
         # Rotation compensation 1/2 alpha x upsilon of the whole interval.
         _cross_acc(dv_nav[k], 0.5, alpha[0], alpha[1], alpha[2], ups[0], ups[1], ups[2])
+
+
+# --------------------------------------------------------------------------------------------
+# Error-state filter: system matrix, Picard propagation, measurement update, lever arm
+# (equations in error_model.py, discretize.py, ekf.py and lever_arm.py). These kernels replace
+# per-epoch chains of small numpy operations, each of which cost more than its arithmetic.
+# They do the same operations in the same order, matrix products with `@` (the same BLAS
+# routines as numpy's), so that the filter's results are those of the numpy formulation bit
+# for bit (a gate or mode decision can hinge on the last bit; see correct()). One known
+# exception: a square x ** 2 is an exact product here, numpy's float64 ** 2 is libm's pow,
+# which differs in the last bit for ~0.1 % of arguments (system_matrix's d/dh column).
+# --------------------------------------------------------------------------------------------
+
+_normal_gravity_dh = njit(cache=True)(earth._normal_gravity_dh)
+
+#: Sensor-error column kinds of :func:`system_matrix` (error_model.StateLayout.sensor_plan).
+BIAS, SCALE, NONORTHOGONALITY, G_SENSITIVITY = 0, 1, 2, 3
+
+
+@njit(cache=True)
+def _skew(x, y, z):
+    """[v x] of v = (x, y, z)."""
+    S = np.zeros((3, 3))
+    S[0, 1], S[0, 2] = -z, y
+    S[1, 0], S[1, 2] = z, -x
+    S[2, 0], S[2, 1] = -y, x
+    return S
+
+
+@njit(cache=True)
+def _dcm(q):
+    """C_nb of a unit quaternion (rotations.quat_to_dcm)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    C = np.empty((3, 3))
+    C[0, 0] = w * w + x * x - y * y - z * z
+    C[0, 1] = 2 * (x * y - w * z)
+    C[0, 2] = 2 * (x * z + w * y)
+    C[1, 0] = 2 * (x * y + w * z)
+    C[1, 1] = w * w - x * x + y * y - z * z
+    C[1, 2] = 2 * (y * z - w * x)
+    C[2, 0] = 2 * (x * z - w * y)
+    C[2, 1] = 2 * (y * z + w * x)
+    C[2, 2] = w * w - x * x - y * y + z * z
+    return C
+
+
+@njit(cache=True)
+def system_matrix(F, lat, h, v, q, f_b, w_ib_b, ell_par, sensors, misalign_index):
+    """Fill the continuous system matrix F (zeroed, n x n) of error_model.system_matrix.
+
+    sensors : (k, 3) int rows (kind, first column, 1 for a gyro block / 0 for an accelerometer
+    block); misalign_index : (6, 2) int, sensor_errors.MISALIGN_INDEX.
+    """
+    a, f, e2, m, omega, gamma_e, ksom = ell_par
+    ve, vn, vu = v[0], v[1], v[2]
+    rm, rn = _radii(lat, a, e2)
+    RM, RN = rm + h, rn + h
+    s, c = math.sin(lat), math.cos(lat)
+    t = s / c
+    w = 1.0 - e2 * s * s
+    drn = rn * e2 * s * c / w          # d R_N / d lat
+    drm = 3.0 * rm * e2 * s * c / w    # d R_M / d lat
+    w_ie = (0.0, omega * c, omega * s)
+    w_en = (-vn / RM, ve / RN, ve * math.tan(lat) / RN)
+
+    # Partial derivatives of omega_ie and omega_en w.r.t. dp (ENU metres) and dv. Nothing
+    # depends on longitude, and d lat = dp_N / RM, d h = dp_U.
+    dwie_dp = np.zeros((3, 3))
+    dwie_dp[1, 1] = -omega * s / RM
+    dwie_dp[2, 1] = omega * c / RM
+    dwen_dp = np.zeros((3, 3))
+    dwen_dp[0, 1] = vn * drm / RM ** 2 / RM
+    dwen_dp[1, 1] = -ve * drn / RN ** 2 / RM
+    dwen_dp[2, 1] = (ve / (c * c * RN) - ve * t * drn / RN ** 2) / RM
+    dwen_dp[0, 2] = vn / RM ** 2
+    dwen_dp[1, 2] = -ve / RN ** 2
+    dwen_dp[2, 2] = -ve * t / RN ** 2
+    dwen_dv = np.zeros((3, 3))
+    dwen_dv[0, 1] = -1.0 / RM
+    dwen_dv[1, 0] = 1.0 / RN
+    dwen_dv[2, 0] = t / RN
+
+    # Position rows: d/dt[(RN cos lat) dlon] and d/dt[RM dlat]; the d RM/d lat terms cancel
+    # exactly, the d RN/d lat ones do not.
+    F[0, 0] = vu / RN - vn * t / RM + vn * drn / (RN * RM)
+    F[0, 1] = ve * t / RM - ve * drn / (RN * RM)
+    F[0, 2] = -ve / RN
+    F[1, 1] = vu / RM
+    F[1, 2] = -vn / RM
+    for i in range(3):
+        F[i, 3 + i] = 1.0
+
+    # Velocity rows.
+    V = _skew(ve, vn, vu)
+    Vp = V @ (2.0 * dwie_dp + dwen_dp)
+    Vv = -_skew(2.0 * w_ie[0] + w_en[0], 2.0 * w_ie[1] + w_en[1], 2.0 * w_ie[2] + w_en[2]) \
+        + V @ dwen_dv
+    C = _dcm(q)
+    f_n = C @ f_b
+    Va = _skew(f_n[0], f_n[1], f_n[2])
+    # Gravity [0, 0, -g(lat, h)]: vertical gradient, and the (tiny) latitude variation.
+    dg_dlat = (_normal_gravity(lat + 1e-6, h, a, f, e2, m, gamma_e, ksom)
+               - _normal_gravity(lat - 1e-6, h, a, f, e2, m, gamma_e, ksom)) / 2e-6
+    Vp[2, 1] += -dg_dlat / (rm + h)
+    Vp[2, 2] += -_normal_gravity_dh(lat, h, _normal_gravity(lat, 0.0, a, f, e2, m, gamma_e, ksom),
+                                    a, f, m)
+    # Attitude rows.
+    Ap = dwie_dp + dwen_dp
+    Aa = -_skew(w_ie[0] + w_en[0], w_ie[1] + w_en[1], w_ie[2] + w_en[2])
+    for i in range(3):
+        for j in range(3):
+            F[3 + i, j] = Vp[i, j]
+            F[3 + i, 3 + j] = Vv[i, j]
+            F[3 + i, 6 + j] = Va[i, j]
+            F[6 + i, j] = Ap[i, j]
+            F[6 + i, 3 + j] = dwen_dv[i, j]
+            F[6 + i, 6 + j] = Aa[i, j]
+
+    # Sensor errors enter through C df (velocity rows) and -C dw (attitude rows), df and dw
+    # the increment errors of a triad measuring x_b (f_b or w_ib_b).
+    for k in range(sensors.shape[0]):
+        kind, col, gyro = sensors[k, 0], sensors[k, 1], sensors[k, 2]
+        row, sign = (6, -1.0) if gyro else (3, 1.0)
+        x_b = w_ib_b if gyro else f_b
+        for i in range(3):
+            if kind == BIAS:
+                for j in range(3):
+                    F[row + i, col + j] = sign * C[i, j]
+            elif kind == SCALE:
+                for j in range(3):
+                    F[row + i, col + j] = sign * (C[i, j] * x_b[j])
+            elif kind == NONORTHOGONALITY:
+                # C Gamma(x_b), Babich eq. 5.4: column k is C[:, r] x_b[s] for the (r, s) term.
+                for j in range(6):
+                    F[row + i, col + j] = sign * (C[i, misalign_index[j, 0]]
+                                                  * x_b[misalign_index[j, 1]])
+            else:  # G_SENSITIVITY: C kron(I, f_b^T), rate error = G f_b with G row-major.
+                for r in range(3):
+                    for j in range(3):
+                        F[row + i, col + 3 * r + j] = sign * (C[i, r] * f_b[j])
+
+
+@njit(cache=True)
+def picard_transition(F, dt, order):
+    """sum_{i=0..order} (F dt)^i / i!; see discretize.picard_transition."""
+    term = np.eye(F.shape[0])
+    phi = term.copy()
+    for i in range(1, order + 1):
+        term = term @ F * (dt / i)
+        phi += term
+    return phi
+
+
+@njit(cache=True)
+def lyapunov_series(F, P0, Q, dt, order):
+    """sum_{i=0..order} K_i dt^i / i!, K_0 = P0, K_1 = F K_0 + K_0 F^T + Q,
+    K_{i+1} = F K_i + K_i F^T, symmetrised; see discretize._lyapunov_series."""
+    K = P0
+    out = K.copy()
+    coeff = 1.0
+    for i in range(1, order + 1):
+        FK = F @ K
+        # Each K_i is symmetric, so F K + K F^T = FK + FK^T: one product per order.
+        K = FK + FK.T
+        if i == 1:
+            K = K + Q
+        coeff *= dt / i
+        out += K * coeff
+    return 0.5 * (out + out.T)
+
+
+@njit(cache=True)
+def kalman_update(P, H, R, nu, gate, force, joseph, min_variance):
+    """Gated covariance update of ekf.ErrorStateEKF.update, with numpy's BLAS/LAPACK routines
+    in the order of the numpy formulation (the same results, bit for bit).
+
+    S = H P H^T + R (symmetrised), NIS = |L^-1 nu|^2 with L the Cholesky factor of S
+    (gating.normalised_innovation). If NIS <= gate or `force`: K = P H^T S^-1 and the Joseph
+    form (I - K H) P (I - K H)^T + K R K^T (or P - K H P), symmetrised, with the diagonal floored
+    at min_variance.
+
+    Returns (S, nis, K^T, P); K^T and P are empty when the measurement is not applied. Raises
+    LinAlgError if S is not positive definite, as np.linalg.cholesky does.
+    """
+    PHt = P @ H.T
+    S = H @ PHt + R
+    S = 0.5 * (S + S.T)
+    w = np.linalg.solve(np.linalg.cholesky(S), nu)
+    nis = w @ w
+    if not (nis <= gate or force):
+        return S, nis, np.empty((0, 0)), np.empty((0, 0))
+    # K^T in C order, as numpy's solve returns it (numba's is in Fortran order): x + K nu is
+    # formed by the caller with the same memory layout, hence the same rounding, as before.
+    Kt = np.ascontiguousarray(np.linalg.solve(S, PHt.T))
+    K = Kt.T
+    if joseph:
+        A = np.eye(P.shape[0]) - K @ H
+        P_new = A @ P @ A.T + K @ R @ K.T
+    else:
+        P_new = P - K @ PHt.T
+    P_new = 0.5 * (P_new + P_new.T)
+    for i in range(P_new.shape[0]):
+        if P_new[i, i] < min_variance:
+            P_new[i, i] = min_variance
+    return S, nis, Kt, P_new
+
+
+@njit(cache=True)
+def _rotate(q, x0, x1, x2):
+    """q ⊗ [0, x] ⊗ q* in the expanded form of rotations.quat_rotate:
+    x + 2w (u × x) + 2 u × (u × x), u = vector part (the same operations in the same order)."""
+    u0, u1, u2 = q[1], q[2], q[3]
+    t0 = 2.0 * (u1 * x2 - u2 * x1)
+    t1 = 2.0 * (u2 * x0 - u0 * x2)
+    t2 = 2.0 * (u0 * x1 - u1 * x0)
+    return (x0 + q[0] * t0 + (u1 * t2 - u2 * t1),
+            x1 + q[0] * t1 + (u2 * t0 - u0 * t2),
+            x2 + q[0] * t2 + (u0 * t1 - u1 * t0))
+
+
+@guvectorize(["void(float64[:], float64[:], float64[:], float64[:], float64, float64, "
+              "float64[:])"], "(n),(m),(n),(n),(),()->(n)", cache=True)
+def lever_arm_velocity(v, q, w, l, lat, omega, out):
+    """v + C (w × l) - w_ie × (C l); see lever_arm.lever_arm_velocity (a gufunc: numpy
+    broadcasts the leading dimensions, at a fraction of the cost of the chain of small array
+    operations for the single vectors of the filter epochs)."""
+    l0, l1, l2 = _rotate(q, l[0], l[1], l[2])
+    a0, a1, a2 = _rotate(q, w[1] * l[2] - w[2] * l[1], w[2] * l[0] - w[0] * l[2],
+                         w[0] * l[1] - w[1] * l[0])
+    # w_ie = earth_rate_enu = (0, e1, e2); its zero kept in the products, as rotations.cross
+    # has it (a NaN lever arm gives NaN in every component there too).
+    e1, e2 = omega * math.cos(lat), omega * math.sin(lat)
+    out[0] = v[0] + a0 - (e1 * l2 - e2 * l1)
+    out[1] = v[1] + a1 - (e2 * l0 - 0.0 * l2)
+    out[2] = v[2] + a2 - (0.0 * l1 - e1 * l0)
+
+
+@njit(cache=True)
+def lever_arm_velocity_jacobians(q, w, l, lat, omega):
+    """d v_point / d phi = [(C (w × l)) ×] - [w_ie ×][(C l) ×] and d v_point / d(gyro error)
+    = -C [l ×]; see lever_arm.lever_arm_velocity_jacobians."""
+    C = _dcm(q)
+    a = C @ np.array([w[1] * l[2] - w[2] * l[1], w[2] * l[0] - w[0] * l[2],
+                      w[0] * l[1] - w[1] * l[0]])
+    b = C @ l
+    d_att = _skew(a[0], a[1], a[2]) \
+        - _skew(0.0, omega * math.cos(lat), omega * math.sin(lat)) @ _skew(b[0], b[1], b[2])
+    d_gyro = -C @ _skew(l[0], l[1], l[2])
+    return d_att, d_gyro

@@ -34,6 +34,9 @@ Methods provided:
 import numpy as np
 from scipy.linalg import expm
 
+# The series run at every filter epoch: compiled (nav/_kernels.py), same results as numpy.
+from . import _kernels
+
 #: Default Picard order: the lowest order that keeps Q_k positive semi-definite for the
 #: INS error models of every sensor grade up to Δt = 1 s (docs/results/error_model.md).
 DEFAULT_ORDER = 5
@@ -55,13 +58,8 @@ def picard_transition(F, dt, order=DEFAULT_ORDER):
     -------
     (n, n) ndarray
     """
-    F = np.asarray(F, dtype=float)
-    term = np.eye(F.shape[0])
-    phi = term.copy()
-    for i in range(1, order + 1):
-        term = term @ F * (dt / i)
-        phi += term
-    return phi
+    return _kernels.picard_transition(np.ascontiguousarray(F, dtype=float), float(dt),
+                                      int(order))
 
 
 def picard_process_noise(F, Q, dt, order=DEFAULT_ORDER):
@@ -107,19 +105,8 @@ def picard_predict(P, F, Q, dt, order=DEFAULT_ORDER):
 
 def _lyapunov_series(F, P0, Q, dt, order):
     """Σ_{i=0..ν} K_i Δt^i / i! for dP/dτ = FP + PF^T + Q, P(0) = P0."""
-    F = np.asarray(F, dtype=float)
-    K = np.asarray(P0, dtype=float)
-    out = K.copy()
-    coeff = 1.0
-    for i in range(1, order + 1):
-        FK = F @ K
-        # Each K_i is symmetric, so F K + K F^T = FK + FK^T: one product per order.
-        K = FK + FK.T
-        if i == 1:
-            K = K + Q
-        coeff *= dt / i
-        out += K * coeff
-    return 0.5 * (out + out.T)
+    F, P0, Q = (np.ascontiguousarray(A, dtype=float) for A in (F, P0, Q))
+    return _kernels.lyapunov_series(F, P0, Q, float(dt), int(order))
 
 
 def book_process_noise(F, Q, dt):

@@ -20,6 +20,7 @@ References
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -68,6 +69,12 @@ class Ellipsoid:
     def somigliana_k(self) -> float:
         """Somigliana's constant k = b gamma_p / (a gamma_e) - 1 (TR8350.2 eq. 4-1)."""
         return self.b * self.gamma_p / (self.a * self.gamma_e) - 1.0
+
+    @cached_property
+    def kernel_params(self) -> tuple:
+        """(a, f, e2, m, omega, gamma_e, somigliana_k): the ellipsoid as the numba kernels
+        (nav/_kernels.py) take it."""
+        return (self.a, self.f, self.e2, self.m, self.omega, self.gamma_e, self.somigliana_k)
 
     @classmethod
     def from_defining(cls, a: float, f: float, gm: float, omega: float) -> "Ellipsoid":
@@ -131,6 +138,14 @@ def _normal_gravity(lat, h, a, f, e2, m, gamma_e, k):
     return gamma0 * (1.0 - 2.0 / a * (1.0 + f + m - 2.0 * f * s2) * h + 3.0 * h * h / (a * a))
 
 
+def _normal_gravity_dh(lat, h, gamma0, a, f, m):
+    """d|g|/dh of :func:`_normal_gravity`, the exact derivative of the TR8350.2 eq. 4-3 height
+    series; gamma0 is the normal gravity on the ellipsoid (h = 0) at lat (raw ellipsoid
+    parameters, shared with the numba kernels)."""
+    s2 = np.sin(lat) ** 2
+    return gamma0 * (-2.0 / a * (1.0 + f + m - 2.0 * f * s2) + 6.0 * h / a ** 2)
+
+
 def normal_gravity(lat, h, ell: Ellipsoid = WGS84):
     """Magnitude of normal gravity at geodetic latitude and ellipsoidal height.
 
@@ -180,10 +195,7 @@ def gravity_gradient_enu(lat, h, ell: Ellipsoid = WGS84) -> np.ndarray:
     rm, rn = radii(lat, ell)
     g = normal_gravity(lat, h, ell)
     r = np.sqrt(rm * rn) + h
-    s2 = np.sin(lat) ** 2
-    gamma0 = normal_gravity(lat, 0.0, ell)
-    dg_dh = gamma0 * (-2.0 / ell.a * (1.0 + ell.f + ell.m - 2.0 * ell.f * s2)
-                      + 6.0 * h / ell.a ** 2)
+    dg_dh = _normal_gravity_dh(lat, h, normal_gravity(lat, 0.0, ell), ell.a, ell.f, ell.m)
     return np.diag([-g / r, -g / r, -dg_dh])
 
 
@@ -191,7 +203,11 @@ def earth_rate_enu(lat, ell: Ellipsoid = WGS84) -> np.ndarray:
     """Earth rotation rate omega_ie resolved in ENU, rad/s, shape (..., 3) (Groves ch. 2
     and 5, ENU order)."""
     lat = np.asarray(lat, float)
-    return ell.omega * np.stack([np.zeros_like(lat), np.cos(lat), np.sin(lat)], -1)
+    # Filled in place: called for single latitudes at every filter epoch (rotations.skew).
+    out = np.zeros(lat.shape + (3,))
+    out[..., 1] = ell.omega * np.cos(lat)
+    out[..., 2] = ell.omega * np.sin(lat)
+    return out
 
 
 def transport_rate_enu(lat, h, v_enu, ell: Ellipsoid = WGS84) -> np.ndarray:

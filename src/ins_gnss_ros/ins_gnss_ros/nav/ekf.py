@@ -25,9 +25,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import _kernels
 from .discretize import DEFAULT_ORDER, picard_predict, picard_transition
 from .error_model import DEFAULT_CLOCK_PSD, StateLayout, noise_input, system_matrix
-from .gating import DEFAULT_GATE_PROB, UpdateResult, chi2_gate, normalised_innovation
+from .gating import DEFAULT_GATE_PROB, UpdateResult, chi2_gate
 
 #: Smallest variance kept on the diagonal after an update (state units squared); guards the
 #: Joseph form against round-off driving a variance negative on perfectly observed states.
@@ -234,27 +235,20 @@ class ErrorStateEKF:
         UpdateResult
         """
         z = np.atleast_1d(np.asarray(z, float))
-        H = np.atleast_2d(np.asarray(H, float))
-        R = np.atleast_2d(np.asarray(R, float))
+        H = np.ascontiguousarray(np.atleast_2d(H), dtype=float)
+        R = np.ascontiguousarray(np.atleast_2d(R), dtype=float)
         nu = z - H @ self.x
-        PHt = self.P @ H.T
-        S = H @ PHt + R
-        S = 0.5 * (S + S.T)
-        nis = normalised_innovation(nu, S)
         gate = chi2_gate(len(z), gate_prob) if gate_prob is not None else np.inf
+        # One compiled call for the covariance algebra (S, NIS, gain, Joseph form); the numpy
+        # version spent most of its time in the overhead of some twenty small-array operations.
+        S, nis, Kt, P = _kernels.kalman_update(np.ascontiguousarray(self.P, dtype=float), H, R,
+                                              nu, gate, force, self.joseph, MIN_VARIANCE)
         ok = nis <= gate
         result = UpdateResult(name, float(t), nu, np.diag(S).copy(), nis, gate, ok or force,
                               "ok" if ok else ("forced" if force else "gated"))
-        if not result.accepted:
-            return result
-        K = np.linalg.solve(S, PHt.T).T
-        self.x = self.x + K @ nu
-        if self.joseph:
-            A = np.eye(self.space.size) - K @ H
-            P = A @ self.P @ A.T + K @ R @ K.T
-        else:
-            P = self.P - K @ PHt.T
-        self.P = symmetrize(P)
+        if result.accepted:
+            self.x = self.x + Kt.T @ nu
+            self.P = P
         return result
 
     def take_correction(self):
@@ -267,12 +261,3 @@ class ErrorStateEKF:
         self.x = np.zeros(self.space.size)
         return dx
 
-
-def symmetrize(P):
-    """Average P with its transpose and floor the diagonal at `MIN_VARIANCE`."""
-    P = 0.5 * (P + P.T)
-    d = np.diagonal(P)
-    low = d < MIN_VARIANCE
-    if low.any():
-        P[low, low] = MIN_VARIANCE
-    return P

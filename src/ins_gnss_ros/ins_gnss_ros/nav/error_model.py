@@ -36,10 +36,10 @@ from functools import cached_property
 
 import numpy as np
 
-from .earth import (WGS84, earth_rate_enu, gravity_gradient_enu, normal_gravity, radii,
-                    transport_rate_enu)
-from .rotations import quat_conj, quat_mul, quat_to_dcm, quat_to_rotvec, skew
-from .sensor_errors import misalign_jacobian
+from . import _kernels
+from .earth import WGS84, radii
+from .rotations import quat_conj, quat_mul, quat_to_dcm, quat_to_rotvec
+from .sensor_errors import MISALIGN_INDEX
 
 #: Number of states of each block.
 BLOCK_SIZES = {"pos": 3, "vel": 3, "att": 3, "bg": 3, "ba": 3, "gmg": 3, "gma": 3,
@@ -96,6 +96,17 @@ class StateLayout:
         """Number of states."""
         return sum(BLOCK_SIZES[b] for b in self.blocks)
 
+    @cached_property
+    def sensor_plan(self):
+        """(k, 3) int64 rows (column kind, first column, 1 for a gyro block) of the sensor-error
+        blocks, as :func:`_kernels.system_matrix` takes them."""
+        rows = []
+        for b in self.blocks:
+            if b in _SENSOR_COLUMNS:
+                kind, gyro = _SENSOR_COLUMNS[b]
+                rows.append((kind, self.slices[b].start, gyro))
+        return np.array(rows, dtype=np.int64).reshape(-1, 3)
+
     def __getitem__(self, name):
         return self.slices[name]
 
@@ -120,70 +131,27 @@ def make_layout(spec, noise=None):
     return StateLayout(blocks, tau)
 
 
-def _rate_jacobians(lat, h, v, ell):
-    """Partial derivatives of ω_ie and ω_en (ENU) w.r.t. δp (ENU metres) and δv.
-
-    Returns (dwie_dp, dwen_dp, dwen_dv), each (3, 3).
-    """
-    rm, rn = radii(lat, ell)
-    RM, RN = rm + h, rn + h
-    s, c = np.sin(lat), np.cos(lat)
-    t = s / c
-    w = 1.0 - ell.e2 * s * s
-    drn = rn * ell.e2 * s * c / w          # d R_N / d lat
-    drm = 3.0 * rm * ell.e2 * s * c / w    # d R_M / d lat
-    ve, vn = v[0], v[1]
-    # Nothing depends on longitude, and d lat = δp_N / RM, d h = δp_U.
-    dwie_dp = np.zeros((3, 3))
-    dwie_dp[:, 1] = ell.omega * np.array([0.0, -s, c]) / RM
-    dwen_dp = np.zeros((3, 3))
-    dwen_dp[:, 1] = np.array([vn * drm / RM ** 2,
-                              -ve * drn / RN ** 2,
-                              ve / (c * c * RN) - ve * t * drn / RN ** 2]) / RM
-    dwen_dp[:, 2] = np.array([vn / RM ** 2, -ve / RN ** 2, -ve * t / RN ** 2])
-    dwen_dv = np.array([[0.0, -1.0 / RM, 0.0],
-                        [1.0 / RN, 0.0, 0.0],
-                        [t / RN, 0.0, 0.0]])
-    return dwie_dp, dwen_dp, dwen_dv
+#: Sensor-error blocks: (column kind of _kernels.system_matrix, True for a gyro block). Gyro
+#: errors enter the attitude rows, accelerometer errors the velocity rows.
+_SENSOR_COLUMNS = {"bg": (_kernels.BIAS, True), "gmg": (_kernels.BIAS, True),
+                   "sg": (_kernels.SCALE, True), "ng": (_kernels.NONORTHOGONALITY, True),
+                   "gs": (_kernels.G_SENSITIVITY, True),
+                   "ba": (_kernels.BIAS, False), "gma": (_kernels.BIAS, False),
+                   "sa": (_kernels.SCALE, False), "na": (_kernels.NONORTHOGONALITY, False)}
+_MISALIGN_INDEX = np.array(MISALIGN_INDEX, dtype=np.int64)
 
 
-def _position_block(lat, h, v, ell):
-    """F_pp of the curvilinear position error in ENU metres (module docstring)."""
-    rm, rn = radii(lat, ell)
-    RM, RN = rm + h, rn + h
-    s, c = np.sin(lat), np.cos(lat)
-    t = s / c
-    drn = rn * ell.e2 * s * c / (1.0 - ell.e2 * s * s)
-    ve, vn, vu = v
-    # d/dt[(RN cos lat) δlon] and d/dt[RM δlat]; the d RM/d lat terms cancel exactly, the
-    # d RN/d lat ones do not.
-    return np.array([
-        [vu / RN - vn * t / RM + vn * drn / (RN * RM),
-         ve * t / RM - ve * drn / (RN * RM),
-         -ve / RN],
-        [0.0, vu / RM, -vn / RM],
-        [0.0, 0.0, 0.0]])
-
-
-#: Sensor-error blocks acting on the gyro (attitude rows) and on the accelerometer (velocity rows).
-_GYRO_BLOCKS = ("bg", "gmg", "sg", "ng", "gs")
-_ACCEL_BLOCKS = ("ba", "gma", "sa", "na")
-
-
-def _sensor_columns(name, C, x_b, f_b):
-    """d(C δx)/d(block) for a sensor-error block: the increment error δx of a triad measuring
-    x_b (rate or specific force); f_b enters only the gyro g-sensitivity "gs"."""
-    if name in ("bg", "gmg", "ba", "gma"):
-        return C
-    if name in ("sg", "sa"):
-        return C * x_b
-    if name in ("ng", "na"):
-        return C @ misalign_jacobian(x_b)
-    return C @ np.kron(np.eye(3), f_b[None, :])  # "gs"
+def _vector(a):
+    """A float64 C-contiguous array, the one layout the kernels are compiled for."""
+    return np.ascontiguousarray(a, dtype=float)
 
 
 def system_matrix(layout, nav_state, f_b, w_ib_b, ell=WGS84):
     """Continuous system matrix F of the error state.
+
+    The navigation and sensor-error rows are filled by the compiled :func:`_kernels.system_matrix`
+    (the equations of the module docstring; F is rebuilt at every covariance epoch, where some
+    sixty small numpy operations took ~0.3 ms), the Gauss-Markov and clock terms here.
 
     Parameters
     ----------
@@ -200,41 +168,11 @@ def system_matrix(layout, nav_state, f_b, w_ib_b, ell=WGS84):
     -------
     (n, n) ndarray [1/s]
     """
-    lat, h = nav_state.lat, nav_state.h
-    v = np.asarray(nav_state.v_enu, float)
-    f_b = np.asarray(f_b, float)
-    w_ib_b = np.asarray(w_ib_b, float)
-    C = quat_to_dcm(nav_state.q_nb)
-    f_n = C @ f_b
-    w_ie = earth_rate_enu(lat, ell)
-    w_en = transport_rate_enu(lat, h, v, ell)
-    dwie_dp, dwen_dp, dwen_dv = _rate_jacobians(lat, h, v, ell)
-    rm, _ = radii(lat, ell)
-
-    S = layout.slices
-    p, vl, a = S["pos"], S["vel"], S["att"]
     F = np.zeros((layout.size, layout.size))
-    F[p, p] = _position_block(lat, h, v, ell)
-    F[p, vl] = np.eye(3)
-
-    F[vl, p] = skew(v) @ (2.0 * dwie_dp + dwen_dp)
-    # Gravity [0, 0, -g(lat, h)]: vertical gradient, and the (tiny) latitude variation.
-    dg_dlat = (normal_gravity(lat + 1e-6, h, ell) - normal_gravity(lat - 1e-6, h, ell)) / 2e-6
-    F[vl.start + 2, p.start + 1] += -dg_dlat / (rm + h)
-    F[vl.start + 2, p.start + 2] += gravity_gradient_enu(lat, h, ell)[2, 2]
-    F[vl, vl] = -skew(2.0 * w_ie + w_en) + skew(v) @ dwen_dv
-    F[vl, a] = skew(f_n)
-
-    F[a, p] = dwie_dp + dwen_dp
-    F[a, vl] = dwen_dv
-    F[a, a] = -skew(w_ie + w_en)
-
-    # Sensor errors enter through C δf (velocity) and -C δω (attitude).
-    for name in layout.blocks[3:]:
-        if name in _GYRO_BLOCKS:
-            F[a, S[name]] = -_sensor_columns(name, C, w_ib_b, f_b)
-        elif name in _ACCEL_BLOCKS:
-            F[vl, S[name]] = _sensor_columns(name, C, f_b, f_b)
+    _kernels.system_matrix(F, float(nav_state.lat), float(nav_state.h), _vector(nav_state.v_enu),
+                           _vector(nav_state.q_nb), _vector(f_b), _vector(w_ib_b),
+                           ell.kernel_params, layout.sensor_plan, _MISALIGN_INDEX)
+    S = layout.slices
     for name, tau in layout.tau.items():
         F[S[name], S[name]] = -np.eye(BLOCK_SIZES[name]) / tau
     if "clock" in layout:

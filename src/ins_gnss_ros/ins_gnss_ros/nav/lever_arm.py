@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .earth import (WGS84, Ellipsoid, earth_rate_enu, ecef_to_enu_matrix, ecef_to_geodetic,
-                    geodetic_to_ecef)
-from .rotations import cross, quat_rotate
+from . import _kernels
+from .earth import WGS84, Ellipsoid, ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
+from .rotations import quat_rotate
 
 
 def lever_arm_position(lat, lon, h, q_nb, l_b, ell: Ellipsoid = WGS84):
@@ -64,6 +64,27 @@ def lever_arm_velocity(v_enu, q_nb, omega_ib_b, l_b, lat, ell: Ellipsoid = WGS84
     -------
     ndarray, shape (..., 3)
     """
-    l_n = quat_rotate(q_nb, l_b)
-    return (np.asarray(v_enu, float) + quat_rotate(q_nb, cross(omega_ib_b, l_b))
-            - cross(earth_rate_enu(lat, ell), l_n))
+    return _kernels.lever_arm_velocity(v_enu, q_nb, omega_ib_b, l_b, lat, ell.omega)
+
+
+def lever_arm_velocity_jacobians(q_nb, omega_ib_b, l_b, lat, ell: Ellipsoid = WGS84):
+    """Derivatives of :func:`lever_arm_velocity` for the error-state measurement models.
+
+    With the attitude error phi (C_computed = (I - [phi x]) C) and the residual gyro error
+    d_omega: d v_point = [C (omega_ib x l) x] phi - [omega_ie x][(C l) x] phi - C [l x] d_omega
+    (Groves, eq. 14.122 for ENU; from d(C x) = [(C x) x] phi).
+
+    Parameters
+    ----------
+    q_nb : array_like, shape (4,)
+    omega_ib_b, l_b : array_like, shape (3,)
+    lat : float
+
+    Returns
+    -------
+    d_att, d_gyro : (3, 3) ndarray
+        d v_point / d phi and d v_point / d omega.
+    """
+    q_nb, omega_ib_b, l_b = (np.ascontiguousarray(a, dtype=float)
+                             for a in (q_nb, omega_ib_b, l_b))
+    return _kernels.lever_arm_velocity_jacobians(q_nb, omega_ib_b, l_b, float(lat), ell.omega)

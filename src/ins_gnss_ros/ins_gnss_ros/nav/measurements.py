@@ -19,7 +19,7 @@ import numpy as np
 
 from .conventions import azimuth_from_yaw, wrap_pi
 from .earth import WGS84, earth_rate_enu, ecef_to_enu_matrix, geodetic_to_ecef, radii
-from .lever_arm import lever_arm_position, lever_arm_velocity
+from .lever_arm import lever_arm_position, lever_arm_velocity, lever_arm_velocity_jacobians
 from .rotations import cross, quat_to_dcm, skew
 
 
@@ -40,6 +40,9 @@ class Innovation:
     z: np.ndarray
     H: np.ndarray
     R: np.ndarray
+
+
+_I3 = np.eye(3)
 
 
 def _zeros(space, m):
@@ -127,15 +130,12 @@ def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3),
     -------
     Innovation
     """
-    lever_b = np.asarray(lever_b, float)
-    omega_ib_b = np.asarray(omega_ib_b, float)
-    C = quat_to_dcm(state.q_nb)
     pred = lever_arm_velocity(state.v_enu, state.q_nb, omega_ib_b, lever_b, state.lat)
+    d_att, d_gyro = lever_arm_velocity_jacobians(state.q_nb, omega_ib_b, lever_b, state.lat)
     H = _zeros(space, 3)
-    H[:, space["vel"]] = np.eye(3)
-    H[:, space["att"]] = skew(C @ cross(omega_ib_b, lever_b)) \
-        - skew(earth_rate_enu(state.lat)) @ skew(C @ lever_b)
-    _gyro_columns(space, H, -C @ skew(lever_b))
+    H[:, space["vel"]] = _I3
+    H[:, space["att"]] = d_att
+    _gyro_columns(space, H, d_gyro)
     _add_time_offset(space, H, dzdt)
     return Innovation("gnss_vel", pred - np.asarray(v_enu, float), H, np.asarray(cov_enu, float))
 
@@ -404,10 +404,7 @@ def range_rates(space, state, sat_pos_ecef, sat_vel_ecef, sat_clock_drift, range
         H_vel = -u_enu^T, lever-arm attitude and gyro terms as in :func:`gnss_velocity`,
         H_drift = -1.
     """
-    lever_b = np.asarray(lever_b, float)
-    omega_ib_b = np.asarray(omega_ib_b, float)
     u_ecef, u_enu, _ = _line_of_sight(state, sat_pos_ecef, lever_b)
-    C = quat_to_dcm(state.q_nb)
     v_ant_enu = lever_arm_velocity(state.v_enu, state.q_nb, omega_ib_b, lever_b, state.lat)
     v_ant_ecef = ecef_to_enu_matrix(state.lat, state.lon).T @ v_ant_enu
     pred = np.einsum("ij,ij->i", u_ecef, np.atleast_2d(sat_vel_ecef) - v_ant_ecef) \
@@ -415,9 +412,9 @@ def range_rates(space, state, sat_pos_ecef, sat_vel_ecef, sat_clock_drift, range
     k = len(pred)
     H = _zeros(space, k)
     H[:, space["vel"]] = -u_enu
-    H[:, space["att"]] = -u_enu @ (skew(C @ cross(omega_ib_b, lever_b))
-                                   - skew(earth_rate_enu(state.lat)) @ skew(C @ lever_b))
-    _gyro_columns(space, H, u_enu @ C @ skew(lever_b))
+    d_att, d_gyro = lever_arm_velocity_jacobians(state.q_nb, omega_ib_b, lever_b, state.lat)
+    H[:, space["att"]] = -u_enu @ d_att
+    _gyro_columns(space, H, -u_enu @ d_gyro)
     if "clock" in space:
         H[:, space["clock"].start + 1] = -1.0
     R = np.diag(np.broadcast_to(np.asarray(variance, float), (k,)).copy())

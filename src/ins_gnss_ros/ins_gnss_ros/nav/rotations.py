@@ -20,6 +20,15 @@ import numpy as np
 _SMALL_ANGLE = 1e-4  # rad; below this the series of sin(x/2)/x are exact to double precision
 
 
+def _components(a):
+    """Components along the last axis: Python floats for a single vector, arrays for a stack.
+
+    The per-epoch filter code calls the functions below for single vectors, where arithmetic
+    on 0-d arrays costs several times that on floats (same IEEE results).
+    """
+    return a.tolist() if a.ndim == 1 else [a[..., i] for i in range(a.shape[-1])]
+
+
 def skew(v) -> np.ndarray:
     """Skew-symmetric cross-product matrix [v×], so that skew(a) @ b = a × b.
 
@@ -32,7 +41,7 @@ def skew(v) -> np.ndarray:
     ndarray, shape (..., 3, 3)
     """
     v = np.asarray(v, float)
-    x, y, w = v[..., 0], v[..., 1], v[..., 2]
+    x, y, w = _components(v)
     # Filled in place: called for single vectors at every filter epoch, where nested
     # np.stack calls cost several times the arithmetic.
     out = np.zeros(v.shape[:-1] + (3, 3))
@@ -50,8 +59,8 @@ def cross(a, b) -> np.ndarray:
     """
     a = np.asarray(a, float)
     b = np.asarray(b, float)
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    a0, a1, a2 = _components(a)
+    b0, b1, b2 = _components(b)
     out = np.empty(np.broadcast_shapes(a.shape, b.shape))
     out[..., 0] = a1 * b2 - a2 * b1
     out[..., 1] = a2 * b0 - a0 * b2
@@ -148,7 +157,7 @@ def quat_to_dcm(q) -> np.ndarray:
     ndarray, shape (..., 3, 3)
     """
     q = np.asarray(q, float)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    w, x, y, z = _components(q)
     C = np.empty(q.shape[:-1] + (3, 3))  # filled in place, as in skew()
     C[..., 0, 0] = w * w + x * x - y * y - z * z
     C[..., 0, 1] = 2 * (x * y - w * z)
