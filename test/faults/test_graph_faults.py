@@ -52,6 +52,7 @@ REPRESENTATIVE = {
 EXTRA = {
     "freeze_imu": ("freeze", 0, "imu sample rejected: frozen"),
     "ramp_fix": ("ramp", 1, None),
+    "clock_jump_imu": ("clock_jump", 2, "imu clock jump: stamps corrected by the arrival clock"),
 }
 #: Cases whose GNSS fault outlasts max_reject_time (the clock jump and the ramp of this short
 #: trial end before it): the kind is forced in and the solution stays

@@ -291,3 +291,51 @@ def test_imu_gap_is_bridged_and_a_long_one_restarts_the_alignment(ros_context):
     run(12.01, 15.0)
     assert node.navigator.nav is not None  # aligned again on the new data
     node.destroy_node()
+
+
+def test_gnss_inside_a_bridged_imu_gap_is_applied_at_its_epochs(trial, ros_context):
+    """2 s of imu/delta lost while driving, GNSS arriving throughout (fault class freeze): the
+    gap is bridged in increments of the usual length, so the fixes of the gap are applied at
+    their epochs (none refused as too old, none gated) against the process noise accrued so
+    far, and the filter's position error stays within 5 sigma of its covariance."""
+    from ins_gnss_ros.nodes.ekf_node import EkfNode
+
+    traj, imu, gnss = trial
+    bus = InProcessBus()
+    ekf = EkfNode(context=ros_context, bus=bus, parameter_overrides=_ekf_params())
+    statuses: list[FilterStatus] = []
+    bus.subscribe("nav/status", statuses.append)
+    S = ekf.navigator.space
+    gap = (70.0, 72.0)
+    ratios = []
+    g = 0
+    for k in range(len(imu.t)):
+        t = imu.t[k]
+        while g < len(gnss) and gnss[g][0] <= t:
+            tg, lat, lon, h, v, npos, nvel = gnss[g]
+            for topic, msg in (("gnss/fix", _fix_msg(tg, lat, lon, h, npos)),
+                               ("gnss/vel", _vel_msg(tg, v, nvel))):
+                bus.publish(topic, msg)
+                bus.drain()
+            g += 1
+        if gap[0] < t <= gap[1]:
+            continue
+        delta = ImuDelta(dt=float(imu.dt))
+        delta.header.stamp = sec_to_stamp(T0 + t)
+        delta.delta_angle, delta.delta_velocity = to_vector3(imu.dtheta[k]), to_vector3(imu.dv[k])
+        bus.publish("imu/delta", delta)
+        bus.drain()
+        nav = ekf.navigator.nav
+        if gap[0] - 1.0 < t < gap[1] + 10.0:
+            j = int(round((nav.t - T0 - traj.t[0]) / traj.dt))
+            true = NavState(traj.lat[j], traj.lon[j], traj.h[j], traj.v_enu[j], traj.q_nb[j], nav.t)
+            sigma = np.sqrt(np.diag(ekf.navigator.covariance())[S["pos"]])
+            ratios.append(np.max(np.abs(nav_error(nav, true)[0]) / sigma))
+    ekf.destroy_node()
+
+    assert ekf.diag.counts["gap in increments: bridged by holding the rates"] == 1
+    in_gap = [u for s in statuses for u in s.updates
+              if gap[0] < stamp_to_sec(u.stamp) - T0 < gap[1]]
+    assert len(in_gap) == 2 * 7  # fix and velocity at 4 Hz, 70.25 to 71.75 s
+    assert all(u.accepted for u in in_gap)
+    assert max(ratios) < 5.0

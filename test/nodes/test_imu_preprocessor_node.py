@@ -441,3 +441,45 @@ def test_instant_samples_are_integrated_by_the_trapezoid_rule(graph):
     for d in deltas:
         t = (stamp_ns(d.header.stamp) - T0_NS) / 1e9
         assert d.delta_angle.z == pytest.approx(a * (t - dt / 2) * dt, rel=1e-9)
+
+
+def _jumping_clock_stream(g, paced, lost=False):
+    """200 Hz samples arriving one period apart on the bus clock (or all at once if not
+    ``paced``): the sensor stamps jump 0.5 s ahead after 1 s and back 1 s later. With ``lost``
+    the samples of a 0.5 s stretch are missing instead (their arrivals too)."""
+    for k in range(600):
+        jump = 100 * DT_NS if 200 <= k < 400 else 0
+        if lost and 200 <= k < 300:
+            continue
+        g.bus.now_ns = T0_NS + (k + 1) * DT_NS if paced else T0_NS
+        g.imu(T0_NS + (k + 1) * DT_NS + (0 if lost else jump), GOOD_W, G_UP)
+
+
+def test_clock_jump_is_taken_out_of_the_stamps_by_the_arrival_clock(graph):
+    """Fault class clock_jump (IMU +0.5 s): samples that keep arriving at 200 Hz while their
+    stamps jump 0.5 s ahead, then back, were not lost: both jumps are taken out of the stamps,
+    so imu/delta keeps its 100 Hz step without a gap (before: a 0.5 s gap, 0.5 s ahead of the
+    GNSS for 1 s, then 0.5 s of samples rejected as backwards)."""
+    from ins_gnss_ros.nodes.imu_preprocessor_node import stamp_ns
+
+    g = graph()
+    _jumping_clock_stream(g, paced=True)
+    assert g.node.diag.counts["imu clock jump: stamps corrected by the arrival clock"] == 2
+    stamps = np.array([stamp_ns(d.header.stamp) for d in g.out["/imu/delta"]])
+    assert len(stamps) == 300
+    np.testing.assert_array_equal(np.diff(stamps), 2 * DT_NS)
+    assert stamps[-1] == T0_NS + 600 * DT_NS
+    assert not any(k.startswith("imu sample rejected") or k.startswith("imu gap")
+                   for k in g.node.diag.counts)
+
+
+@pytest.mark.parametrize("paced, lost", [(False, False), (True, True)])
+def test_gaps_and_unpaced_streams_are_not_clock_jumps(graph, paced, lost):
+    """Samples delivered faster than real time on a clock that does not pace them (a replay on
+    a wall clock, a burst) or really lost (their arrivals missing too) leave the stamps alone: the
+    stamp jump reaches the strapdown and ekf as a gap, as before."""
+    g = graph()
+    _jumping_clock_stream(g, paced, lost)
+    assert g.node.diag.counts["imu clock jump: stamps corrected by the arrival clock"] == 0
+    assert g.node.diag.counts[
+        "imu gap longer than max_bridge_samples: integration restarted"] == 1

@@ -153,3 +153,62 @@ class SampleChecker:
         gyro = g0 + frac[:, None] * (g1 - g0)
         accel = a0 + frac[:, None] * (a1 - a0)
         return CheckResult(True, "gap_bridged", stamps, gyro, accel)
+
+
+class ClockJumps:
+    """Finds jumps of a sensor's clock against the arrival clock and takes them out of its stamps.
+
+    A sensor that samples at a fixed rate delivers one sample per period. When its samples keep
+    arriving one period apart but a stamp steps by J more (or less) than that, the samples were
+    not lost (that would delay the arrival too): the clock labelling them jumped, e.g. a driver
+    re-synchronising its time. Without correction a forward jump is taken for a gap of J and the
+    stream then runs J ahead of the other sensors (a backward one is rejected sample by sample
+    until the stamps pass the old ones, losing J of motion). Here the jump, rounded to whole
+    sample periods, is subtracted from this and every later stamp.
+
+    Only trusted while the arrival clock paces the samples: the last `regular_samples` arrival
+    steps, and this one, within `tolerance` of a period. A replay faster than real time on a wall
+    clock, a burst after a stall, reordered or duplicated deliveries all break that, and the
+    stamps then pass unchanged. A stream with regular stamps is never changed: a stamp step of
+    one period with a regular arrival step differs from it by at most `tolerance` periods (5 ms
+    at 50 Hz), below `min_jump`. A jump beyond `max_jump` is not a glitch but a new time base
+    (a restarted or looped source): it is passed on for the downstream to restart.
+
+    Parameters
+    ----------
+    rate_hz : float
+        Nominal sample rate, Hz.
+    min_jump, max_jump : float
+        Stamp steps that differ from the arrival step by min_jump..max_jump s are clock jumps.
+    regular_samples : int
+        Regular arrival steps needed before a jump is believed.
+    tolerance : float
+        Largest deviation of a regular arrival step from the period, in periods.
+    """
+
+    def __init__(self, rate_hz: float, min_jump: float = 0.1, max_jump: float = 2.5,
+                 regular_samples: int = 10, tolerance: float = 0.25):
+        if not (rate_hz > 0 and 0 < min_jump <= max_jump):
+            raise ValueError("rate_hz must be > 0 and 0 < min_jump <= max_jump")
+        self.period_ns = 1e9 / rate_hz
+        self.min_ns, self.max_ns = min_jump * 1e9, max_jump * 1e9
+        self.regular_samples = int(regular_samples)
+        self.tolerance = float(tolerance)
+        self.offset_ns = 0      # subtracted from the sensor stamps
+        self.jumps = 0
+        self._last = None       # (stamp, arrival) of the previous sample, ns
+        self._regular = 0       # arrival steps within tolerance of a period, in a row
+
+    def correct(self, stamp_ns: int, arrival_ns: int) -> int:
+        """The stamp (ns) of a sample that arrived at arrival_ns, with the clock jumps taken out."""
+        last, self._last = self._last, (stamp_ns, arrival_ns)
+        if last is not None:
+            arrival_step = arrival_ns - last[1]
+            regular = abs(arrival_step - self.period_ns) <= self.tolerance * self.period_ns
+            jump = (stamp_ns - last[0]) - arrival_step
+            if regular and self._regular >= self.regular_samples \
+                    and self.min_ns <= abs(jump) <= self.max_ns:
+                self.offset_ns += int(round(round(jump / self.period_ns) * self.period_ns))
+                self.jumps += 1
+            self._regular = self._regular + 1 if regular else 0
+        return stamp_ns - self.offset_ns

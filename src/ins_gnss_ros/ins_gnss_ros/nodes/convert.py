@@ -64,6 +64,22 @@ def increment_problem(msg) -> str | None:
     return None
 
 
+def held_increments(t: float, dtheta: np.ndarray, dv: np.ndarray, dt: float,
+                    interval: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bridge a gap in the increments: the increment (dtheta, dv) over dt ending at t, its rates
+    held over the whole `interval` before t, as increments of about dt each (end stamps, angle
+    and velocity increments; shapes (n,), (n, 3), (n, 3)).
+
+    Increments of the usual length, not one long one, so that measurements with epochs inside
+    the gap are applied there, against states of the gap.
+    """
+    n = max(1, round(interval / dt))
+    stamps = t - interval + interval / n * np.arange(1, n + 1)
+    stamps[-1] = t
+    scale = interval / n / dt
+    return stamps, np.tile(dtheta * scale, (n, 1)), np.tile(dv * scale, (n, 1))
+
+
 def to_vector3(a) -> Vector3:
     return Vector3(x=float(a[0]), y=float(a[1]), z=float(a[2]))
 

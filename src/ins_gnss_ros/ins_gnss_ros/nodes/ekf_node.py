@@ -25,9 +25,10 @@ admitted on both sides (the navigator's ``_update``); until the noise floor this
 confirmed by its aiding), the published covariances include the floor, and /diagnostics
 counts ``<kind> forced in: degraded until confirmed``.
 A gap in ``imu/delta`` of up to ``max_imu_gap_s`` is bridged by holding the rates of the
-increment after it, with the covariance widened by ``imu_gap.*`` (as the ``strapdown`` node
-bridges it); a longer gap loses the IMU and the filter aligns again. After either, ``nav/fix``
-is withheld until the filter has re-synchronised the strapdown.
+increment after it, in increments of its length (as the ``strapdown`` node bridges it), with
+the process noise of ``imu_gap.*`` over the gap; GNSS epochs inside the gap are applied there.
+A longer gap loses the IMU and the filter aligns again. After either, ``nav/fix`` is withheld
+until the filter has re-synchronised the strapdown.
 """
 
 from __future__ import annotations
@@ -49,13 +50,13 @@ from ..nav.earth import ecef_to_enu, geodetic_to_ecef
 from ..nav.ekf import ExtraState
 from ..nav.error_model import LAYOUTS, nav_error
 from ..nav.navigator import (ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, GnssVelocity,
-                             HeadingFix, ImuGap, Navigator, NavigatorConfig, SpeedLog)
+                             HeadingFix, Navigator, NavigatorConfig, SpeedLog)
 from ..nav.rotations import quat_to_dcm
 from ..nav.strapdown import NavState
 from ..nav.sensor_errors import GRADES, BlockNoise, FilterNoise, filter_noise
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
-from .convert import (increment_problem, nav_state_from_msg, sec_to_stamp, stamp_to_sec,
-                      to_quaternion, to_vector3, vec)
+from .convert import (held_increments, increment_problem, nav_state_from_msg, sec_to_stamp,
+                      stamp_to_sec, to_quaternion, to_vector3, vec)
 from .gnss_convert import kepler_from_msg, raw_epoch_from_msg
 
 MODES = {ALIGNING: FilterStatus.MODE_ALIGNING, NAVIGATING: FilterStatus.MODE_NAVIGATING,
@@ -252,22 +253,22 @@ class EkfNode(NavNode):
         dtheta, dv = vec(msg.delta_angle), vec(msg.delta_velocity)
         t = stamp_to_sec(msg.header.stamp)
         interval = t - self.last_delta_t
+        self.last_delta_t = t
         if msg.dt > 0.0 and interval - msg.dt > 0.5 * msg.dt:
+            # The strapdown publishes its state after the gap before this filter has applied
+            # the measurements of the gap: nav/fix waits for the next synchronisation.
+            self.sequence += 1
             if interval > self.p["max_imu_gap_s"] + msg.dt:
                 self.diag.count("imu lost: gap in increments beyond max_imu_gap_s, aligning again")
                 self.navigator.reset()
             else:
                 # The increment covers only its dt: hold its rates over the whole gap (free
-                # fall otherwise) and widen the covariance by what holding them may miss.
+                # fall otherwise), with the process noise of what holding them may miss.
                 self.diag.count("gap in increments: bridged by holding the rates")
-                # Applied after the measurements of the gap (their extrapolated states do not
-                # know it), before the covariance is propagated over it.
-                self.navigator.add_measurement(ImuGap(t - 0.5 * msg.dt, interval - msg.dt))
-                dtheta, dv = dtheta * (interval / msg.dt), dv * (interval / msg.dt)
-            # The strapdown publishes its state after the gap before this filter has widened
-            # its covariance: nav/fix waits for the next synchronisation.
-            self.sequence += 1
-        self.last_delta_t = t
+                self.navigator.add_bridged_gap(t - interval, t)
+                self.navigator.add_imu(*held_increments(t, dtheta, dv, msg.dt, interval))
+                self.after_filter()
+                return
         self.navigator.add_imu(t, dtheta, dv)
         self.after_filter()
 

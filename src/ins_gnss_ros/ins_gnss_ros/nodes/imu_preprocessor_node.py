@@ -3,6 +3,9 @@
 Per raw ``imu/data_raw`` sample (sensor frame, any mounting, any rate that is an integer
 multiple of the navigation rate, e.g. 1200 Hz for seed 004's ISON-1):
 
+0. :class:`~ins_gnss_ros.imu.sample_checks.ClockJumps` takes jumps of the sensor clock out of the
+   stamps: a stamp step unlike the step of the arrival times (node clock: ``/clock`` in a
+   replay) while the samples arrive at their regular period (``clock_jump.*``);
 1. :class:`~ins_gnss_ros.imu.sample_checks.SampleChecker` rejects NaN/inf, saturated readings,
    duplicated or backwards stamps and a frozen sensor (``max_identical_samples`` bit-identical
    readings in a row) (counted on /diagnostics, never passed on), bridges gaps of up to
@@ -37,7 +40,7 @@ from ins_gnss_msgs.msg import ImuDelta, InsCorrection
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from ..imu.calibration import ImuCalibration, ResidualErrors
-from ..imu.sample_checks import SampleChecker
+from ..imu.sample_checks import ClockJumps, SampleChecker
 from ..nav.coning import METHODS, Integrator
 from ..params_io import ParamsFileError, load_yaml_file
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
@@ -124,6 +127,11 @@ class ImuPreprocessorNode(NavNode):
               "stamp: increment = rate dt) or instant (the rate at the stamp: increment by the "
               "trapezoid of neighbouring samples; rate dt would lag it by half a sample)",
               choices=("interval_mean", "instant")),
+        Param("clock_jump.min_s", 0.1, "a stamp step that differs from the arrival step (node "
+              "clock) by at least this while the samples arrive one period apart is a jump of the "
+              "sensor clock, taken out of the stamps (0: never), s", 0.0, 10.0),
+        Param("clock_jump.max_s", 2.5, "larger stamp jumps are a new time base (a restarted or "
+              "looped source) and pass unchanged, s", 0.0, 3600.0),
         Param("time_offset_s", 0.0, "added to the sensor stamps to put them on GNSS time (the "
               "IMU clock's offset, e.g. -0.125 for the car drive's logger), s", -10.0, 10.0),
     )
@@ -147,6 +155,12 @@ class ImuPreprocessorNode(NavNode):
                                          p["bridge"], max_identical=p["max_identical_samples"])
         except ValueError as err:
             raise ParameterError(f"parameter 'max_identical_samples': {err}") from None
+        self.clock = None
+        if p["clock_jump.min_s"] > 0.0:
+            try:
+                self.clock = ClockJumps(p["rate_hz"], p["clock_jump.min_s"], p["clock_jump.max_s"])
+            except ValueError as err:
+                raise ParameterError(f"parameter 'clock_jump.max_s': {err}") from None
         self.residual = ResidualErrors()
         self.offset_ns = int(round(p["time_offset_s"] * NS))
         self.temperature: float | None = None
@@ -223,6 +237,12 @@ class ImuPreprocessorNode(NavNode):
     # -- IMU samples ---------------------------------------------------------------------------
     def on_imu(self, msg: Imu) -> None:
         t_ns = stamp_ns(msg.header.stamp) + self.offset_ns
+        if self.clock is not None:
+            jumps = self.clock.jumps
+            t_ns = self.clock.correct(t_ns, stamp_ns(self.now_msg()))
+            if self.clock.jumps != jumps:
+                self.diag.count("imu clock jump: stamps corrected by the arrival clock")
+                self.diag.set_value("imu clock correction, s", -self.clock.offset_ns / NS)
         if self._origin_ns is None:
             self._origin_ns = t_ns
         gyro, accel = vec(msg.angular_velocity), vec(msg.linear_acceleration)

@@ -9,11 +9,11 @@ and applied to every increment from that epoch on, unless ``apply_sensor_correct
 Without corrections the node keeps navigating (dead reckoning) and says so in ``mode``.
 
 A gap in ``imu/delta`` (samples lost before or in the ``imu_preprocessor``) of up to
-``max_imu_gap_s`` is bridged by holding the rates of the increment after it over the whole gap
-(that increment alone covers only its ``dt``: integrated over the gap it would be free fall). A
-longer gap means the IMU was lost: the node starts a new run at the next increment, as if
-restarted (kept history and older corrections dropped), and reports ``MODE_INVALID`` until the
-filter has re-synchronised it.
+``max_imu_gap_s`` is bridged by holding the rates of the increment after it over the whole gap,
+in steps of its length (that increment alone covers only its ``dt``: integrated over the gap it
+would be free fall). A longer gap means the IMU was lost: the node starts a new run at the next
+increment, as if restarted (kept history and older corrections dropped), and reports
+``MODE_INVALID`` until the filter has re-synchronised it.
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ from ..nav.conventions import yaw_from_azimuth
 from ..nav.rotations import quat_from_euler
 from ..nav.strapdown import NavState, Strapdown
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, run
-from .convert import fill_ins_state, increment_problem, set_vector3, stamp_to_sec, vec
+from .convert import (fill_ins_state, held_increments, increment_problem, set_vector3,
+                      stamp_to_sec, vec)
 
 
 @dataclass
@@ -119,6 +120,7 @@ class StrapdownNode(NavNode):
             self.lost = not np.isnan(state.t)
             self.history.clear()
             state = NavState(state.lat, state.lon, state.h, state.v_enu, state.q_nb, np.nan)
+        steps = [(t, dtheta, dv)]
         if np.isnan(state.t):  # first increment (of this run) fixes the time axis
             self.t_start = t - msg.dt
             self.ins.state = NavState(state.lat, state.lon, state.h, state.v_enu, state.q_nb, t - msg.dt)
@@ -126,10 +128,12 @@ class StrapdownNode(NavNode):
             self.diag.count("increment stamp not after the previous one: dropped")
             return
         elif interval - msg.dt > 0.5 * msg.dt:
-            # Hold the increment's rates over the interval its stamp says it covers.
+            # Hold the increment's rates over the interval its stamp says it covers, in steps
+            # of its length as the ekf does (a correction may refer to an epoch in the gap).
             self.diag.count("gap in increments: bridged by holding the rates")
-            dtheta, dv = dtheta * (interval / msg.dt), dv * (interval / msg.dt)
-        self._step(dtheta, dv, t - self.ins.state.t)
+            steps = zip(*held_increments(t, dtheta, dv, msg.dt, interval))
+        for t_k, dtheta_k, dv_k in steps:
+            self._step(dtheta_k, dv_k, t_k - self.ins.state.t)
         self.count += 1
         if self.count % self.p["publish_every"] == 0:
             self.publish_state()
