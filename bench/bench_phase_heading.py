@@ -16,7 +16,7 @@ otherwise. Time to first fix counts from the first epoch (the receiver's half-cy
 included) and, separately, from the first epoch with valid carrier phases.
 
 Usage: ``.venv/bin/python bench/bench_phase_heading.py [--quick] [--ratio R]
-[--param NAME=VALUE ...]``
+[--param NAME=VALUE ...] [--first-fix START:STOP]``
 """
 from __future__ import annotations
 
@@ -62,9 +62,12 @@ class Trial:
     tilt_rejections: int = 0                         # fixes the node's max_tilt_deg check refused
 
 
-def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0, overrides=()):
-    """One simulated sea trial through the node (``overrides``: more node Parameters);
-    returns a :class:`Trial`."""
+def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0, overrides=(),
+              until=math.inf, context=None):
+    """One simulated sea trial through the node (``overrides``: more node Parameters; ``context``:
+    its rclpy context, the default one if None), fed up to trajectory time ``until`` (the
+    scenario, its slips and satellites are still those of ``duration``: the start of a long run,
+    reproduced quickly); returns a :class:`Trial`."""
     sc = scenarios.sea(duration=duration, seed=seed, rate=2 * rate, oversample=2)
     tr = sc.trajectory
     broadcast = ephemeris_data.load(tr.lon[0])
@@ -82,7 +85,7 @@ def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0, ove
     bus = InProcessBus()
     heads = []
     bus.recorders.append(lambda topic, msg: heads.append(msg) if topic == "/gnss/heading" else 0)
-    node = PhaseHeadingNode(bus=bus, parameter_overrides=[
+    node = PhaseHeadingNode(context=context, bus=bus, parameter_overrides=[
         Parameter("antenna_positions", value=[float(v) for a in antennas for v in a]),
         Parameter("ratio_threshold", value=ratio), *overrides])
     valid = {}
@@ -90,6 +93,8 @@ def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0, ove
     pending_slips = list(out.slips)
     step = int(round(1.0 / (tr.dt * rate)))
     for k in range(0, len(tr), step):
+        if tr.t[k] >= until:
+            break
         epochs = sim.epoch(tr.t[k], tr.lat[k], tr.lon[k], tr.h[k], tr.v_enu[k], tr.q_nb[k],
                            tr.omega_ib_b[k])
         stamp = sec_to_stamp(STAMP0 + tr.t[k])
@@ -229,15 +234,41 @@ def print_slips(trials):
           f"largest FIXED |heading error|/sigma within 5 s after a slip: {worst:.2f}")
 
 
+def first_fix_sample(seeds, until=10.0, ratio=3.0, overrides=()):
+    """The first ``until`` s of many runs (2 antennas: the 30 s TTFF runs; 4 antennas: the
+    600 s runs with slips), where the first fix comes from the Galileo satellites alone: how
+    often a wrong fix is published before GPS phases join (6 s) and exposes it."""
+    for antennas, duration, name in ((TWO_ANTENNAS, 30.0, "2 antennas"),
+                                     (FOUR_ANTENNAS, 600.0, "4 antennas")):
+        trials = [run_trial(seed, duration, antennas, slip_every=30.0, ratio=ratio,
+                            overrides=overrides, until=until) for seed in seeds]
+        summarise(trials, f"first {until:.0f} s of {len(seeds)} runs (seeds {seeds[0]}-"
+                          f"{seeds[-1]}), {name}")
+        bad = [seed for seed, tr in zip(seeds, trials)
+               if any(st == 2 and not ok for st, ok in zip(tr.status, tr.correct))]
+        print(f"runs with a wrong FIXED epoch: {len(bad)}/{len(seeds)} {bad}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="short runs (smoke test)")
     ap.add_argument("--ratio", type=float, default=3.0, help="ratio_threshold of the node")
-    ap.add_argument("--param", action="append", default=[], metavar="NAME=FLOAT",
-                    help="node parameter override, e.g. multipath.phase_m=0")
+    ap.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                    help="node parameter override, e.g. multipath.phase_m=0.0 or "
+                         "fix_confirm_epochs=1 (a value with a point is a float)")
+    ap.add_argument("--first-fix", metavar="START:STOP",
+                    help="only the first-fix sample: the first 10 s of seeds START..STOP-1")
     args = ap.parse_args(argv)
-    extra = [Parameter(name, value=float(value)) for name, value in
-             (item.split("=", 1) for item in args.param)]
+    extra = [Parameter(name, value=float(value) if "." in value else int(value))
+             for name, value in (item.split("=", 1) for item in args.param)]
+    if args.first_fix:
+        start, stop = (int(v) for v in args.first_fix.split(":"))
+        rclpy.init()
+        try:
+            first_fix_sample(list(range(start, stop)), ratio=args.ratio, overrides=extra)
+        finally:
+            rclpy.shutdown()
+        return 0
     long_s, ttff_runs, ttff_s = (120.0, 3, 20.0) if args.quick else (600.0, 10, 30.0)
     rclpy.init()
     try:

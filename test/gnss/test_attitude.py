@@ -5,9 +5,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from scipy.stats import chi2
+
 from ins_gnss_ros.gnss.attitude import (
     AttitudeSolver, baseline_azimuth_elevation, correlated_variance_factor, estimate_mounting,
-    solve_attitude, wahba_svd)
+    rigid_body_misfit, solve_attitude, wahba_svd)
 from ins_gnss_ros.gnss.differences import form_double_differences
 from ins_gnss_ros.gnss.multipath import MultipathModel
 from ins_gnss_ros.nav.conventions import azimuth_from_yaw, wrap_pi
@@ -87,6 +89,31 @@ def test_solve_attitude_single_and_multiple_baselines():
     P = (A @ A.T / 9 + np.eye(9)) * 3e-3 ** 2       # correlated, as through the master antenna
     nees3 = _mc_euler(b_body, R, P, 1200, rng)
     assert np.all((0.85 < nees3) & (nees3 < 1.15))
+
+
+def test_rigid_body_misfit_is_chi2_for_the_antenna_geometry_and_flags_one_wrong_baseline():
+    rng = np.random.default_rng(3)
+    b_body = FOUR[1:] - FOUR[0]
+    R = dcm_from_euler(0.1, -0.05, 2.5)
+    # Baselines correlated through the master antenna (each baseline's error is remote - master).
+    ant = np.diag([0.002, 0.002, 0.005]) ** 2
+    P = np.kron(np.ones((3, 3)) + np.eye(3), ant)
+    b_true = b_body @ R.T
+    draws = [rigid_body_misfit(b_true + x.reshape(3, 3), P, b_body)
+             for x in rng.multivariate_normal(np.zeros(9), P, 1000)]
+    misfit = np.array([m for m, _ in draws])
+    assert {d for _, d in draws} == {6}
+    assert np.mean(misfit) == pytest.approx(6.0, rel=0.07)
+    assert np.mean(misfit > chi2.ppf(0.99, 6)) < 0.02
+    # A wrong fix of baseline 1 alone: its own length right, its direction 4.5 deg off in
+    # azimuth (the seed-6 first fix of the 4-antenna sea trial): far from any rigid rotation.
+    wrong = b_true.copy()
+    wrong[0] = dcm_from_euler(0.0, 0.0, np.radians(4.5)) @ wrong[0]
+    assert rigid_body_misfit(wrong, P, b_body)[0] > 10 * chi2.ppf(1 - 1e-4, 6)
+    # Collinear baselines leave the rotation about their line free: one degree of freedom more.
+    line = np.array([[1.5, 0.0, 0.0], [3.0, 0.0, 0.0]])
+    m, dof = rigid_body_misfit(line @ R.T, np.eye(6) * 1e-6, line)
+    assert dof == 4 and m == pytest.approx(0.0, abs=1e-9)
 
 
 def test_mounting_calibration_recovers_offsets():
@@ -194,6 +221,26 @@ def test_attitude_prior_gives_a_fix_from_the_first_epoch():
     for seed in range(5):
         _, status = _run(TWO, 60 + seed, 1, 1.0, _vessel, prior=True)
         assert status == ["FIXED"]
+
+
+def test_a_weak_first_fix_is_held_once_confirmed_a_strong_one_at_once():
+    # With an attitude prior every epoch's fix passes the ratio test. From 5 Galileo satellites
+    # (4 DDs, fewer than WEAK_FIX_DDS) the fix is held at the second epoch that agrees; from 5
+    # GPS + 5 Galileo (8 DDs) at the first.
+    R = dcm_from_euler(0.02, -0.01, 0.7)
+    prior = (dcm_from_euler(0.02, -0.01, 0.71), np.radians(1.0) ** 2 * np.eye(3))
+    for n_gps, expected in ((0, ["FLOAT", "FIXED", "FIXED"]), (5, ["FIXED"] * 3)):
+        sim = PhaseSim(90, TWO, n_gps=n_gps, n_gal=5)
+        solver = AttitudeSolver(TWO, noise=sim.noise, confirm_epochs=2)
+        status = []
+        for i in range(3):
+            t = 0.2 * i
+            sol = solver.process(sim.observe(t, R), sim.los(t), t, attitude_prior=prior)
+            status.append(sol.status)
+        assert status == expected
+        dd = form_double_differences(sim.observe(0.4, R), sim.los(0.4), solver.references,
+                                     sim.noise)
+        np.testing.assert_array_equal(solver.store.lookup(dd), _truth_dd(sim, dd))
 
 
 def test_a_signal_without_phase_is_no_reference_and_is_used_once_valid():

@@ -158,11 +158,70 @@ def test_fixes_beyond_the_platform_tilt_are_rejected(ros_context, bus, static_tw
     # The platform pitches 8 deg nose up: with a 5 deg limit every fix is taken as wrong.
     epochs, ephs = static_two
     node = _node(ros_context, bus, max_tilt_deg=5.0)
-    heads = _run(node, bus, epochs[:6], ephs)
+    heads = _run(node, bus, epochs[:10], ephs)
     assert {h.status for h in heads} == {NONE}
     assert node.diag.counts[
         "FIXED attitude beyond max_tilt_deg: wrong fix, ambiguities dropped"] >= 2
     node.destroy_node()
+
+
+def _bench():
+    """bench/bench_phase_heading.py as a module (its run_trial: the sea trial through the node)."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "bench" / "bench_phase_heading.py"
+    spec = importlib.util.spec_from_file_location("bench_phase_heading", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module         # its dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+def _fixed_epochs(trial):
+    """(time, held ambiguities all right) of every FIXED epoch of a bench trial."""
+    return [(t, ok) for t, st, ok in zip(trial.t, trial.status, trial.correct) if st == FIXED]
+
+
+def test_wrong_galileo_only_first_fix_of_two_antennas_is_not_published(ros_context):
+    # The first 2.5 s of the 2-antenna sea trial of seed 135: only the 5 Galileo satellites have
+    # a phase (GPS joins at 6 s), 4 double differences. Held at the first epoch it passes the
+    # ratio test (0.6 s), a wrong integer set (16 deg heading, 26 deg pitch error) is kept until
+    # GPS joins; confirmed over 2 epochs (the default), only the right one is held (1.8 s).
+    bench = _bench()
+
+    def trial(confirm):
+        return _fixed_epochs(bench.run_trial(
+            135, 30.0, TWO, slip_every=30.0, until=2.5, context=ros_context,
+            overrides=[Parameter("fix_confirm_epochs", value=confirm)]))
+
+    at_once = trial(1)
+    assert at_once and not at_once[0][1]                 # the situation reproduced
+    confirmed = trial(2)
+    assert confirmed and all(ok for _, ok in confirmed)
+
+
+def test_wrong_galileo_only_first_fix_of_four_antennas_is_not_published(ros_context,
+                                                                         monkeypatch):
+    # The first 2.4 s of the 4-antenna sea trial of seed 6, Galileo only as above. Each baseline's
+    # own tests (ratio, residual, length) pass a wrong first fix at 0.4 s (4.5 deg heading, 12
+    # deg pitch error); the rigid-body test across the three baselines refuses it, and the fix
+    # that follows is right.
+    from ins_gnss_ros.gnss.attitude import AttitudeSolver
+
+    bench = _bench()
+
+    def trial():
+        return _fixed_epochs(bench.run_trial(6, 600.0, FOUR, slip_every=30.0, until=2.4,
+                                             context=ros_context))
+
+    with monkeypatch.context() as m:
+        m.setattr(AttitudeSolver, "_rigid_ok", lambda self, fixed: True)
+        unchecked = trial()
+    assert unchecked and not any(ok for _, ok in unchecked[:5])    # the situation reproduced
+    checked = trial()
+    assert checked and all(ok for _, ok in checked)
 
 
 def test_cycle_slips_on_one_antenna_are_detected_without_a_wrong_heading(ros_context, bus):

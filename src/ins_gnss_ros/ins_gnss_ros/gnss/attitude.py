@@ -22,6 +22,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import chi2
 
 from ..nav.conventions import azimuth_from_yaw, wrap_pi
 from ..nav.rotations import dcm_from_euler, dcm_to_quat, quat_from_rotvec, quat_to_dcm, \
@@ -30,6 +31,12 @@ from .baseline import AmbiguityStore, fix_ambiguities, fixed_baselines, float_so
 from .cycle_slip import detect_slips_dd, detect_slips_doppler
 from .differences import NoiseModel, common_signals, form_double_differences, select_references
 from .multipath import MultipathModel
+
+
+#: A fix from scratch of a single baseline with fewer double differences than this is held only
+#: once confirmed (``AttitudeSolver._confirmed``): with 5 DDs 12 of 241 accepted single-epoch
+#: fixes were wrong, with 7 one of 744 (``docs/results/phase_heading.md``, bench_lambda §2).
+WEAK_FIX_DDS = 6
 
 
 def baseline_azimuth_elevation(b_enu, cov=None):
@@ -192,6 +199,42 @@ def solve_attitude(b_enu, cov, b_body, iterations=3) -> AttitudeEstimate:
                             Minv @ P_theta @ Minv.T, q)
 
 
+def rigid_body_misfit(b_enu, cov, b_body) -> tuple[float, int]:
+    """How far measured baselines are from one rigid rotation of the antenna geometry.
+
+    χ² = min_C (b - C b_body)ᵀ P⁻¹ (b - C b_body) over all K baselines jointly, at the attitude
+    of :func:`solve_attitude` (the weighted Wahba / Gauss-Newton minimiser; for collinear
+    baselines the longest one's direction), with 3K - 3 degrees of freedom (3K - 2 for collinear
+    baselines: the rotation about their line is free). It tests the lengths and the angles
+    between the baselines at once: the orthonormality constraint of the multivariate constrained
+    LAMBDA (Teunissen 2007, "A general multivariate formulation of the multi-antenna GNSS
+    attitude determination problem", Artificial Satellites 42; Teunissen, Giorgi & Buist 2011,
+    GPS Solutions 15), used here as a test of fixes made baseline by baseline. With correct
+    integers it is χ²(dof) when ``cov`` holds all the errors; a wrong integer set moves its
+    baseline by decimetres in a direction no common rotation of the others follows.
+
+    Parameters
+    ----------
+    b_enu : array_like, shape (K, 3)
+        Measured baselines (ENU, m).
+    cov : array_like, shape (3K, 3K)
+        Their covariance, including the uncertainty of the body geometry (m²).
+    b_body : array_like, shape (K, 3)
+        The baselines in the body frame (FLU, m).
+
+    Returns
+    -------
+    chi2 : float
+    dof : int
+    """
+    b_enu = np.atleast_2d(np.asarray(b_enu, float))
+    b_body = np.atleast_2d(np.asarray(b_body, float))
+    att = solve_attitude(b_enu, cov, b_body)
+    r = (b_enu - b_body @ quat_to_dcm(att.q_nb).T).ravel()
+    collinear = np.isnan(att.roll)
+    return float(r @ np.linalg.solve(cov, r)), 3 * len(b_body) - (2 if collinear else 3)
+
+
 @dataclass
 class MountingCalibration:
     """Body-frame direction of a baseline estimated against a reference attitude.
@@ -323,12 +366,20 @@ class AttitudeSolver:
         independent measurement: the correlated part of the covariance is counted so that the
         average over that time has the right variance (:func:`correlated_variance_factor`).
         0: once (the variance of one epoch); inf: the long-run limit ≈ 2τ/Δt.
+    confirm_epochs : int
+        With one baseline, a fix from scratch from fewer than ``WEAK_FIX_DDS`` double
+        differences is held once the same integers have passed the ratio test at this many
+        consecutive epochs (1: at once; see ``_confirmed``).
+
+    Every epoch the held ambiguities must pass the residual χ² test, the known baseline lengths
+    and, with two or more baselines, the rigid-body test (:func:`rigid_body_misfit`); a failure
+    drops them all.
     """
 
     def __init__(self, antennas_flu, noise=NoiseModel(), ratio_threshold=3.0,
                  sigma_length=0.002, elevation_mask=np.radians(10.0), slip_threshold=1.0,
                  w_critical=4.0, max_gap=5.0, window=5, multipath: MultipathModel | None = None,
-                 averaging_time=0.0):
+                 averaging_time=0.0, confirm_epochs=1):
         ant = np.asarray(antennas_flu, float)
         self.b_body = ant[1:] - ant[0]
         self.lengths = np.linalg.norm(self.b_body, axis=1)
@@ -341,10 +392,12 @@ class AttitudeSolver:
         self.max_gap = max_gap
         self.multipath = multipath
         self.averaging_time = averaging_time
+        self.confirm_epochs = confirm_epochs
         self._t_last = None     # last epoch processed; reset() keeps it (the output goes on)
         self.store = AmbiguityStore()
         self._refs: dict = {}
         self._ratio = {}
+        self._candidate = None  # one baseline: ((row keys, integers), epochs passed in a row)
         self._prev = None   # (t, epochs, dd, baselines)
         self._window = deque(maxlen=max(window - 1, 0))   # earlier epochs' DDs
 
@@ -357,6 +410,7 @@ class AttitudeSolver:
         """Forget the held ambiguities and the previous epoch."""
         self.store.forget()
         self._refs, self._ratio, self._prev = {}, {}, None
+        self._candidate = None
         self._window.clear()
 
     def process(self, epochs, los_enu, t, attitude_prior=None) -> AttitudeSolution:
@@ -423,11 +477,18 @@ class AttitudeSolver:
                 continue
             fix = fix_ambiguities(fs, self.lengths[k - 1], self.sigma_length,
                                   enough_ratio=max(10.0, self.ratio_threshold))
-            if fix is not None and fix.ratio >= self.ratio_threshold:
-                self.store.hold(dd, fs.rows, fix.ambiguities)
-                self._ratio[k] = fix.ratio
+            if fix is None or fix.ratio < self.ratio_threshold:
+                self._candidate = None
+                continue
+            weak = K == 1 and fs.rows.size == dd.rows(k).size and fs.rows.size < WEAK_FIX_DDS
+            if weak and not self._confirmed(dd, fs, fix):
+                continue
+            self._candidate = None
+            self.store.hold(dd, fs.rows, fix.ambiguities)
+            self._ratio[k] = fix.ratio
         fixed = fixed_baselines(dd, self.store.lookup(dd), K)
-        if fixed is not None and not (fixed.consistent() and self._lengths_ok(fixed)):
+        if fixed is not None and not (fixed.consistent() and self._lengths_ok(fixed)
+                                      and self._rigid_ok(fixed)):
             # A wrong fix or an undetected slip: start the ambiguities afresh.
             self.store.forget()
             self._ratio = {}
@@ -491,6 +552,44 @@ class AttitudeSolver:
             if abs(np.linalg.norm(b) - self.lengths[k]) > k_sigma * np.sqrt(s2):
                 return False
         return True
+
+    def _confirmed(self, dd, fs, fix) -> bool:
+        """Whether a fix from scratch of the single baseline (none of its ambiguities held) from
+        fewer than ``WEAK_FIX_DDS`` double differences may be held: the same integers of the
+        same rows have passed the ratio test at ``confirm_epochs`` consecutive epochs.
+
+        The solver tries a fix at every epoch until one passes, so the chance that a wrong
+        candidate passes once grows with the number of tries; held, it is never tested by the
+        ratio again. With few double differences the winner drifts between a few candidates
+        from epoch to epoch (time-correlated multipath moves the float solution); a wrong one
+        seldom passes twice in a row, a right one keeps winning: the "minimum fix count to hold
+        ambiguity" of fix-and-hold RTK (RTKLIB manual, option pos2-arminfix). Fixes next to held
+        ambiguities (after a slip) are constrained by them and held at once; with two or more
+        baselines the rigid-body test (:meth:`_rigid_ok`) is the stronger check and fixes are
+        held at once.
+        """
+        key = (tuple(dd.key(j) for j in fs.rows), tuple(fix.ambiguities.tolist()))
+        last, count = self._candidate or (None, 0)
+        count = count + 1 if last == key else 1
+        self._candidate = (key, count)
+        return count >= self.confirm_epochs
+
+    def _rigid_ok(self, fixed, alpha=1e-4) -> bool:
+        """With two or more baselines, :func:`rigid_body_misfit` at false-alarm probability
+        ``alpha`` per epoch. It catches a wrong fix that each baseline's own tests pass: with few
+        double differences (e.g. the first fix from 5 Galileo satellites, 4 per baseline) the
+        residual χ² has 1 degree of freedom per baseline and epoch, and a length-constrained
+        wrong candidate has the right length by construction. The covariance is that of one
+        epoch: the white part, the time-correlated multipath once, and the body geometry
+        (``sigma_length`` on every axis)."""
+        K = len(self.b_body)
+        if K < 2:
+            return True
+        cov = fixed.cov + self.sigma_length ** 2 * np.eye(3 * K)
+        if fixed.cov_correlated is not None:
+            cov = cov + fixed.cov_correlated
+        misfit, dof = rigid_body_misfit(fixed.baselines, cov, self.b_body)
+        return misfit <= chi2.ppf(1.0 - alpha, dof)
 
     def _solution(self, status, b, cov, sats, slipped, ratio) -> AttitudeSolution:
         att = solve_attitude(b, cov, self.b_body)

@@ -15,9 +15,12 @@ Per GNSS epoch the node
 3. runs the phase-attitude core :class:`~ins_gnss_ros.gnss.attitude.AttitudeSolver` (cycle-slip
    detection, double differences, length-constrained LAMBDA with ratio test, held ambiguities),
    with the INS attitude as an a-priori baseline when ``ins/state`` is recent and navigating
-   (seed 004's tightly-coupled phase processing: it shrinks the ambiguity search); a FIXED
-   attitude with pitch or roll beyond ``max_tilt_deg`` is a wrong fix: the ambiguities are
-   dropped and nothing usable is published;
+   (seed 004's tightly-coupled phase processing: it shrinks the ambiguity search); with 2
+   antennas a fix from scratch from fewer than 6 double differences is held once the same
+   integers passed the ratio test at ``fix_confirm_epochs`` consecutive epochs, with 3-4
+   antennas the fixed baselines must fit the antenna geometry under one attitude (the core's
+   rigid-body test); a FIXED attitude with pitch or roll beyond ``max_tilt_deg`` is a wrong
+   fix: the ambiguities are dropped and nothing usable is published;
 4. publishes ``gnss/heading`` (ins_gnss_msgs/Heading, source PHASE_DIFFERENCE, reference TRUE):
    azimuth of the body x axis, pitch nose-up positive (the message's convention: the negative of
    the core's ROS pitch), roll (NaN with one baseline), their variances, the master→antenna-1
@@ -183,6 +186,10 @@ class PhaseHeadingNode(NavNode):
         Param("float_window", 5,
               "epochs accumulated in the float solution before the first fix (1: single epoch)",
               1, 100),
+        Param("fix_confirm_epochs", 2,
+              "with 2 antennas, a fix from scratch from fewer than 6 double differences is held "
+              "(and published) once the same integers have passed the ratio test at this many "
+              "consecutive epochs (1: at once)", 1, 50),
         Param("slip_threshold_cycles", 1.0,
               "phase minus integrated Doppler threshold of the slip test, cycles", 0.1, 100.0),
         Param("max_gap_s", 5.0, "longest epoch gap over which slips are tested and ambiguities "
@@ -238,7 +245,8 @@ class PhaseHeadingNode(NavNode):
             ratio_threshold=p["ratio_threshold"], sigma_length=p["baseline_length_sigma_m"],
             elevation_mask=math.radians(p["elevation_mask_deg"]),
             slip_threshold=p["slip_threshold_cycles"], max_gap=p["max_gap_s"],
-            window=p["float_window"], multipath=multipath,
+            window=p["float_window"], confirm_epochs=p["fix_confirm_epochs"],
+            multipath=multipath,
             averaging_time=p["multipath.averaging_time_s"])
         self.pending: dict[float, dict] = {}     # epoch GNSS time -> {antenna_id: msg}
         self.last_epoch = -math.inf               # GNSS time of the last epoch handled
