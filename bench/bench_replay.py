@@ -11,11 +11,12 @@ replayed as fast as possible
 and the wall time of each replay, bag reading and writing included, is compared with the 600 s
 of the trial. Targets: >= 10x for the graph, >= 100x for the offline path.
 
-    .venv/bin/python bench/bench_replay.py [--duration 600] [--keep DIR] [--offline-only]
+    .venv/bin/python bench/bench_replay.py [--duration 600] [--keep DIR] [--offline-only|--graph-only]
 
 ``--offline-only`` times the offline path alone (after an untimed offline replay of a 10 s
 trial, which loads the numba kernels as the graph replays do before it in the full bench): the
 quick A/B of filter-code changes, alternating two source trees on PYTHONPATH.
+``--graph-only`` does the same for the full graph (warmed up on a 5 s trial).
 """
 from __future__ import annotations
 
@@ -49,8 +50,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=600.0, help="trial length, s")
     parser.add_argument("--keep", default=None, help="work folder to keep (default: temporary)")
-    parser.add_argument("--offline-only", action="store_true",
-                        help="time only the offline filter path (warmed up on a 10 s trial)")
+    only = parser.add_mutually_exclusive_group()
+    only.add_argument("--offline-only", action="store_true",
+                      help="time only the offline filter path (warmed up on a 10 s trial)")
+    only.add_argument("--graph-only", action="store_true",
+                      help="time only the full graph (warmed up on a 5 s trial)")
     args = parser.parse_args()
 
     from ins_gnss_ros.trial import bag as bagio
@@ -64,14 +68,26 @@ def main() -> None:
     strapdown.write_text(STRAPDOWN)
     full.write_text(FULL_GRAPH)
     t = time.perf_counter()
-    bag = simulate("car", args.duration, 1, work / "car", SimOptions(imu_topic="delta"))
+    # The imu/delta trial (strapdown alone, offline path); --graph-only needs only imu/data_raw.
+    bag = None if args.graph_only else simulate("car", args.duration, 1, work / "car",
+                                                SimOptions(imu_topic="delta"))
     offline = ("offline filter path (navigator)", replay_offline, bag, strapdown, "offline", {},
                100.0)
+
+    def full_graph(raw):
+        return ("full graph imu_preprocessor+strapdown+ekf, in-process", replay, raw, full,
+                "full", {"init_from_truth": True}, 10.0)
+
     if args.offline_only:
         # Loads the numba kernels (compiled machine code from the cache), untimed.
         replay_offline(simulate("car", 10.0, 1, work / "car_warmup", SimOptions(imu_topic="delta")),
                        strapdown, work / "warmup")
         runs = (offline,)
+    elif args.graph_only:
+        # Loads the numba kernels and the message modules, untimed.
+        replay(simulate("car", 5.0, 1, work / "car_raw_warmup"), full, work / "warmup",
+               init_from_truth=True)
+        runs = (full_graph(simulate("car", args.duration, 1, work / "car_raw")),)
     else:
         raw = simulate("car", args.duration, 1, work / "car_raw")
         print(f"simulated {args.duration:.0f} s car trial twice (200 Hz imu/delta, imu/data_raw; "
@@ -89,8 +105,7 @@ def main() -> None:
               f"({len(rows) / read:,.0f} msg/s)")
         runs = (("strapdown node alone, in-process", replay, bag, strapdown, "strapdown",
                  {"init_from_truth": True}, 10.0),
-                ("full graph imu_preprocessor+strapdown+ekf, in-process", replay, raw, full,
-                 "full", {"init_from_truth": True}, 10.0),
+                full_graph(raw),
                 offline)
     for name, function, trial, profile, folder, kwargs, target in runs:
         out = work / folder

@@ -117,3 +117,25 @@ def test_in_process_bus_delivers_in_order_and_records(ros_context):
     assert [type(s) for s in states] == [InsState] * 3
     assert [s.header.stamp for s in states] == [sec_to_stamp(k * 0.01) for k in range(1, 4)]
     assert recorded == [("/imu/delta", "ImuDelta"), ("/ins/state", "InsState")] * 3
+
+
+def test_now_msg_equals_rclpy_time_conversion(ros_context):
+    """now_msg builds the stamp from integer ns itself: the same stamp as rclpy's
+    Time.to_msg, on the bus' replay time and on the node clock."""
+    import rclpy.time
+
+    from ins_gnss_ros.nodes.base import InProcessBus
+
+    bus = InProcessBus()
+    on_bus = NavNode("now_on_bus", context=ros_context, bus=bus)
+    for t_ns in (0, 999_999_999, 1_000_000_000, 1_767_225_600_123_456_789):
+        bus.now_ns = t_ns
+        assert on_bus.now_ns() == t_ns
+        assert on_bus.now_msg() == rclpy.time.Time(nanoseconds=t_ns).to_msg()
+    on_bus.destroy_node()
+    on_clock = NavNode("now_on_clock", context=ros_context)
+    before = on_clock.get_clock().now().nanoseconds
+    stamp = on_clock.now_msg()
+    t_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+    assert before <= t_ns <= on_clock.get_clock().now().nanoseconds
+    on_clock.destroy_node()

@@ -11,7 +11,7 @@ from geometry_msgs.msg import Vector3
 from ins_gnss_msgs.msg import InsState
 
 from ins_gnss_ros.nav.strapdown import NavState
-from ins_gnss_ros.nodes.convert import (fill_ins_state, finite_vector3, nav_state_from_msg,
+from ins_gnss_ros.nodes.convert import (fill_ins_state, increment_problem, nav_state_from_msg,
                                         sec_to_stamp, stamp_to_sec)
 from ins_gnss_ros.nodes.ekf_node import EkfNode
 
@@ -38,11 +38,26 @@ def test_fill_ins_state_round_trips_a_nav_state():
     assert all(isinstance(v, float) for v in (msg.velocity.x, msg.orientation.w))
 
 
-def test_finite_vector3_checks_every_component():
-    ok = Vector3(x=1.0, y=-2.0, z=3.0)
-    assert finite_vector3(ok, ok)
+def test_increment_problem_checks_every_component():
+    from ins_gnss_msgs.msg import ImuDelta
+
+    def delta(angle=(1e-3, -2e-3, 3e-3), velocity=(0.01, 0.0, 0.098), dt=0.01):
+        return ImuDelta(delta_angle=Vector3(x=angle[0], y=angle[1], z=angle[2]),
+                        delta_velocity=Vector3(x=velocity[0], y=velocity[1], z=velocity[2]),
+                        dt=dt)
+
+    assert increment_problem(delta()) is None
+    non_finite = "non-finite or non-positive increment dropped"
     for bad in (math.nan, math.inf, -math.inf):
-        assert not finite_vector3(ok, Vector3(x=1.0, y=bad, z=0.0))
+        for k in range(3):
+            vector = [0.0, 0.0, 0.0]
+            vector[k] = bad
+            assert increment_problem(delta(angle=vector)) == non_finite
+            assert increment_problem(delta(velocity=vector)) == non_finite
+        assert increment_problem(delta(dt=bad)) == non_finite
+    assert increment_problem(delta(dt=0.0)) == non_finite
+    assert increment_problem(delta(angle=(1.01, 0.0, 0.0))) == "implausible increment dropped"
+    assert increment_problem(delta(velocity=(0.0, 0.0, 101.0))) == "implausible increment dropped"
 
 
 def test_ins_state_at_takes_the_newest_state_of_the_epoch_with_the_current_sequence():

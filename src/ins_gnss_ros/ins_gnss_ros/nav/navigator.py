@@ -387,9 +387,12 @@ class Navigator:
         # compensation changes them by (bias dt) x (increment) ~ 1e-6 m/s per sample for a
         # 0.2 deg/s gyro bias at 100 Hz: far below the sensor noise, and it keeps the
         # per-segment work to a subtraction.
-        prev = (self._imu_th[-1], self._imu_dv[-1]) if len(self._imu_t) else None
-        prev_th = np.vstack([np.zeros(3) if prev is None else prev[0], dtheta[:-1]])
-        prev_dv = np.vstack([np.zeros(3) if prev is None else prev[1], dv[:-1]])
+        # Each sample's predecessor (filled in place: np.vstack costs more than the copy in
+        # the ekf node, which adds one sample per call).
+        prev_th, prev_dv = np.zeros_like(dtheta), np.zeros_like(dv)
+        if len(self._imu_t):
+            prev_th[0], prev_dv[0] = self._imu_th[-1], self._imu_dv[-1]
+        prev_th[1:], prev_dv[1:] = dtheta[:-1], dv[:-1]
         rot, dvn = coning_sculling(dtheta[:, None, :], dv[:, None, :], "one_sample",
                                    prev=(prev_th, prev_dv))
         self._trim()
@@ -581,9 +584,9 @@ class Navigator:
             t_cov = self._t_epoch + cfg.cov_interval
             t_meas = self._pending[0][0] if self._pending else np.inf
             t_stop = min(t_cov, t_meas)
+            if not final and self._imu_t[n - 1] <= t_stop:
+                return  # the segment's end is not yet known (no search: the ekf node's usual case)
             j = int(np.searchsorted(self._imu_t, t_stop, side="right"))
-            if j >= n and not final:
-                return  # the segment's end is not yet known
             if j > i:
                 self._segment(i, j)
             elif t_meas <= t_cov:

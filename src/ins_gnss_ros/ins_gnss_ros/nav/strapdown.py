@@ -122,10 +122,6 @@ class VerticalDamping:
         return cls(2.0 * omega0, omega0 ** 2 + grad)
 
 
-def _ell_par(ell: Ellipsoid) -> tuple:
-    return (ell.a, ell.f, ell.e2, ell.m, ell.omega, ell.gamma_e, ell.somigliana_k)
-
-
 def strapdown_step(state: NavState, dtheta, dv, dt: float, ell: Ellipsoid = WGS84,
                    h_ref: float = np.nan,
                    damping: VerticalDamping | None = None) -> NavState:
@@ -158,7 +154,7 @@ def strapdown_step(state: NavState, dtheta, dv, dt: float, ell: Ellipsoid = WGS8
     q = np.empty(4)
     lat, lon, h = _kernels.mech_step(
         float(state.lat), float(state.lon), float(state.h), state.v_enu, state.q_nb,
-        np.asarray(dtheta, float), np.asarray(dv, float), float(dt), _ell_par(ell),
+        np.asarray(dtheta, float), np.asarray(dv, float), float(dt), ell.kernel_params,
         float(href), k1, k2, v, q)
     return NavState(lat, lon, h, v, q, state.t + dt)
 
@@ -196,7 +192,7 @@ def run(state0: NavState, dthetas, dvs, dt: float, ell: Ellipsoid = WGS84, h_ref
         k1, k2 = damping.k1, damping.k2
     lla, vel, quat = _kernels.mech_run(
         float(state0.lat), float(state0.lon), float(state0.h), state0.v_enu, state0.q_nb,
-        dthetas, dvs, float(dt), _ell_par(ell), href, k1, k2)
+        dthetas, dvs, float(dt), ell.kernel_params, href, k1, k2)
     return {"t": state0.t + dt * np.arange(n + 1), "lat": lla[:, 0], "lon": lla[:, 1],
             "h": lla[:, 2], "v_enu": vel, "q_nb": quat}
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import rclpy
-import rclpy.time
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy._rclpy_pybind11 import RCLError
@@ -233,11 +233,17 @@ class NavNode(Node):
         else:
             self.create_subscription(msg_type, topic, callback, qos)
 
-    def now_msg(self):
-        """Current time as a message stamp: the bus' replay time or the node clock."""
+    def now_ns(self) -> int:
+        """Current time, ns: the bus' replay time or the node clock."""
         if self.bus is not None:
-            return rclpy.time.Time(nanoseconds=self.bus.now_ns).to_msg()
-        return self.get_clock().now().to_msg()
+            return self.bus.now_ns
+        return self.get_clock().now().nanoseconds
+
+    def now_msg(self) -> Time:
+        """Current time as a message stamp (as rclpy's ``Time.to_msg``, without building an
+        rclpy Time: replays call this for every sample)."""
+        sec, nanosec = divmod(self.now_ns(), 1_000_000_000)
+        return Time(sec=sec, nanosec=nanosec)
 
 
 #: Executors a node process can spin in. ``events`` (rclpy's C++ EventsExecutor) takes each

@@ -39,11 +39,6 @@ def vec(v: Vector3) -> np.ndarray:
     return np.array([v.x, v.y, v.z])
 
 
-def finite_vector3(*vectors: Vector3) -> bool:
-    """True if every component of the Vector3 messages is finite (no numpy on 3-vectors)."""
-    return all(math.isfinite(c) for v in vectors for c in (v.x, v.y, v.z))
-
-
 #: Bounds of a physically possible increment: angular rate (rad/s, ~5700 deg/s) and specific
 #: force (m/s^2, ~1000 g), far beyond any navigation IMU's range. A value past them is a corrupt
 #: message: integrated, it would wreck the state and the filter's covariance (a 1e12 rad
@@ -54,12 +49,14 @@ MAX_RATE, MAX_SPECIFIC_FORCE = 100.0, 1e4
 def increment_problem(msg) -> str | None:
     """Why an ImuDelta cannot be integrated (non-finite, non-positive dt, beyond MAX_RATE or
     MAX_SPECIFIC_FORCE), or None."""
-    if not (math.isfinite(msg.dt) and msg.dt > 0.0
-            and finite_vector3(msg.delta_angle, msg.delta_velocity)):
+    # Each field read once: a message field is a Python property (checked on every sample).
+    a, v, dt = msg.delta_angle, msg.delta_velocity, msg.dt
+    ax, ay, az, vx, vy, vz = a.x, a.y, a.z, v.x, v.y, v.z
+    if not (math.isfinite(dt) and dt > 0.0
+            and all(map(math.isfinite, (ax, ay, az, vx, vy, vz)))):
         return "non-finite or non-positive increment dropped"
-    a, v = msg.delta_angle, msg.delta_velocity
-    if (math.sqrt(a.x * a.x + a.y * a.y + a.z * a.z) > MAX_RATE * msg.dt
-            or math.sqrt(v.x * v.x + v.y * v.y + v.z * v.z) > MAX_SPECIFIC_FORCE * msg.dt):
+    if (math.sqrt(ax * ax + ay * ay + az * az) > MAX_RATE * dt
+            or math.sqrt(vx * vx + vy * vy + vz * vz) > MAX_SPECIFIC_FORCE * dt):
         return "implausible increment dropped"
     return None
 

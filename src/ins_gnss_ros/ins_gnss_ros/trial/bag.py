@@ -21,6 +21,7 @@ import struct
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib import import_module
+from operator import itemgetter
 from pathlib import Path
 from typing import Any, Iterable, Iterator, NamedTuple
 
@@ -86,8 +87,12 @@ def messages_equal(a, b) -> bool:
 
 def msgtype_of(msg) -> str:
     """ROS type name ``pkg/msg/Name`` of an rclpy message object."""
-    package = type(msg).__module__.split(".")[0]
-    return f"{package}/msg/{type(msg).__name__}"
+    return _msgtype_of_class(type(msg))
+
+
+@lru_cache(maxsize=None)
+def _msgtype_of_class(cls) -> str:
+    return f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"
 
 
 @lru_cache(maxsize=None)
@@ -152,7 +157,8 @@ class BagWriter:
             self.write(topic, msg)
 
     def close(self) -> Path:
-        self._rows.sort(key=lambda row: row[:2])
+        # (stamp, writing order) decide: the order is unique, so no key function is needed.
+        self._rows.sort()
         self.path.parent.mkdir(parents=True, exist_ok=True)
         store = typestore()
         writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
@@ -223,15 +229,17 @@ def read_raw(path, topics: Iterable[str] | None = None) -> list[RawMessage]:
             connections = [c for c in reader.connections if wanted is None or c.topic in wanted]
             rows = _mcap_rows(reader, connections) if connections else []
             if rows is None:
-                rows = [(t, i, c.topic, c.msgtype, data) for i, (c, t, data)
-                        in enumerate(reader.messages(connections=connections))]
+                rows = [RawMessage(c.topic, t, c.msgtype, data)
+                        for c, t, data in reader.messages(connections=connections)]
     except BagError:
         raise
     except Exception as err:  # rosbags, mcap and yaml raise many types on a damaged file
         raise BagError(f"{path}: unreadable bag ({type(err).__name__}: {first_line(err)})") \
             from None
-    rows.sort(key=lambda row: row[:2])
-    return [RawMessage(topic, t, msgtype, data) for t, _, topic, msgtype, data in rows]
+    # Stable: ties stay in file order. The rows are built once, in their final type (a bag
+    # has a few hundred thousand of them).
+    rows.sort(key=itemgetter(1))
+    return rows
 
 
 #: MCAP file magic and the record opcodes read here (MCAP specification, "Records").
@@ -240,7 +248,7 @@ _OP_FOOTER, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_DATA_END = 0x02, 0x04, 0x05
 
 
 def _mcap_rows(reader, connections) -> list | None:
-    """Rows (t, index, topic, type, data) of a one-file MCAP bag in file order, parsed here.
+    """The :class:`RawMessage` rows of a one-file MCAP bag in file order, parsed here.
 
     rosbags' reader costs several microseconds per message (a stream object per record and a
     heap merge across chunks), about twice what this costs, which was a sizeable part of the
@@ -277,7 +285,7 @@ def _mcap_rows(reader, connections) -> list | None:
                 channel, _, t = unpack("<HIQ", buf, body)
                 if channel in channels:
                     topic = channels[channel]
-                    rows.append((t, len(rows), topic, types[topic], buf[body + 22:pos]))
+                    rows.append(RawMessage(topic, t, types[topic], buf[body + 22:pos]))
             elif op == _OP_CHANNEL:
                 channel, _, size = unpack("<HHI", buf, body)
                 topic = buf[body + 8:body + 8 + size].decode()
