@@ -277,7 +277,7 @@ def run(node_factory: Callable[[], Node], args: list[str] | None = None,
         print(f"error: {err}", file=sys.stderr)
         return 2
     rclpy.init(args=args)
-    node = None
+    node = spinner = None
     try:
         node = node_factory()
         spinner = EXECUTORS[kind]()
@@ -297,6 +297,13 @@ def run(node_factory: Callable[[], Node], args: list[str] | None = None,
             raise
         # A signal shut the context down while the node was still creating its endpoints.
     finally:
+        # The executor lets go of the node before either is destroyed: the events executor
+        # aborts the process ("Destroying callback manager with callbacks remaining") when it
+        # is garbage-collected while a node's entities are still registered with it.
+        if spinner is not None:
+            if node is not None:
+                spinner.remove_node(node)
+            spinner.shutdown()
         if node is not None:
             node.destroy_node()
         if rclpy.ok():
