@@ -167,8 +167,6 @@ def test_tight_coupling_with_three_satellites_through_the_nodes(ros_context):
     """Raw GNSS from real orbits (the GNSS simulator): the ekf aligns on SPP fix + velocity, then
     with 3 satellites uses their pseudoranges and Dopplers. The strapdown's error stays at the
     metre level where free inertial navigation drifts away."""
-    from ins_gnss_msgs.msg import GnssObservations
-
     from ins_gnss_ros.gnss import ephemeris_data
     from ins_gnss_ros.gnss.simulator import GnssSimulator, SimulatorConfig, solve_fix
     from ins_gnss_ros.nodes.ekf_node import EkfNode

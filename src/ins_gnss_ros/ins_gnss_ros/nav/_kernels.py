@@ -1,7 +1,10 @@
-"""Numba kernels of the per-sample hot loops: strapdown mechanisation and coning/sculling.
+"""Numba kernels of the hot loops: strapdown mechanisation, coning/sculling, and the filter
+maths (system matrix, Picard series, Joseph update, lever-arm velocity and its Jacobians).
 
 This module only holds compiled inner loops; the equations, frames and references are
-documented in :mod:`ins_gnss_ros.nav.strapdown` and :mod:`ins_gnss_ros.nav.coning`. Numba
+documented in :mod:`ins_gnss_ros.nav.strapdown`, :mod:`ins_gnss_ros.nav.coning`,
+:mod:`ins_gnss_ros.nav.error_model`, :mod:`ins_gnss_ros.nav.discretize`,
+:mod:`ins_gnss_ros.nav.ekf` and :mod:`ins_gnss_ros.nav.lever_arm`. Numba
 caches the machine code next to the source (``cache=True``): the first call after a change
 compiles for a few seconds, a later process loads it in about a second (docs/results/replay.md).
 Quaternion arithmetic is written out on scalars here (rather than calling
