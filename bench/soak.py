@@ -28,6 +28,10 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 G = 9.81  # stationary specific force magnitude fed to the nodes, m/s^2 (any plausible value)
+#: White noise on the synthetic IMU samples (rad/s, m/s^2): a real sensor's readings never repeat
+#: bit for bit, and the imu_preprocessor rejects repeated ones as a frozen sensor.
+GYRO_NOISE, ACCEL_NOISE = 1e-3, 1e-2
+RNG = np.random.default_rng(0)
 
 
 def _stamp(t_ns):
@@ -41,7 +45,9 @@ def _imu_delta(t_ns, dt):
 
     m = ImuDelta(dt=dt)
     m.header.stamp, m.header.frame_id = _stamp(t_ns), "base_link"
-    m.delta_velocity.z = G * dt
+    w, f = RNG.normal(0.0, GYRO_NOISE, 3), RNG.normal((0.0, 0.0, G), ACCEL_NOISE)
+    (m.delta_angle.x, m.delta_angle.y, m.delta_angle.z) = (float(v) for v in w * dt)
+    (m.delta_velocity.x, m.delta_velocity.y, m.delta_velocity.z) = (float(v) for v in f * dt)
     return m
 
 
@@ -50,7 +56,10 @@ def _imu(t_ns, dt):
 
     m = Imu()
     m.header.stamp, m.header.frame_id = _stamp(t_ns), "imu_link"
-    m.linear_acceleration.z = G
+    w, f = RNG.normal(0.0, GYRO_NOISE, 3), RNG.normal((0.0, 0.0, G), ACCEL_NOISE)
+    (m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z) = (float(v) for v in w)
+    (m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z) = \
+        (float(v) for v in f)
     return m
 
 
