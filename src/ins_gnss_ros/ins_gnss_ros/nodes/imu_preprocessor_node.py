@@ -54,14 +54,17 @@ def stamp_ns(stamp: Time) -> int:
     return stamp.sec * NS + stamp.nanosec
 
 
-def ns_to_stamp(t_ns: int) -> Time:
-    return Time(sec=t_ns // NS, nanosec=t_ns % NS)
-
-
 def set_stamp_ns(stamp: Time, t_ns: int) -> None:
     """Write integer nanoseconds into an existing stamp (the messages here are filled in place:
     each generated sub-message constructor is a few microseconds of Python, per sample)."""
     stamp.sec, stamp.nanosec = divmod(t_ns, NS)
+
+
+def ns_to_stamp(t_ns: int) -> Time:
+    """A new stamp of integer nanoseconds (for callers that build messages, e.g. the tests)."""
+    stamp = Time()
+    set_stamp_ns(stamp, t_ns)
+    return stamp
 
 
 def rotate_covariance(cov, c) -> list:
