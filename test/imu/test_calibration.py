@@ -68,6 +68,28 @@ def test_round_trip_within_noise():
     assert np.sqrt(np.mean((f - f_true) ** 2)) == pytest.approx(sa, rel=0.1)
 
 
+def test_correct_sample_is_correct_in_python_floats():
+    """The per-sample path gives correct()'s values up to the rounding of the 3x3 sums (numpy's
+    kernels may fuse multiply-adds), keeps M(T) and b(T) only while the temperature is unchanged,
+    and applies the residual errors."""
+    rng = np.random.default_rng(3)
+    cal = _example(rng)
+    residual = ResidualErrors(gyro_bias=[1e-4, -2e-4, 3e-4], gyro_scale=[1e-3, 0, -1e-3],
+                              accel_bias=[0.01, 0, -0.02], accel_scale=[0, 2e-3, 0])
+    gyro, accel = rng.normal(0, 1.0, (8, 3)), rng.normal(0, 10.0, (8, 3))
+    temperatures = [None, 40.0, 40.0, -5.0, None, None, 40.0, 25.0]
+    for k, temp in enumerate(temperatures):
+        res = residual if k % 2 else None
+        w, f = cal.correct_sample(tuple(gyro[k].tolist()), accel[k].tolist(), temp, res)
+        assert all(type(x) is float for x in w + f)
+        w_ref, f_ref = cal.correct(gyro[k], accel[k], temp, res)
+        np.testing.assert_allclose(w, w_ref, rtol=0, atol=1e-15)   # ~4 ulp of the 1 rad/s inputs
+        np.testing.assert_allclose(f, f_ref, rtol=0, atol=1e-14)   # ~4 ulp of the 10 m/s² inputs
+    # With the ideal sensor nothing is rounded: the readings come back bit for bit.
+    w, f = ImuCalibration().correct_sample((0.1, -0.2, 0.3), (1.0, 2.0, 9.8))
+    assert (w, f) == ((0.1, -0.2, 0.3), (1.0, 2.0, 9.8))
+
+
 def test_dict_yaml_round_trip():
     cal = _example(np.random.default_rng(2))
     text = yaml.safe_dump(cal.to_dict())

@@ -81,6 +81,27 @@ def test_bridging_values(mode):
         np.testing.assert_allclose(r.fill_accel[:, 2], 9.0)
 
 
+def test_results_without_fill_samples_are_shared_and_immutable():
+    """Results that bring no fill samples are one shared object per reason: frozen, with
+    read-only empty arrays, so that no caller can change what the next sample gets."""
+    import dataclasses
+
+    chk = _checker(max_identical=0)
+    dt = 1 / RATE
+    first, second = chk.check(0.0, (0.1, 0, 0), (0, 0, 9.8)), chk.check(dt, [0.1, 0, 0], [0, 0, 9.8])
+    assert first is second and first.reason == "ok"
+    rejected = [chk.check(dt, (0.1, 0, 0), (0, 0, 9.8)), chk.check(dt, (0.1, 0, 0), (0, 0, 9.8))]
+    assert rejected[0] is rejected[1] and rejected[0].reason == "duplicate_stamp"
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        first.reason = "gap"
+    for a in (first.fill_stamps, first.fill_gyro, first.fill_accel):
+        assert a.size == 0 and not a.flags.writeable
+    bridged = chk.check(4 * dt, (0.1, 0, 0), (0, 0, 9.8))
+    assert bridged.reason == "gap_bridged" and bridged.fill_gyro.shape == (2, 3)
+    with pytest.raises(ValueError):  # a reading must have exactly three channels
+        chk.check(5 * dt, (0.1, 0), (0, 0, 9.8))
+
+
 def test_bad_configuration():
     with pytest.raises(ValueError, match="bridge"):
         _checker(bridge="spline")

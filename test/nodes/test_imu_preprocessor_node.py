@@ -316,6 +316,30 @@ def test_magnetometer_rotated_and_bad_samples_dropped(graph):
     assert counts["magnetometer sample rejected: stamp not after the previous one"] == 1
 
 
+def test_imu_covariances_rotated_into_each_messages_own_arrays(graph):
+    """The driver's covariances, rotated into base_link (memoised per distinct covariance), are
+    copied into every output message: no two messages share an array."""
+    g = graph(Parameter("mounting_rpy_deg", value=[180.0, 0.0, 90.0]))
+    c_bs = dcm_from_euler(np.pi, 0.0, np.pi / 2)
+    cov_w, cov_f = np.diag([1e-6, 2e-6, 3e-6]), np.diag([1e-4, 2e-4, 4e-4])
+    for k in range(3):
+        msg = _imu_msg(T0_NS + k * DT_NS, GOOD_W, G_UP)
+        msg.angular_velocity_covariance[:] = cov_w.ravel()
+        msg.linear_acceleration_covariance[:] = -1.0 if k == 2 else cov_f.ravel()  # unknown
+        g.send("imu/data_raw", msg)
+    out = g.out["/imu/data"]
+    for m in out:
+        np.testing.assert_allclose(np.reshape(m.angular_velocity_covariance, (3, 3)),
+                                   c_bs @ cov_w @ c_bs.T, rtol=0, atol=1e-20)
+        assert m.orientation_covariance[0] == -1.0
+    np.testing.assert_allclose(np.reshape(out[0].linear_acceleration_covariance, (3, 3)),
+                               c_bs @ cov_f @ c_bs.T, rtol=0, atol=1e-18)
+    assert list(out[2].linear_acceleration_covariance) == [-1.0] * 9
+    arrays = [a for m in out for a in (m.angular_velocity_covariance,
+                                       m.linear_acceleration_covariance)]
+    assert not any(np.shares_memory(a, b) for i, a in enumerate(arrays) for b in arrays[i + 1:])
+
+
 @pytest.mark.parametrize("enabled", [False, True])
 def test_filter_corrections_only_when_enabled(graph, enabled):
     from ins_gnss_msgs.msg import InsCorrection

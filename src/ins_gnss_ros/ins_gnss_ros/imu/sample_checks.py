@@ -11,6 +11,7 @@ caller can restart integration.
 """
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import dataclass, field
 
@@ -21,9 +22,9 @@ REASONS = ("ok", "non_finite", "saturated", "duplicate_stamp", "backwards_stamp"
            "gap_bridged", "gap")
 
 
-@dataclass
+@dataclass(frozen=True)
 class CheckResult:
-    """Outcome of checking one sample.
+    """Outcome of checking one sample (immutable: the results without fill samples are shared).
 
     Attributes
     ----------
@@ -41,6 +42,18 @@ class CheckResult:
     fill_stamps: np.ndarray = field(default_factory=lambda: np.zeros(0))
     fill_gyro: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     fill_accel: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a
+
+
+#: One shared result per reason for the samples that bring no fill samples (nearly all of them):
+#: building a CheckResult and its three empty arrays cost more than the checks themselves.
+_PLAIN = {reason: CheckResult(reason in ("ok", "gap"), reason, _read_only(np.zeros(0)),
+                              _read_only(np.zeros((0, 3))), _read_only(np.zeros((0, 3))))
+          for reason in REASONS if reason != "gap_bridged"}
 
 
 class SampleChecker:
@@ -98,7 +111,7 @@ class SampleChecker:
 
     def _reject(self, reason: str) -> CheckResult:
         self.counts[reason] += 1
-        return CheckResult(False, reason)
+        return _PLAIN[reason]
 
     def check(self, stamp: float, gyro, accel) -> CheckResult:
         """Classify one sample.
@@ -107,16 +120,21 @@ class SampleChecker:
         ----------
         stamp : float
             Sensor time, s.
-        gyro, accel : array_like, shape (3,)
+        gyro, accel : sequence of 3 floats
             Raw angular rate (rad/s) and specific force (m/s²).
         """
-        gyro = np.asarray(gyro, float)
-        accel = np.asarray(accel, float)
-        if not (np.isfinite(stamp) and np.all(np.isfinite(gyro)) and np.all(np.isfinite(accel))):
+        # Six Python floats: per sample, scalar tests cost a fraction of numpy calls on 3-vectors.
+        gx, gy, gz = gyro
+        ax, ay, az = accel
+        isfinite = math.isfinite
+        if not (isfinite(stamp) and isfinite(gx) and isfinite(gy) and isfinite(gz)
+                and isfinite(ax) and isfinite(ay) and isfinite(az)):
             return self._reject("non_finite")
-        if np.any(np.abs(gyro) >= self.gyro_range) or np.any(np.abs(accel) >= self.accel_range):
+        if (max(abs(gx), abs(gy), abs(gz)) >= self.gyro_range
+                or max(abs(ax), abs(ay), abs(az)) >= self.accel_range):
             return self._reject("saturated")
-        result = CheckResult(True, "ok")
+        gyro, accel = (gx, gy, gz), (ax, ay, az)
+        result = _PLAIN["ok"]
         dt = 0.0
         if self._last is not None:
             dt = stamp - self._last[0]
@@ -131,15 +149,15 @@ class SampleChecker:
             if 0 < missing <= self.max_bridge:
                 result = self._fill(*self._last, stamp, gyro, accel, missing)
             else:
-                result = CheckResult(True, "gap")
+                result = _PLAIN["gap"]
         self._last = (float(stamp), gyro, accel)
         self.counts[result.reason] += 1
         return result
 
-    def _frozen(self, gyro, accel) -> bool:
+    def _frozen(self, gyro: tuple, accel: tuple) -> bool:
         """Count this sample's repetition of its predecessor; True from `max_identical` in a row."""
         prev, self._previous = self._previous, (gyro, accel)
-        if prev is not None and np.array_equal(prev[0], gyro) and np.array_equal(prev[1], accel):
+        if prev == self._previous:  # float ==, as np.array_equal (NaN never gets here)
             self._identical += 1
         else:
             self._identical = 0
@@ -150,6 +168,7 @@ class SampleChecker:
         stamps = t0 + frac * (t1 - t0)
         if self.bridge == "hold":
             frac = np.zeros_like(frac)
+        g0, g1, a0, a1 = (np.asarray(x, float) for x in (g0, g1, a0, a1))
         gyro = g0 + frac[:, None] * (g1 - g0)
         accel = a0 + frac[:, None] * (a1 - a0)
         return CheckResult(True, "gap_bridged", stamps, gyro, accel)
