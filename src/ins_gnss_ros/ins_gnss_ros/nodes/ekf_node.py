@@ -57,6 +57,7 @@ from ..nav.sensor_errors import GRADES, BlockNoise, FilterNoise, filter_noise
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import (held_increments, increment_problem, nav_state_from_msg, sec_to_stamp,
                       stamp_to_sec, to_quaternion, to_vector3, vec)
+from .fast_messages import new
 from .gnss_convert import kepler_from_msg, raw_epoch_from_msg
 
 MODES = {ALIGNING: FilterStatus.MODE_ALIGNING, NAVIGATING: FilterStatus.MODE_NAVIGATING,
@@ -487,7 +488,7 @@ class EkfNode(NavNode):
         (with the noise floors of forced measurement kinds: Navigator.covariance)."""
         P, S = self.navigator.covariance(), self.navigator.space
         stamp = ins.header.stamp
-        fix = NavSatFix()
+        fix = new(NavSatFix)
         fix.header.stamp, fix.header.frame_id = stamp, "base_link"
         fix.status.status = NavSatStatus.STATUS_FIX
         fix.latitude, fix.longitude, fix.altitude = np.degrees(st.lat), np.degrees(st.lon), st.h
@@ -496,7 +497,7 @@ class EkfNode(NavNode):
         self.pub_fix.publish(fix)
         if self.datum is None:
             return
-        odom = Odometry()
+        odom = new(Odometry)
         odom.header.stamp, odom.header.frame_id, odom.child_frame_id = stamp, "map", "base_link"
         enu = ecef_to_enu(geodetic_to_ecef(st.lat, st.lon, st.h), *self.datum)
         odom.pose.pose.position.x, odom.pose.pose.position.y, odom.pose.pose.position.z = \

@@ -45,6 +45,7 @@ from ..nav.coning import METHODS, Integrator
 from ..params_io import ParamsFileError, load_yaml_file
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import set_vector3, vec
+from .fast_messages import new
 
 NS = 1_000_000_000
 
@@ -170,7 +171,9 @@ class ImuPreprocessorNode(NavNode):
                 self.clock = ClockJumps(p["rate_hz"], p["clock_jump.min_s"], p["clock_jump.max_s"])
             except ValueError as err:
                 raise ParameterError(f"parameter 'clock_jump.max_s': {err}") from None
-        self.residual = ResidualErrors()
+        # None until the filter sends a correction: removing zero errors changes no bit but
+        # costs work on every sample.
+        self.residual: ResidualErrors | None = None
         self.offset_ns = int(round(p["time_offset_s"] * NS))
         self.temperature: float | None = None
         self.synthesised = 0
@@ -178,7 +181,11 @@ class ImuPreprocessorNode(NavNode):
         self._last_ns: int | None = None     # end of the last integrated sample
         self._last_rates = None              # its rates (trapezoid of instant samples)
         self._last_mag_ns: int | None = None
-        self._rotated_cache: dict[bytes, list] = {}
+        # Read per sample: attributes, not parameter-dict lookups and string comparisons.
+        self._period = 1.0 / p["rate_hz"]
+        self._instant = p["sample_model"] == "instant"
+        self._frame_id = p["frame_id"]
+        self._rotated_cache: dict[bytes, np.ndarray] = {}
         self.pub_data = self.publisher(Imu, "imu/data", SENSOR_QOS)
         self.pub_delta = self.publisher(ImuDelta, "imu/delta", SENSOR_QOS)
         self.pub_mag = self.publisher(MagneticField, "imu/mag", SENSOR_QOS)
@@ -254,7 +261,8 @@ class ImuPreprocessorNode(NavNode):
                 self.diag.set_value("imu clock correction, s", -self.clock.offset_ns / NS)
         if self._origin_ns is None:
             self._origin_ns = t_ns
-        gyro, accel = vec(msg.angular_velocity), vec(msg.linear_acceleration)
+        w, f = msg.angular_velocity, msg.linear_acceleration
+        gyro, accel = (w.x, w.y, w.z), (f.x, f.y, f.z)
         result = self.checker.check((t_ns - self._origin_ns) / NS, gyro, accel)
         if not result.ok:
             self.diag.count(f"imu sample rejected: {result.reason}")
@@ -267,22 +275,21 @@ class ImuPreprocessorNode(NavNode):
             self.diag.count("imu gap bridged")
             self.synthesised += len(result.fill_stamps)
             self.diag.set_value("imu samples synthesised", self.synthesised)
-        fill_ns = [self._origin_ns + int(round(t * NS)) for t in result.fill_stamps]
-        stamps = fill_ns + [t_ns]
-        if fill_ns:
-            gyro, accel = np.vstack([result.fill_gyro, gyro]), np.vstack([result.fill_accel, accel])
-        else:  # the usual case, without the cost of stacking nothing
-            gyro, accel = gyro[None, :], accel[None, :]
-        w_b, f_b = self.cal.correct(gyro, accel, self.temperature, self.residual)
-        for k, t in enumerate(stamps):
-            self._integrate(t, w_b[k], f_b[k])
-        self._publish_data(msg, t_ns, w_b[-1], f_b[-1])
+        correct = self.cal.correct_sample
+        for t, g, a in zip(result.fill_stamps.tolist(), result.fill_gyro.tolist(),
+                           result.fill_accel.tolist()):
+            self._integrate(self._origin_ns + int(round(t * NS)),
+                            *correct(g, a, self.temperature, self.residual))
+        w_b, f_b = correct(gyro, accel, self.temperature, self.residual)
+        self._integrate(t_ns, w_b, f_b)
+        self._publish_data(msg, t_ns, w_b, f_b)
 
-    def _integrate(self, t_ns: int, w_b, f_b) -> None:
-        dt = 1.0 / self.p["rate_hz"] if self._last_ns is None else (t_ns - self._last_ns) / NS
+    def _integrate(self, t_ns: int, w_b: tuple, f_b: tuple) -> None:
+        dt = self._period if self._last_ns is None else (t_ns - self._last_ns) / NS
         self._last_ns = t_ns
-        if self.p["sample_model"] == "instant" and self._last_rates is not None:
-            w_mean, f_mean = 0.5 * (self._last_rates[0] + w_b), 0.5 * (self._last_rates[1] + f_b)
+        if self._instant and self._last_rates is not None:
+            w_mean = [0.5 * (a + b) for a, b in zip(self._last_rates[0], w_b)]
+            f_mean = [0.5 * (a + b) for a, b in zip(self._last_rates[1], f_b)]
         else:
             w_mean, f_mean = w_b, f_b
         self._last_rates = (w_b, f_b)
@@ -290,34 +297,38 @@ class ImuPreprocessorNode(NavNode):
         if out is None:
             return
         phi, dv, dt_nav = out
-        delta = ImuDelta(dt=dt_nav)
+        delta = new(ImuDelta)
+        delta.dt = dt_nav
         set_vector3(delta.delta_angle, phi)
         set_vector3(delta.delta_velocity, dv)
         set_stamp_ns(delta.header.stamp, t_ns)
-        delta.header.frame_id = self.p["frame_id"]
+        delta.header.frame_id = self._frame_id
         self.pub_delta.publish(delta)
 
-    def _publish_data(self, raw: Imu, t_ns: int, w_b, f_b) -> None:
-        out = Imu()
-        set_vector3(out.angular_velocity, w_b)
-        set_vector3(out.linear_acceleration, f_b)
+    def _publish_data(self, raw: Imu, t_ns: int, w_b: tuple, f_b: tuple) -> None:
+        out = new(Imu)
+        w, f = out.angular_velocity, out.linear_acceleration
+        (w.x, w.y, w.z), (f.x, f.y, f.z) = w_b, f_b
         set_stamp_ns(out.header.stamp, t_ns)
-        out.header.frame_id = self.p["frame_id"]
+        out.header.frame_id = self._frame_id
         out.orientation_covariance[0] = -1.0  # REP-145: no orientation estimate
-        out.angular_velocity_covariance = self._rotated(raw.angular_velocity_covariance)
-        out.linear_acceleration_covariance = self._rotated(raw.linear_acceleration_covariance)
+        # Written into the message's own arrays: assigning a list runs the generated setter's
+        # per-element type and range checks.
+        out.angular_velocity_covariance[:] = self._rotated(raw.angular_velocity_covariance)
+        out.linear_acceleration_covariance[:] = self._rotated(raw.linear_acceleration_covariance)
         self.pub_data.publish(out)
 
-    def _rotated(self, cov) -> list:
+    def _rotated(self, cov) -> np.ndarray:
         """:func:`rotate_covariance` by the mounting, memoised: a driver repeats the same few
-        covariances on every sample, and the matrix products cost more than the lookup."""
+        covariances on every sample, and the matrix products cost more than the lookup. The
+        array is the memo's own: callers copy it into their message."""
         key = np.asarray(cov, float).tobytes()
         out = self._rotated_cache.get(key)
         if out is None:
             if len(self._rotated_cache) > 64:  # a driver with varying covariances
                 self._rotated_cache.clear()
-            out = self._rotated_cache[key] = rotate_covariance(cov, self.cal.c_bs)
-        return list(out)
+            out = self._rotated_cache[key] = np.array(rotate_covariance(cov, self.cal.c_bs))
+        return out
 
     def on_temperature(self, msg: Temperature) -> None:
         if not np.isfinite(msg.temperature):
@@ -331,7 +342,7 @@ class ImuPreprocessorNode(NavNode):
         if not all(np.all(np.isfinite(x)) for x in incr):
             self.diag.count("non-finite sensor correction rejected")
             return
-        r = self.residual
+        r = self.residual or ResidualErrors()
         # Increments to the applied estimates, from this sample on (the past is not redone here).
         self.residual = ResidualErrors(r.gyro_bias + incr[0], r.gyro_scale + incr[1],
                                        r.accel_bias + incr[2], r.accel_scale + incr[3])
@@ -348,11 +359,11 @@ class ImuPreprocessorNode(NavNode):
             return
         self._last_mag_ns = t_ns
         c = self.cal.c_bs
-        out = MagneticField()
+        out = new(MagneticField)
         set_vector3(out.magnetic_field, c @ m)
         set_stamp_ns(out.header.stamp, t_ns)
-        out.header.frame_id = self.p["frame_id"]
-        out.magnetic_field_covariance = self._rotated(msg.magnetic_field_covariance)
+        out.header.frame_id = self._frame_id
+        out.magnetic_field_covariance[:] = self._rotated(msg.magnetic_field_covariance)
         self.pub_mag.publish(out)
 
 

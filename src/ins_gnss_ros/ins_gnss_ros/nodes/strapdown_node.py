@@ -30,6 +30,7 @@ from ..nav.strapdown import NavState, Strapdown
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, run
 from .convert import (fill_ins_state, held_increments, increment_problem, set_vector3,
                       stamp_to_sec, vec)
+from .fast_messages import new
 
 
 @dataclass
@@ -164,11 +165,15 @@ class StrapdownNode(NavNode):
             # be wrong while carrying the filter's current sequence (published as synchronised).
             self.diag.count("correction older than this run ignored", log=False)
             return
-        # Index of the step whose end state is the correction epoch (half a step tolerance).
+        # Index of the step whose end state is the correction epoch (half a step tolerance),
+        # searched from the newest: the filter lags the strapdown by a few steps only.
         replay_from = None
-        for i, step in enumerate(self.history):
+        for i in range(len(self.history) - 1, -1, -1):
+            step = self.history[i]
             if abs(step.state.t - t_c) <= 0.5 * step.dt:
                 replay_from = i
+                break
+            if step.state.t < t_c:
                 break
         if replay_from is None:
             self.diag.count("correction epoch outside the kept history: applied to the latest state")
@@ -190,7 +195,7 @@ class StrapdownNode(NavNode):
 
     def publish_state(self) -> None:
         state = self.ins.state
-        msg = InsState()
+        msg = new(InsState)
         msg.header.frame_id = "map"
         fill_ins_state(msg, state)
         dtheta, dv, dt = self.last_compensated

@@ -2,8 +2,10 @@
 
 A bag folder holds ``metadata.yaml`` and one ``.mcap`` file, the layout ``ros2 bag record -s
 mcap`` produces, so ``ros2 bag play``, Foxglove and the ``mcap`` tools open it. Payloads are CDR,
-serialised by rclpy itself (``rclpy.serialization``, the code path rosbag2 uses), and read back
-into the rclpy message classes, so a replay feeds the nodes the same objects DDS would deliver.
+serialised like rclpy does (``rclpy.serialization`` or, for the fixed-layout types of the
+high-rate topics, the same CDR several times faster: :mod:`ins_gnss_ros.nodes.fast_messages`),
+and read back into the rclpy message classes, so a replay feeds the nodes the same objects DDS
+would deliver.
 ``rosbags`` is used only for the container: its typestore supplies the message definitions that
 MCAP stores as schemas (the project's own ``ins_gnss_msgs`` are registered from their .msg files).
 Readers for which speed matters (the offline replay) take the undecoded rows (:func:`read_raw`;
@@ -31,6 +33,7 @@ from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StorageP
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from ins_gnss_ros.nav.conventions import seed_angles_from_quat
+from ins_gnss_ros.nodes.fast_messages import codec
 
 #: Package whose .msg files are registered in the typestore besides the ROS 2 Jazzy ones.
 CUSTOM_PACKAGE = "ins_gnss_msgs"
@@ -107,6 +110,13 @@ def msg_class(msgtype: str):
         raise BagError(f"message type {msgtype!r} is not installed") from None
 
 
+def serialize(msg) -> bytes:
+    """CDR payload of an rclpy message (:mod:`ins_gnss_ros.nodes.fast_messages` where it has
+    a codec for the type, else rclpy)."""
+    fast = codec(type(msg))
+    return fast.encode(msg) if fast else serialize_message(msg)
+
+
 def stamp_ns(msg) -> int:
     """Header stamp of a message in ns (rosgraph/Clock: its clock field)."""
     stamp = msg.header.stamp if hasattr(msg, "header") else msg.clock
@@ -140,7 +150,7 @@ class BagWriter:
     def write(self, topic: str, msg, t_ns: int | None = None) -> None:
         """Queue ``msg`` on ``topic`` at log time ``t_ns`` (default: its header stamp)."""
         self.write_raw(topic, msgtype_of(msg), stamp_ns(msg) if t_ns is None else t_ns,
-                       serialize_message(msg))
+                       serialize(msg))
 
     def write_raw(self, topic: str, msgtype: str, t_ns: int, data: bytes) -> None:
         """Queue a serialised (CDR) message of type ``msgtype`` on ``topic`` at ``t_ns``."""
@@ -313,8 +323,10 @@ def decode_message(raw: RawMessage, path="bag"):
     BagError
         The payload does not decode (``path`` names the bag in the message).
     """
+    cls = msg_class(raw.msgtype)
+    fast = codec(cls)
     try:
-        return deserialize_message(bytes(raw.data), msg_class(raw.msgtype))
+        return fast.decode(raw.data) if fast else deserialize_message(bytes(raw.data), cls)
     except BagError:
         raise
     except Exception as err:
