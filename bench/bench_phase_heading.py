@@ -8,7 +8,11 @@ clock; GPS L1 C/A phase valid once its half-cycle ambiguity is resolved after 6 
 pilot-tracked Galileo E1-C phase from lock), turned into ``gnss/observations`` and
 ``gnss/ephemeris`` messages as the ``gnss_simulator`` node publishes them (``nodes/gnss_convert``),
 and fed to a
-``PhaseHeadingNode`` on the in-process bus. Nothing of the truth reaches the node.
+``PhaseHeadingNode`` on the in-process bus. Nothing of the truth reaches the node, except with
+``--tilt-prior SIGMA_DEG``: then an ``ins/state`` in MODE_ALIGNING is published with every epoch,
+as an INS levelled by its accelerometers but not aligned in heading would: the true attitude with
+a slowly varying tilt error (first-order Gauss-Markov about East and North, σ = SIGMA_DEG each,
+correlation time ``TILT_TAU_S``) and a heading off by a random constant of up to ±180° per run.
 
 Per epoch a FIXED solution is *correct* when every double-difference ambiguity the solver holds
 equals the simulator's integer (DD of the true N of both antennas and both satellites), *wrong*
@@ -16,7 +20,7 @@ otherwise. Time to first fix counts from the first epoch (the receiver's half-cy
 included) and, separately, from the first epoch with valid carrier phases.
 
 Usage: ``.venv/bin/python bench/bench_phase_heading.py [--quick] [--ratio R]
-[--param NAME=VALUE ...] [--first-fix START:STOP]``
+[--param NAME=VALUE ...] [--first-fix START:STOP] [--tilt-prior SIGMA_DEG]``
 """
 from __future__ import annotations
 
@@ -29,13 +33,15 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import rclpy
+from ins_gnss_msgs.msg import InsState
 from rclpy.parameter import Parameter
 
 from ins_gnss_ros.gnss import ephemeris_data
 from ins_gnss_ros.gnss.simulator import GnssSimulator, SimulatorConfig, SlipEvent
 from ins_gnss_ros.nav.conventions import seed_angles_from_quat, wrap_pi
+from ins_gnss_ros.nav.rotations import quat_from_rotvec, quat_mul
 from ins_gnss_ros.nodes.base import InProcessBus
-from ins_gnss_ros.nodes.convert import sec_to_stamp
+from ins_gnss_ros.nodes.convert import sec_to_stamp, to_quaternion
 from ins_gnss_ros.nodes.gnss_convert import ephemeris_msg, observations_msg
 from ins_gnss_ros.nodes.phase_heading_node import PhaseHeadingNode
 from ins_gnss_ros.sim import scenarios
@@ -43,6 +49,9 @@ from ins_gnss_ros.sim import scenarios
 TWO_ANTENNAS = ((0.75, 0.0, 1.0), (-0.75, 0.0, 1.0))                 # 1.5 m fore-aft
 FOUR_ANTENNAS = ((0.75, 0.5, 1.0), (-0.75, 0.5, 1.0), (0.75, -0.5, 1.0), (-0.75, -0.5, 1.0))
 STAMP0 = 1000.0   # ROS-axis stamp of trajectory time 0, s
+#: Correlation time of the simulated INS tilt error, s: a levelled INS's tilt follows the
+#: accelerometer bias and the Schuler loop, minutes rather than seconds.
+TILT_TAU_S = 120.0
 
 
 @dataclass
@@ -63,11 +72,12 @@ class Trial:
 
 
 def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0, overrides=(),
-              until=math.inf, context=None):
+              until=math.inf, context=None, tilt_sigma=0.0):
     """One simulated sea trial through the node (``overrides``: more node Parameters; ``context``:
     its rclpy context, the default one if None), fed up to trajectory time ``until`` (the
     scenario, its slips and satellites are still those of ``duration``: the start of a long run,
-    reproduced quickly); returns a :class:`Trial`."""
+    reproduced quickly); with ``tilt_sigma`` > 0 (rad) an aligning ins/state with that tilt
+    error is published with every epoch (:class:`AligningIns`); returns a :class:`Trial`."""
     sc = scenarios.sea(duration=duration, seed=seed, rate=2 * rate, oversample=2)
     tr = sc.trajectory
     broadcast = ephemeris_data.load(tr.lon[0])
@@ -88,6 +98,7 @@ def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0, ove
     node = PhaseHeadingNode(context=context, bus=bus, parameter_overrides=[
         Parameter("antenna_positions", value=[float(v) for a in antennas for v in a]),
         Parameter("ratio_threshold", value=ratio), *overrides])
+    ins = AligningIns(tilt_sigma, seed) if tilt_sigma > 0 else None
     valid = {}
     out = Trial(slips=sim.config.slips)
     pending_slips = list(out.slips)
@@ -98,6 +109,9 @@ def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0, ove
         epochs = sim.epoch(tr.t[k], tr.lat[k], tr.lon[k], tr.h[k], tr.v_enu[k], tr.q_nb[k],
                            tr.omega_ib_b[k])
         stamp = sec_to_stamp(STAMP0 + tr.t[k])
+        if ins is not None:
+            bus.publish("ins/state", ins.state(stamp, 1.0 / rate, tr.lat[k], tr.lon[k], tr.h[k],
+                                               tr.q_nb[k]))
         if k == 0:
             for eph in sim.ephemerides.values():
                 bus.publish("gnss/ephemeris", ephemeris_msg(eph, stamp, epochs[0].raw.leap_s))
@@ -138,6 +152,31 @@ def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0, ove
         "FIXED attitude beyond max_tilt_deg: wrong fix, ambiguities dropped"]
     node.destroy_node()
     return out
+
+
+class AligningIns:
+    """ins/state of an INS that has levelled but not found its heading: the true attitude with a
+    tilt error about East and North (first-order Gauss-Markov, ``sigma`` rad each, correlation
+    time ``TILT_TAU_S``) and a heading error drawn once, uniform in ±180°."""
+
+    def __init__(self, sigma, seed):
+        self.sigma = sigma
+        self.rng = np.random.default_rng(10_000 + seed)
+        self.tilt = sigma * self.rng.standard_normal(2)
+        self.heading_error = self.rng.uniform(-math.pi, math.pi)
+
+    def state(self, stamp, dt, lat, lon, h, q_nb) -> InsState:
+        a = math.exp(-dt / TILT_TAU_S)
+        self.tilt = a * self.tilt + self.sigma * math.sqrt(1.0 - a * a) * \
+            self.rng.standard_normal(2)
+        # Errors about navigation axes premultiply q_nb; the heading one (about Up) last.
+        q = quat_mul(quat_from_rotvec([0.0, 0.0, self.heading_error]),
+                     quat_mul(quat_from_rotvec([*self.tilt, 0.0]), q_nb))
+        msg = InsState(latitude=float(lat), longitude=float(lon), altitude=float(h),
+                       orientation=to_quaternion(q), mode=InsState.MODE_ALIGNING)
+        msg.header.stamp = stamp
+        msg.header.frame_id = "map"
+        return msg
 
 
 def held_ambiguities_true(node, epochs) -> bool:
@@ -234,14 +273,15 @@ def print_slips(trials):
           f"largest FIXED |heading error|/sigma within 5 s after a slip: {worst:.2f}")
 
 
-def first_fix_sample(seeds, until=10.0, ratio=3.0, overrides=()):
+def first_fix_sample(seeds, until=10.0, ratio=3.0, overrides=(), tilt_sigma=0.0):
     """The first ``until`` s of many runs (2 antennas: the 30 s TTFF runs; 4 antennas: the
     600 s runs with slips), where the first fix comes from the Galileo satellites alone: how
     often a wrong fix is published before GPS phases join (6 s) and exposes it."""
     for antennas, duration, name in ((TWO_ANTENNAS, 30.0, "2 antennas"),
                                      (FOUR_ANTENNAS, 600.0, "4 antennas")):
         trials = [run_trial(seed, duration, antennas, slip_every=30.0, ratio=ratio,
-                            overrides=overrides, until=until) for seed in seeds]
+                            overrides=overrides, until=until, tilt_sigma=tilt_sigma)
+                  for seed in seeds]
         summarise(trials, f"first {until:.0f} s of {len(seeds)} runs (seeds {seeds[0]}-"
                           f"{seeds[-1]}), {name}")
         bad = [seed for seed, tr in zip(seeds, trials)
@@ -258,14 +298,19 @@ def main(argv=None) -> int:
                          "fix_confirm_epochs=1 (a value with a point is a float)")
     ap.add_argument("--first-fix", metavar="START:STOP",
                     help="only the first-fix sample: the first 10 s of seeds START..STOP-1")
+    ap.add_argument("--tilt-prior", type=float, default=0.0, metavar="SIGMA_DEG",
+                    help="publish an aligning ins/state (true tilt with this 1-sigma error, "
+                         "heading wrong) with every epoch: the node's tilt prior")
     args = ap.parse_args(argv)
+    tilt = math.radians(args.tilt_prior)
     extra = [Parameter(name, value=float(value) if "." in value else int(value))
              for name, value in (item.split("=", 1) for item in args.param)]
     if args.first_fix:
         start, stop = (int(v) for v in args.first_fix.split(":"))
         rclpy.init()
         try:
-            first_fix_sample(list(range(start, stop)), ratio=args.ratio, overrides=extra)
+            first_fix_sample(list(range(start, stop)), ratio=args.ratio, overrides=extra,
+                             tilt_sigma=tilt)
         finally:
             rclpy.shutdown()
         return 0
@@ -275,19 +320,21 @@ def main(argv=None) -> int:
         wall = time.perf_counter()
         print(f"ratio_threshold {args.ratio}; sea scenario; GPS L1 + Galileo E1; 10 deg mask; "
               "2 mm + 2 mm/sin(E) phase noise + multipath; 5 Hz"
+              + (f"; aligning ins/state, tilt error {args.tilt_prior} deg" if tilt > 0 else "")
               + "".join(f"; {item}" for item in args.param))
-        summarise([run_trial(100 + i, ttff_s, TWO_ANTENNAS, ratio=args.ratio, overrides=extra)
+        summarise([run_trial(100 + i, ttff_s, TWO_ANTENNAS, ratio=args.ratio, overrides=extra,
+                             tilt_sigma=tilt)
                    for i in range(ttff_runs)],
                   f"time to first fix: {ttff_runs} runs x {ttff_s:.0f} s, 2 antennas, 1.5 m")
         runs = [run_trial(seed, long_s, TWO_ANTENNAS, slip_every=30.0, ratio=args.ratio,
-                          overrides=extra)
+                          overrides=extra, tilt_sigma=tilt)
                 for seed in (1, 2, 3, 4)]
         summarise(runs, f"2 antennas 1.5 m, 4 x {long_s:.0f} s, slips on antenna 1 every 30 s")
         print_slips(runs)
         n_ep = sum(len(r.t) for r in runs)
         print(f"node time per epoch: {1e3 * sum(r.seconds_node for r in runs) / n_ep:.2f} ms")
         runs4 = [run_trial(seed, long_s, FOUR_ANTENNAS, slip_every=30.0, ratio=args.ratio,
-                           overrides=extra)
+                           overrides=extra, tilt_sigma=tilt)
                  for seed in (5, 6)]
         summarise(runs4, f"4 antennas (1.5 m x 1.0 m), 2 x {long_s:.0f} s, slips every 30 s")
         print_slips(runs4)

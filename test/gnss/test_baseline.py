@@ -101,10 +101,27 @@ def test_attitude_prior_shrinks_the_float_ambiguities():
     err = np.array([0.01, -0.01, 0.02])              # prior attitude off by ~1 deg
     b_prior = dcm_from_euler(*err) @ R @ ANT[1]
     fs0 = float_solution(dd, 1)
-    fs1 = float_solution(dd, 1, prior=(b_prior, P))
+    fs1 = float_solution(dd, 1, prior=(np.eye(3), b_prior, P))
     assert np.trace(fs1.cov[3:, 3:]) < 0.2 * np.trace(fs0.cov[3:, 3:])
     fix = fix_ambiguities(fs1, 1.5, 0.002)
     np.testing.assert_array_equal(fix.ambiguities, _true_dd_ambiguities(sim, dd))
+
+
+def test_up_component_prior_adds_information_on_the_up_axis_only():
+    # A prior on the up component alone (an INS's roll and pitch, heading unknown) is no 3x3
+    # covariance with a large horizontal variance: the information of the float solution grows
+    # by exactly 1/σ² on the up axis of the baseline and nowhere else.
+    sim = PhaseSim(6, ANT)
+    R = dcm_from_euler(0.03, -0.02, 2.0)
+    dd, _ = _epoch(sim, 0.0, R)
+    sigma = 0.013
+    fs0 = float_solution(dd, 1)
+    fs1 = float_solution(dd, 1, prior=([[0.0, 0.0, 1.0]], [(R @ ANT[1])[2]], [[sigma ** 2]]))
+    gain = np.linalg.inv(fs1.cov) - np.linalg.inv(fs0.cov)
+    expected = np.zeros_like(gain)
+    expected[2, 2] = 1.0 / sigma ** 2
+    np.testing.assert_allclose(gain, expected, atol=1e-6 * expected[2, 2])
+    assert fs1.cov[2, 2] < sigma ** 2 < fs0.cov[2, 2]
 
 
 def test_fixed_baseline_error_is_consistent_with_its_covariance():

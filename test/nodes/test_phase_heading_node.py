@@ -14,7 +14,7 @@ from rclpy.parameter import Parameter
 from ins_gnss_ros.gnss import ephemeris_data
 from ins_gnss_ros.gnss.simulator import GnssSimulator, SimulatorConfig, SlipEvent
 from ins_gnss_ros.nav.conventions import quat_from_seed_angles, seed_angles_from_quat, wrap_pi
-from ins_gnss_ros.nav.rotations import dcm_from_euler, quat_from_euler, quat_mul
+from ins_gnss_ros.nav.rotations import dcm_from_euler, quat_from_euler, quat_mul, quat_to_dcm
 from ins_gnss_ros.nodes.convert import sec_to_stamp, to_quaternion
 
 LAT, LON, H = math.radians(60.8), math.radians(31.5), 22.0
@@ -382,6 +382,64 @@ def test_float_policy_and_ins_prior(ros_context, bus, static_two):
         assert np.all(np.abs(err[:, 0]) < 4.5 * sig[:, 0]) if len(err) else True
         node.destroy_node()
     assert fixed[True] >= 7 and fixed[False] <= 2
+
+
+def test_ins_prior_is_the_tilt_alone_while_the_ins_heading_is_unknown(ros_context, bus,
+                                                                      static_two):
+    # The whole ins/state attitude is the prior only while it is NAVIGATING and the ekf's
+    # nav/status (if any) knows the heading to ins_prior.sigma_deg; otherwise (ins/state
+    # ALIGNING; the strapdown NAVIGATING under an ekf still ALIGNING or with a wide heading σ)
+    # only its roll and pitch, and the fixes stay right. The tilt σ is the parameter's 0.5 deg
+    # or the ekf's larger one.
+    from ins_gnss_msgs.msg import FilterStatus, InsState
+
+    epochs, ephs = static_two
+    node = _node(ros_context, bus, float_window=1)
+    priors, process = [], node.solver.process
+
+    def spy(*args, **kwargs):
+        priors.append(kwargs)
+        return process(*args, **kwargs)
+
+    node.solver.process = spy
+    heads = []
+    bus.recorders.append(lambda topic, msg: heads.append(msg) if topic == "/gnss/heading" else 0)
+    for m in ephs:
+        bus.publish("gnss/ephemeris", m)
+    names = ["pos[0]", "att[0]", "att[1]", "att[2]"]
+    status = {"aligning": FilterStatus(mode=FilterStatus.MODE_ALIGNING),
+              "wide": FilterStatus(mode=FilterStatus.MODE_NAVIGATING, state_names=names,
+                                   state_std=[1.0, 0.03, 0.02, 0.1]),
+              "narrow": FilterStatus(mode=FilterStatus.MODE_NAVIGATING, state_names=names,
+                                     state_std=[1.0, 0.001, 0.001, 0.01])}
+    cases = [(InsState.MODE_ALIGNING, None, "tilt_prior", math.radians(0.5)),
+             (InsState.MODE_NAVIGATING, None, "attitude_prior", None),
+             (InsState.MODE_NAVIGATING, "aligning", "tilt_prior", math.radians(0.5)),
+             (InsState.MODE_NAVIGATING, "wide", "tilt_prior", 0.03),
+             (InsState.MODE_NAVIGATING, "narrow", "attitude_prior", None)]
+    for k, (mode, filter_status, kind, sigma) in enumerate(cases):
+        t, q, msgs, _ = epochs[k]
+        if filter_status:
+            bus.publish("nav/status", status[filter_status])
+        ins = InsState(latitude=LAT, longitude=LON, altitude=H, mode=mode)
+        ins.header.stamp = sec_to_stamp(1000.0 + t)
+        # The heading is wrong where the node must not use it (and right where it may).
+        yaw_error = 2.0 if kind == "tilt_prior" else 0.01
+        ins.orientation = to_quaternion(quat_mul(quat_from_euler(0.0, 0.0, yaw_error), q))
+        bus.publish("ins/state", ins)
+        for m in msgs:
+            bus.publish("gnss/observations", m)
+        bus.drain()
+        assert list(priors[-1]) == [kind]
+        if kind == "tilt_prior":
+            C, s = priors[-1][kind]
+            np.testing.assert_allclose(C[2], quat_to_dcm(q)[2], atol=1e-9)
+            assert s == pytest.approx(sigma)
+    # The epochs with the tilt prior (heading 115 deg off) give right fixes.
+    tilt_only = [h for h, p in zip(heads, priors) if "tilt_prior" in p]
+    err, sig = _errors(tilt_only, epochs)
+    assert len(err) >= 2 and np.all(np.abs(err[:, 0]) < 4.5 * sig[:, 0])
+    node.destroy_node()
 
 
 def test_parameters_are_validated(ros_context):

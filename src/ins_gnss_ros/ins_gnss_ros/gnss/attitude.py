@@ -413,7 +413,8 @@ class AttitudeSolver:
         self._candidate = None
         self._window.clear()
 
-    def process(self, epochs, los_enu, t, attitude_prior=None) -> AttitudeSolution:
+    def process(self, epochs, los_enu, t, attitude_prior=None, tilt_prior=None
+                ) -> AttitudeSolution:
         """Attitude of one epoch.
 
         Parameters
@@ -428,6 +429,11 @@ class AttitudeSolver:
         attitude_prior : (ndarray (3, 3), ndarray (3, 3)), optional
             Predicted C_nb and the covariance of its small-angle error (rad², ENU), e.g. from
             the INS: it becomes an a-priori baseline in the float solution.
+        tilt_prior : (ndarray (3, 3), float), optional
+            C_nb whose roll and pitch are known, to the 1σ error given (rad), and whose heading is
+            not (e.g. an INS levelled by its accelerometers before its heading is aligned): it
+            becomes an a-priori up component of every baseline (:meth:`_priors`). Not used with
+            ``attitude_prior``, which holds the tilt already.
 
         Returns
         -------
@@ -467,7 +473,7 @@ class AttitudeSolver:
             self._window.clear()
         history = list(self._window)
         self._window.append(dd)
-        priors = self._priors(attitude_prior)
+        priors = self._priors(attitude_prior, tilt_prior)
         held = self.store.lookup(dd)
         for k in range(1, K + 1):
             if np.all(np.isfinite(held[dd.rows(k)])):
@@ -534,16 +540,35 @@ class AttitudeSolver:
                 slipped |= {s for s, f in zip(ep.signal_ids, ep.loss_of_lock) if f}
         return slipped
 
-    def _priors(self, attitude_prior):
-        if attitude_prior is None:
-            return [None] * len(self.b_body)
-        C, P_theta = attitude_prior
-        out = []
-        for bb in self.b_body:
-            p = C @ bb
-            S = skew(p)       # δb = δθ × (C b) = -[(C b)×] δθ
-            out.append((p, S @ P_theta @ S.T + 1e-6 * np.eye(3)))
-        return out
+    def _priors(self, attitude_prior, tilt_prior):
+        """A-priori observation (H, y, C) of each baseline for :func:`float_solution`, or None.
+
+        A full attitude gives the whole baseline C b. A tilt alone gives its up component
+        (C b)_U = c₃ᵀ b, with c₃ the third row of C_nb, which depends on roll and pitch only: a
+        heading error of any size leaves it unchanged, so nothing is linearised in the heading.
+        A tilt error δθ (about E and N, σ each) moves it by δθ_E p_N - δθ_N p_E, p = C b, of
+        variance σ² (p_E² + p_N²) = σ² (|b|² - p_U²), free of the heading too; the body geometry
+        adds ``sigma_length``². With the length constraint of the fix this leaves the integer
+        search one unknown direction, the heading, instead of the weak vertical of a geometry
+        with satellites on one side of the horizon only.
+        """
+        if attitude_prior is not None:
+            C, P_theta = attitude_prior
+            out = []
+            for bb in self.b_body:
+                p = C @ bb
+                S = skew(p)       # δb = δθ × (C b) = -[(C b)×] δθ
+                out.append((np.eye(3), p, S @ P_theta @ S.T + 1e-6 * np.eye(3)))
+            return out
+        if tilt_prior is not None:
+            C, sigma = tilt_prior
+            out = []
+            for bb in self.b_body:
+                up = float(C[2] @ bb)
+                var = sigma ** 2 * (bb @ bb - up ** 2) + self.sigma_length ** 2
+                out.append((np.array([[0.0, 0.0, 1.0]]), np.array([up]), np.array([[var]])))
+            return out
+        return [None] * len(self.b_body)
 
     def _lengths_ok(self, fixed, k_sigma=6.0) -> bool:
         for k, b in enumerate(fixed.baselines):

@@ -82,9 +82,11 @@ def _epoch_normals(dd: DoubleDifferences, k, known, free, use_code, prior=None):
             A_pr[:, :3] = dd.geometry[ok]
             blocks.append((A_pr, dd.code[ok], dd.cov_code[np.ix_(ok, ok)]))
     if prior is not None:
-        A_pb = np.zeros((3, 3 + n))
-        A_pb[:, :3] = np.eye(3)
-        blocks.append((A_pb, np.asarray(prior[0], float), np.asarray(prior[1], float)))
+        H = np.atleast_2d(np.asarray(prior[0], float))
+        A_pb = np.zeros((H.shape[0], 3 + n))
+        A_pb[:, :3] = H
+        blocks.append((A_pb, np.atleast_1d(np.asarray(prior[1], float)),
+                       np.atleast_2d(np.asarray(prior[2], float))))
     Nmat = np.zeros((3 + n, 3 + n))
     rhs = np.zeros(3 + n)
     for A, y, C in blocks:
@@ -106,9 +108,12 @@ def float_solution(dd: DoubleDifferences, k: int, held=None, prior=None, use_cod
         Remote antenna index of the baseline.
     held : ndarray, shape (len(dd.phase),), optional
         Known DD ambiguities per row (cycles), NaN where unknown.
-    prior : (ndarray (3,), ndarray (3, 3)), optional
-        A-priori current baseline (ENU, m) and covariance (m²), e.g. the INS attitude applied to
-        the body-frame baseline; it shrinks the ambiguity search space.
+    prior : (ndarray (m, 3), ndarray (m,), ndarray (m, m)), optional
+        A-priori observation y = H b + e, e ~ N(0, C), of the current baseline (H, y in m, C in
+        m²): e.g. the INS attitude applied to the body-frame baseline (H = I), or only its up
+        component from the INS roll and pitch (H = [0, 0, 1]). Its information Hᵀ C⁻¹ H enters
+        the normal equations and none along directions H does not see, so an unknown heading
+        needs no large variance. It shrinks the ambiguity search space.
     use_code : bool
         Use the DD pseudoranges.
     history : sequence of DoubleDifferences

@@ -15,7 +15,12 @@ Per GNSS epoch the node
 3. runs the phase-attitude core :class:`~ins_gnss_ros.gnss.attitude.AttitudeSolver` (cycle-slip
    detection, double differences, length-constrained LAMBDA with ratio test, held ambiguities),
    with the INS attitude as an a-priori baseline when ``ins/state`` is recent and navigating
-   (seed 004's tightly-coupled phase processing: it shrinks the ambiguity search); with 2
+   (seed 004's tightly-coupled phase processing: it shrinks the ambiguity search), or only its
+   roll and pitch, as an a-priori up component of the baselines, while the INS heading is not
+   known (``ins/state`` ALIGNING, the ekf's ``nav/status`` ALIGNING or its heading σ above
+   ``ins_prior.sigma_deg``, or ``ins_prior.heading`` false): an INS levels itself from its
+   accelerometers in seconds, and the up component removes the weak vertical of the GNSS
+   geometry from the search, where wrong candidates from few double differences hide; with 2
    antennas a fix from scratch from fewer than 6 double differences is held once the same
    integers passed the ratio test at ``fix_confirm_epochs`` consecutive epochs, with 3-4
    antennas the fixed baselines must fit the antenna geometry under one attitude (the core's
@@ -49,7 +54,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
-from ins_gnss_msgs.msg import GnssEphemeris, GnssObservations, Heading, InsState
+from ins_gnss_msgs.msg import FilterStatus, GnssEphemeris, GnssObservations, Heading, InsState
 from sensor_msgs.msg import NavSatFix, NavSatStatus
 
 from ..gnss.attitude import AttitudeSolution, AttitudeSolver
@@ -214,6 +219,12 @@ class PhaseHeadingNode(NavNode):
               "use the ins/state attitude as an a-priori baseline for the ambiguity search"),
         Param("ins_prior.sigma_deg", 2.0, "1-sigma attitude error assumed for ins/state, deg",
               0.01, 90.0),
+        Param("ins_prior.heading", True,
+              "use the ins/state heading too (the whole attitude, ins_prior.sigma_deg) when it "
+              "is known; false: roll and pitch only (ins_prior.tilt_sigma_deg)"),
+        Param("ins_prior.tilt_sigma_deg", 0.5,
+              "1-sigma roll and pitch error assumed for ins/state when only its tilt is used "
+              "(a larger one from the ekf's nav/status is taken instead), deg", 0.01, 10.0),
         Param("ins_prior.max_age_s", 0.2,
               "largest stamp difference between an epoch and the ins/state used, s", 0.0, 10.0),
     )
@@ -255,7 +266,8 @@ class PhaseHeadingNode(NavNode):
         self.eph_cache: dict[str, KeplerEphemeris] = {}
         self.position = None                      # (stamp s, ECEF xyz) of the latest position
         self.spp_x0 = None
-        self.ins = None                           # (stamp s, C_nb) of the latest ins/state
+        self.ins = None             # (stamp s, C_nb, heading known) of the latest ins/state
+        self.filter = None          # (heading known, tilt 1-sigma rad) from the latest nav/status
         self.last_solution: AttitudeSolution | None = None
         self.status_counts: Counter[str] = Counter()
         self.pub = self.publisher(Heading, "gnss/heading", SENSOR_QOS)
@@ -263,6 +275,7 @@ class PhaseHeadingNode(NavNode):
         self.subscribe(GnssEphemeris, "gnss/ephemeris", self.on_ephemeris, STATE_QOS)
         self.subscribe(NavSatFix, "gnss/fix", self.on_fix, SENSOR_QOS)
         self.subscribe(InsState, "ins/state", self.on_ins_state, SENSOR_QOS)
+        self.subscribe(FilterStatus, "nav/status", self.on_filter_status, STATE_QOS)
 
     @staticmethod
     def _check_geometry(antennas) -> None:
@@ -306,8 +319,23 @@ class PhaseHeadingNode(NavNode):
             return
         t = stamp_to_sec(msg.header.stamp)
         self.position = (t, geodetic_to_ecef(msg.latitude, msg.longitude, msg.altitude))
-        if msg.mode == InsState.MODE_NAVIGATING:
-            self.ins = (t, quat_to_dcm(quat_normalize(q)))
+        # ALIGNING: levelled, heading unknown; DEAD_RECKONING: maybe never levelled (a strapdown
+        # without any correction integrates from its initial attitude parameters).
+        if msg.mode in (InsState.MODE_NAVIGATING, InsState.MODE_ALIGNING):
+            self.ins = (t, quat_to_dcm(quat_normalize(q)), msg.mode == InsState.MODE_NAVIGATING)
+
+    def on_filter_status(self, msg: FilterStatus) -> None:
+        """The ekf's view of the attitude the strapdown's ins/state carries: the strapdown says
+        NAVIGATING whenever it is corrected, also while the filter, levelled at rest, has yet
+        to find the heading (ALIGNING); and the filter's attitude σ (ENU error angles)."""
+        std = dict(zip(msg.state_names, msg.state_std))
+        att = [std.get(f"att[{i}]", math.nan) for i in range(3)]
+        tilt = max(att[0], att[1]) if all(math.isfinite(a) for a in att[:2]) else 0.0
+        # A heading σ larger than the full prior assumes makes that prior overconfident (no σ
+        # reported, NaN: trust the mode).
+        too_wide = att[2] > math.radians(self.p["ins_prior.sigma_deg"])
+        known = msg.mode != FilterStatus.MODE_ALIGNING and not too_wide
+        self.filter = (known, tilt)
 
     def on_observations(self, msg: GnssObservations) -> None:
         t = msg.gps_week * SECONDS_PER_WEEK + msg.time_of_week
@@ -371,7 +399,7 @@ class PhaseHeadingNode(NavNode):
             return None
         los = lines_of_sight(parsed[0], ephemerides, t_gps, rx)
         try:
-            sol = self.solver.process([p.antenna for p in parsed], los, t_gps, self._prior(t))
+            sol = self.solver.process([p.antenna for p in parsed], los, t_gps, **self._priors(t))
         except (ValueError, np.linalg.LinAlgError, FloatingPointError) as err:
             # A degenerate geometry the core could not handle: start the ambiguities afresh.
             self.diag.count(f"attitude solver failed: {type(err).__name__}")
@@ -411,12 +439,20 @@ class PhaseHeadingNode(NavNode):
         self.position = (t, sol.xyz)
         return sol.xyz
 
-    def _prior(self, t: float):
+    def _priors(self, t: float) -> dict:
+        """Keyword arguments of the core's ``process``: ``attitude_prior`` when the ins/state
+        heading is known and wanted, else ``tilt_prior``; none without a recent ins/state."""
         p = self.p
         if not p["ins_prior.enabled"] or self.ins is None or \
                 abs(t - self.ins[0]) > p["ins_prior.max_age_s"]:
-            return None
-        return self.ins[1], np.eye(3) * math.radians(p["ins_prior.sigma_deg"]) ** 2
+            return {}
+        _, C_nb, heading_known = self.ins
+        filter_known, filter_tilt = self.filter or (True, 0.0)
+        if p["ins_prior.heading"] and heading_known and filter_known:
+            return {"attitude_prior": (C_nb, np.eye(3) * math.radians(p["ins_prior.sigma_deg"])
+                                       ** 2)}
+        return {"tilt_prior": (C_nb, max(math.radians(p["ins_prior.tilt_sigma_deg"]),
+                                         filter_tilt))}
 
 
 def main(args=None) -> int:
