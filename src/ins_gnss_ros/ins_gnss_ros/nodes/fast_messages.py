@@ -11,8 +11,8 @@ The classes of ``rosidl_generator_py`` keep each field ``f`` in the slot ``_f`` 
 ``_check_fields``) and describe the fields in ``SLOT_TYPES``; the properties only check and
 store. This module builds objects through the slots:
 
-* :func:`new` — a default instance, equal to ``cls()``: a copy of one instance made by ``cls()``
-  (immutable values shared, arrays and sub-messages copied);
+* :func:`new` — a default instance, equal to ``cls()``, made from the fields of one instance
+  made by ``cls()`` (immutable values shared, arrays copied, sub-messages made the same way);
 * :class:`Codec` — plain little-endian CDR of one message (OMG "Common Object Request Broker
   Architecture", ch. 9.3, "CDR Transfer Syntax"; XCDR version 1 as the ROS 2 rmw
   implementations write it: a 4-byte encapsulation
@@ -47,6 +47,8 @@ _PRIMITIVES = {
 _ARRAY_TYPES = set(_PRIMITIVES) - {"boolean"}
 _ARRAY_DTYPES = {code: np.dtype("<" + code) for code in _PRIMITIVES.values()}
 _ENCAPSULATION = b"\x00\x01\x00\x00"   # CDR_LE
+#: A string's uint32 length after 0-3 bytes of padding.
+_STRING_LENGTH = [struct.Struct(f"<{pad}xI") for pad in range(4)]
 
 
 class Unsupported(TypeError):
@@ -55,7 +57,7 @@ class Unsupported(TypeError):
 
 def new(cls):
     """A default instance of the rclpy message class ``cls``, equal to ``cls()``."""
-    return _copier(cls)(_template(cls))
+    return _constructor(cls)()
 
 
 @lru_cache(maxsize=None)
@@ -64,29 +66,31 @@ def _template(cls):
 
 
 @lru_cache(maxsize=None)
-def _copier(cls):
-    """Function copying an instance of ``cls`` whose fields have the types of ``cls()``."""
-    steps = []
+def _constructor(cls):
+    """Function making instances equal to ``cls()`` from the fields of one made by ``cls()``:
+    numbers and strings shared (immutable), arrays copied, sub-messages made the same way."""
+    plain, made = [], []
     for slot in cls.__slots__:
         value = getattr(_template(cls), slot)
         if hasattr(value, "SLOT_TYPES"):
-            steps.append((slot, _copier(type(value))))
+            made.append((slot, _constructor(type(value))))
         elif isinstance(value, list):      # an array of messages, or an empty sequence
-            steps.append((slot, lambda v: [_copier(type(e))(e) for e in v]))
+            made.append((slot, lambda v=value: [_constructor(type(e))() for e in v]))
         elif hasattr(value, "copy"):       # numpy and array.array values (mutable)
-            steps.append((slot, type(value).copy))
-        else:                               # numbers and strings (immutable): shared
-            steps.append((slot, None))
+            made.append((slot, value.copy))
+        else:
+            plain.append((slot, value))
     new_object = cls.__new__
 
-    def copy(msg):
+    def construct():
         out = new_object(cls)
-        for slot, copy_value in steps:
-            value = getattr(msg, slot)
-            setattr(out, slot, value if copy_value is None else copy_value(value))
+        for slot, value in plain:
+            setattr(out, slot, value)
+        for slot, make in made:
+            setattr(out, slot, make())
         return out
 
-    return copy
+    return construct
 
 
 @lru_cache(maxsize=None)
@@ -120,13 +124,15 @@ class Codec:
         self._segments: list[list] = [[]]
         self._strings: list[str] = []
         self._build = self._builder(cls, "")
-        self._getters = [attrgetter(*[leaf[3] for leaf in leaves]) if leaves else None
-                         for leaves in self._segments]
-        # Index and dtype of the arrays in each segment's values; whether a getter gives a tuple.
-        self._arrays = [[(k, _ARRAY_DTYPES[code], count) for k, (code, _, count, _) in
-                         enumerate(leaves) if count > 1] for leaves in self._segments]
-        self._single = [len(leaves) == 1 for leaves in self._segments]
-        self._string_getters = [attrgetter(path) for path in self._strings]
+        # Per segment, for encode(): the getter of its leaves (one value or a tuple), the index,
+        # dtype and length of its arrays, and the getter of the string after it (None: last).
+        strings = [attrgetter(path) for path in self._strings] + [None]
+        self._plan = [(attrgetter(*[leaf[3] for leaf in leaves]) if leaves else None,
+                       len(leaves) == 1,
+                       [(k, _ARRAY_DTYPES[code], count)
+                        for k, (code, _, count, _) in enumerate(leaves) if count > 1],
+                       string)
+                      for leaves, string in zip(self._segments, strings)]
         self._structs: dict = {}
 
     def _builder(self, cls, prefix):
@@ -187,14 +193,12 @@ class Codec:
             A fixed-size array field of another length.
         """
         parts, pos = [_ENCAPSULATION], 0
-        for segment, getter in enumerate(self._getters):
+        for segment, (getter, single, arrays, string) in enumerate(self._plan):
             if getter is not None:
-                values = getter(msg)
-                if self._single[segment]:
-                    values = (values,)
-                if self._arrays[segment]:
+                values = (getter(msg),) if single else getter(msg)
+                if arrays:
                     values = list(values)
-                    for k, dtype, count in self._arrays[segment]:
+                    for k, dtype, count in arrays:
                         array = np.asarray(values[k], dtype)
                         if array.shape != (count,):
                             raise ValueError(f"{self.cls.__name__}: an array field of shape "
@@ -203,11 +207,10 @@ class Codec:
                 s = self._struct(segment, pos)
                 parts.append(s.pack(*values))
                 pos += s.size
-            if segment < len(self._string_getters):
-                data = self._string_getters[segment](msg).encode()
+            if string is not None:
+                data = string(msg).encode()
                 pad = -pos % 4
-                parts.append(struct.pack(f"<{pad}xI", len(data) + 1))
-                parts += (data, b"\0")
+                parts += (_STRING_LENGTH[pad].pack(len(data) + 1), data, b"\0")
                 pos += pad + 4 + len(data) + 1
         return b"".join(parts)
 
