@@ -57,7 +57,15 @@ from ins_gnss_ros.sim.imu_sim import ImuSpec, simulate_imu
 from ins_gnss_ros.trial.evaluate import euler_error_jacobian
 
 TWO_ANTENNAS = ((0.75, 0.0, 1.0), (-0.75, 0.0, 1.0))                 # 1.5 m fore-aft
-FOUR_ANTENNAS = ((0.75, 0.5, 1.0), (-0.75, 0.5, 1.0), (0.75, -0.5, 1.0), (-0.75, -0.5, 1.0))
+
+
+def four_antennas(length: float = 1.5, width: float = 1.0) -> tuple:
+    """Antennas at the corners of a length (fore-aft) x width (athwartship) rectangle, 1 m
+    above the IMU (FLU, m)."""
+    x, y = length / 2, width / 2
+    return (x, y, 1.0), (-x, y, 1.0), (x, -y, 1.0), (-x, -y, 1.0)
+
+
 STAMP0_S = 1_750_000_000   # ROS-axis stamp of trajectory time 0, whole s
 IMU_RATE = 100.0           # Hz
 GNSS_RATE = 5.0            # Hz
@@ -315,6 +323,9 @@ def main(argv=None) -> int:
     ap.add_argument("--antennas", type=int, choices=(2, 4), nargs="+", default=[2, 4])
     ap.add_argument("--grade", choices=sorted(GRADES), default=MEMS_ADIS16405.name,
                     help="simulated IMU and ekf noise model (sensor_errors.GRADES)")
+    ap.add_argument("--array", default="1.5x1.0", metavar="LENGTHxWIDTH",
+                    help="4-antenna rectangle, m (ISON-2's antenna unit is about 2.7 m long, "
+                         "seed 004 section 3.3: 2.7x1.2)")
     ap.add_argument("--phase-param", action="append", default=[], metavar="NAME=FLOAT",
                     help="phase_heading parameter override, e.g. multipath.phase_m=0")
     args = ap.parse_args(argv)
@@ -330,7 +341,9 @@ def main(argv=None) -> int:
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     rclpy.init()
     try:
-        configs = {2: ("2 ant. 1.5 m", TWO_ANTENNAS), 4: ("4 ant. 1.5 x 1.0 m", FOUR_ANTENNAS)}
+        length, width = (float(x) for x in args.array.split("x"))
+        configs = {2: ("2 ant. 1.5 m", TWO_ANTENNAS),
+                   4: (f"4 ant. {length:g} x {width:g} m", four_antennas(length, width))}
         for label, antennas in (configs[n] for n in args.antennas):
             for seed in seeds:
                 r = run_trial(seed, duration, antennas, grade=GRADES[args.grade],
