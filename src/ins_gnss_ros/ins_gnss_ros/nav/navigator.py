@@ -623,7 +623,23 @@ class Navigator:
                 v = quat_rotate(q, [self._gnss_speed, 0.0, 0.0])
             self.nav = NavState(lat, lon, h, v, q, float(self._imu_t[k - 1]))
             self._start_filter()
+        if self.nav is None and not self._pending and len(self._imu_t):
+            self._forget_unlevelled()
         return self.nav is not None
+
+    def _forget_unlevelled(self):
+        """Without a measurement to start on, keep only the samples of the last ``history``
+        (at least ``level_time``) seconds: the first fix is levelled on the samples before it,
+        and a receiver without a fix for hours (a ship at the pier) must not fill the memory
+        with IMU data. Older samples are passed over and the levelling starts afresh after
+        them; :meth:`_trim` then drops them."""
+        cfg = self.config
+        horizon = self._imu_t[-1] - max(cfg.history, cfg.level_time)
+        k = int(np.searchsorted(self._imu_t, horizon, side="right"))
+        if k > self._next:
+            self._next = k
+            self._level_sum = np.zeros(3)
+            self._level_time = 0.0
 
     def _start_filter(self):
         cfg = self.config
