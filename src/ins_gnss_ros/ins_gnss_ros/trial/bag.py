@@ -78,14 +78,34 @@ def typestore():
 def messages_equal(a, b) -> bool:
     """Field-by-field equality of two messages, NaN equal to NaN (rclpy's ``==`` says NaN !=
     NaN, and the CDR bytes cannot be compared: rclpy leaves alignment padding uninitialised)."""
+    return first_difference(a, b) is None
+
+
+def first_difference(a, b, path="") -> str | None:
+    """Dotted path and values of the first field where messages a and b differ (NaN equal to
+    NaN), or None when they are equal."""
     if hasattr(a, "get_fields_and_field_types"):
-        return type(a) is type(b) and all(
-            messages_equal(getattr(a, f), getattr(b, f)) for f in a.get_fields_and_field_types())
+        if type(a) is not type(b):
+            return f"{path or 'message'}: type {type(a).__name__} vs {type(b).__name__}"
+        for name in a.get_fields_and_field_types():
+            diff = first_difference(getattr(a, name), getattr(b, name),
+                                    f"{path}.{name}" if path else name)
+            if diff is not None:
+                return diff
+        return None
     if isinstance(a, (list, tuple, np.ndarray)) or type(a).__name__ == "array":
-        return len(a) == len(b) and all(messages_equal(x, y) for x, y in zip(a, b))
+        if len(a) != len(b):
+            return f"{path}: length {len(a)} vs {len(b)}"
+        for i, (x, y) in enumerate(zip(a, b)):
+            diff = first_difference(x, y, f"{path}[{i}]")
+            if diff is not None:
+                return diff
+        return None
     if isinstance(a, float) or isinstance(b, float):
-        return (math.isnan(a) and math.isnan(b)) or a == b
-    return a == b
+        same = (math.isnan(a) and math.isnan(b)) or a == b
+    else:
+        same = a == b
+    return None if same else f"{path}: {a!r} vs {b!r}"
 
 
 def msgtype_of(msg) -> str:

@@ -5,6 +5,7 @@
     trial replay bags/NAME --config config/PROFILE.yaml --out OUT [--outages LEN:PERIOD[:FIRST]]
                  [--init-from-truth] [--rate R --processes | --offline] [--faults FILE]
     trial evaluate OUT [--truth bags/NAME] [--json] [--skip S]
+    trial compare OUT_A OUT_B [--with-diagnostics]
     trial batch --config PROFILE --out DIR (--scenario S --seeds N | --bags B ...) [--scheduler A]
     trial run --config config/PROFILE.yaml
 
@@ -87,6 +88,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--skip", type=float, default=0.0,
                    help="leave the first S s (alignment, convergence) out of the statistics")
+
+    p = sub.add_parser("compare", help="are two replays' outputs identical, message by message")
+    p.add_argument("a", help="replay output folder (or bag folder)")
+    p.add_argument("b", help="the other one")
+    p.add_argument("--with-diagnostics", action="store_true", help="compare /diagnostics too")
 
     p = sub.add_parser("batch", help="many replays or Monte Carlo seeds on dask.distributed")
     _replay_args(p)
@@ -198,6 +204,14 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
+def cmd_compare(args) -> int:
+    from ins_gnss_ros.trial.compare import DEFAULT_SKIP, compare
+
+    result = compare(args.a, args.b, skip=() if args.with_diagnostics else DEFAULT_SKIP)
+    print("\n".join(result.lines()))
+    return 0 if result.identical else 1
+
+
 def cmd_batch(args) -> int:
     from ins_gnss_ros.trial.batch import run_batch
 
@@ -220,7 +234,7 @@ def cmd_run(args) -> int:
 
 
 COMMANDS = {"simulate": cmd_simulate, "import": cmd_import, "replay": cmd_replay,
-            "evaluate": cmd_evaluate, "batch": cmd_batch, "run": cmd_run}
+            "evaluate": cmd_evaluate, "compare": cmd_compare, "batch": cmd_batch, "run": cmd_run}
 
 if __name__ == "__main__":
     sys.exit(main())
