@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from ins_gnss_ros.magnetic.compass import MagneticCompass, level_field
-from ins_gnss_ros.magnetic.disturbance import DisturbanceDetector, total_and_inclination
+from ins_gnss_ros.magnetic.disturbance import (NOISE_MARGIN, DisturbanceDetector,
+                                               total_and_inclination)
 from ins_gnss_ros.magnetic.wmm import field_elements
 from ins_gnss_ros.nav.conventions import wrap_pi, yaw_from_azimuth
 from ins_gnss_ros.nav.rotations import dcm_from_euler
@@ -56,7 +57,7 @@ def test_steel_mass_flagged_and_no_heading_published():
     rng = np.random.default_rng(9)
     t, raw, roll, pitch, az = _scenario(rng)
     det = DisturbanceDetector(FIELD.total, FIELD.inclination)
-    compass = MagneticCompass(detector=det)
+    compass = MagneticCompass(detector=det, field_std=50e-9)  # the scenario's noise
     published = np.zeros(len(t), bool)
     flagged = np.zeros(len(t), bool)
     err = np.full(len(t), np.nan)
@@ -105,3 +106,47 @@ def test_hysteresis_and_running_norm():
         states.append(det.update(t, f).disturbed)
     assert states[0] and states[15] and not states[-1]
     assert states.index(False) == pytest.approx(20, abs=1)
+
+
+def _clean_drive(rng, seconds=120.0, rate=50.0, field_std=100e-9, tilt_step=0.6 * DEG):
+    """A level field at 50 Hz with 100 nT of noise per axis, levelled with an attitude whose
+    pitch error steps by ``tilt_step`` half-way (a filter correcting a MEMS INS's tilt)."""
+    t = np.arange(0.0, seconds, 1 / rate)
+    pitch_error = np.where(t < seconds / 2, 0.0, tilt_step)
+    az = 0.5 * DEG * t
+    c_nb = dcm_from_euler(np.zeros_like(t), np.zeros_like(t), yaw_from_azimuth(az))
+    raw = np.einsum("nji,nj->ni", c_nb, np.broadcast_to(FIELD.enu, (len(t), 3)))
+    raw = raw + rng.normal(0, field_std, raw.shape)
+    return t, np.array([level_field(m, 0.0, p) for m, p in zip(raw, pitch_error)])
+
+
+def test_noise_floor_raises_the_tolerances():
+    det = DisturbanceDetector(FIELD.total, FIELD.inclination, field_std=100e-9,
+                              tilt_std=0.3 * DEG)
+    tol = det.tolerances()
+    assert tol["model_total"] == 0.08 and tol["model_inclination"] == pytest.approx(4 * DEG)
+    assert tol["running_total"] == pytest.approx(NOISE_MARGIN * 100e-9 / FIELD.total)
+    assert tol["running_inclination"] == pytest.approx(
+        NOISE_MARGIN * np.hypot(100e-9 / FIELD.total, 0.3 * DEG))
+    # The noise they were chosen for leaves the defaults as they are.
+    det.set_noise(50e-9, 0.05 * DEG)
+    assert det.tolerances() == det.tol
+
+
+def test_noisy_clean_field_is_not_held_up_and_a_disturbance_still_is():
+    """100 nT at 50 Hz with a MEMS INS's tilt (0.3 deg, corrected by 0.6 deg half-way): given
+    that noise the detector passes every sample; without it (the tolerances of a 50 nT, 0.05
+    deg set-up) it trips on the noise and the correction and then withholds for good. A +5 %
+    step of |F| is flagged either way."""
+    t, level = _clean_drive(np.random.default_rng(4))
+    noisy = DisturbanceDetector(FIELD.total, FIELD.inclination, field_std=100e-9,
+                                tilt_std=0.3 * DEG)
+    blind = DisturbanceDetector(FIELD.total, FIELD.inclination)
+    flagged = {"noisy": [], "blind": []}
+    for ti, f in zip(t, level):
+        flagged["noisy"].append(noisy.update(ti, f).disturbed)
+        flagged["blind"].append(blind.update(ti, f).disturbed)
+    assert not any(flagged["noisy"])
+    assert np.mean(flagged["blind"][len(t) // 2:]) > 0.9
+    s = noisy.update(t[-1] + 0.02, 1.05 * level[-1])
+    assert s.disturbed and s.reasons == ("running_total",)

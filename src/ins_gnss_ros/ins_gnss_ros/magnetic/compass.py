@@ -100,7 +100,8 @@ class MagneticCompass:
         Systematic azimuth error of the installation to remove (ΔK_mk of the turntable
         calibration), rad.
     field_std, roll_std, pitch_std : float
-        Noise of the calibrated field (T) and of the INS roll and pitch (rad) for the variance.
+        Noise of the calibrated field (T) and of the INS roll and pitch (rad), for the variance
+        and the detector's noise floor.
     """
 
     def __init__(self, calibration: HardSoftIron | None = None,
@@ -110,7 +111,14 @@ class MagneticCompass:
         self.calibration = calibration
         self.detector = detector
         self.heading_bias = heading_bias
-        self.field_std, self.roll_std, self.pitch_std = field_std, roll_std, pitch_std
+        self.field_std = field_std
+        self.set_attitude_std(roll_std, pitch_std)
+
+    def set_attitude_std(self, roll_std: float, pitch_std: float) -> None:
+        """Roll and pitch error (rad) of the attitude the next samples are levelled with."""
+        self.roll_std, self.pitch_std = roll_std, pitch_std
+        if self.detector is not None:
+            self.detector.set_noise(self.field_std, max(roll_std, pitch_std))
 
     def update(self, t: float, mag_raw, roll: float, pitch: float, declination: float):
         """Process one sample.

@@ -5,7 +5,13 @@ Per ``imu/mag`` sample (base_link axes, from the ``imu_preprocessor``) the
 (``mag_calibrate_cli`` output or inline parameters), tilt-compensates with the latest roll and
 pitch (from ``ins/state``, or levelled from the accelerometer on ``imu/data`` where no INS runs)
 and gates the sample with the :class:`~ins_gnss_ros.magnetic.disturbance.DisturbanceDetector`:
-while a disturbance is flagged nothing is published and /diagnostics says why. The WMM
+while a disturbance is flagged nothing is published and /diagnostics says why. An ``ins/state``
+in DEAD_RECKONING that no filter has corrected yet (``correction_sequence`` 0: a strapdown
+integrating from its initial-attitude parameters) has no known roll and pitch: nothing is
+published from it. The roll/pitch error of the attitude source (``roll_std_deg``,
+``pitch_std_deg``, or the larger tilt σ the ekf reports on ``nav/status``) enters the variance
+and the detector's noise floor: a MEMS INS's tilt, uncertain by tenths of a degree, cannot show
+a dip change of half a degree. The WMM
 (:mod:`ins_gnss_ros.magnetic.wmm`) at the position (``gnss/fix``, else ``ins/state``, else the
 ``position.*`` parameters) and at the decimal year of the sample's stamp gives the declination and
 the expected field the detector checks against.
@@ -22,7 +28,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from ins_gnss_msgs.msg import Heading, InsState
+from ins_gnss_msgs.msg import FilterStatus, Heading, InsState
 from sensor_msgs.msg import Imu, MagneticField, NavSatFix, NavSatStatus
 
 from ..magnetic.compass import MagneticCompass
@@ -32,7 +38,7 @@ from ..magnetic.wmm import decimal_year, field_elements
 from ..nav.alignment import level
 from ..nav.rotations import quat_to_euler
 from ..params_io import ParamsFileError, load_yaml_file
-from .base import SENSOR_QOS, NavNode, Param, ParameterError, run
+from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import quat, stamp_to_sec, vec
 
 _IDENTITY = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
@@ -67,8 +73,10 @@ class MagCompassNode(NavNode):
               "date for the WMM, decimal year; 0: the date of each sample's stamp (set it when "
               "replaying data whose stamps are not dates)", 0.0, 2100.0),
         Param("field_std_nT", 100.0, "noise of the calibrated field per axis, nT", 0.0, 1e5),
-        Param("roll_std_deg", 0.05, "roll error of the attitude source, deg", 0.0, 90.0),
-        Param("pitch_std_deg", 0.05, "pitch error of the attitude source, deg", 0.0, 90.0),
+        Param("roll_std_deg", 0.05, "roll error of the attitude source (a larger tilt sigma on "
+              "nav/status is taken instead), deg", 0.0, 90.0),
+        Param("pitch_std_deg", 0.05, "pitch error of the attitude source (a larger tilt sigma on "
+              "nav/status is taken instead), deg", 0.0, 90.0),
         Param("disturbance.model_total_tol", 0.08,
               "relative tolerance of |F| against the WMM, -", 0.0, 10.0),
         Param("disturbance.model_inclination_deg", 4.0,
@@ -94,6 +102,7 @@ class MagCompassNode(NavNode):
                          math.radians(p["position.longitude_deg"]), p["position.altitude_m"])
         self._fix_seen = False
         self.attitude: tuple[float, float, float] | None = None  # (t, roll, pitch)
+        self._uncorrected = False  # the latest ins/state: a strapdown never corrected
         self._f_lp: np.ndarray | None = None                     # low-passed specific force
         self._last_imu_t: float | None = None
         self._last_mag_t: float | None = None
@@ -113,6 +122,8 @@ class MagCompassNode(NavNode):
         self.subscribe(InsState, "ins/state", self.on_ins_state, SENSOR_QOS)
         if p["attitude_source"] == "imu_data":
             self.subscribe(Imu, "imu/data", self.on_imu, SENSOR_QOS)
+        else:
+            self.subscribe(FilterStatus, "nav/status", self.on_filter_status, STATE_QOS)
 
     def _calibration(self) -> tuple[HardSoftIron, float]:
         """Hard/soft iron and heading bias (rad) from the file or the inline parameters."""
@@ -159,9 +170,26 @@ class MagCompassNode(NavNode):
         pos = (msg.latitude, msg.longitude, msg.altitude)
         if not self._fix_seen and all(map(math.isfinite, pos)):
             self.position = pos
-        if self.p["attitude_source"] == "ins_state":
-            roll, pitch, _ = quat_to_euler(q)
-            self.attitude = (stamp_to_sec(msg.header.stamp), float(roll), float(pitch))
+        if self.p["attitude_source"] != "ins_state":
+            return
+        # However level it looks, the attitude of a strapdown no filter has corrected is its
+        # initial-attitude parameters plus drift.
+        self._uncorrected = msg.mode == InsState.MODE_DEAD_RECKONING and \
+            msg.correction_sequence == 0
+        if self._uncorrected:
+            self.attitude = None
+            return
+        roll, pitch, _ = quat_to_euler(q)
+        self.attitude = (stamp_to_sec(msg.header.stamp), float(roll), float(pitch))
+
+    def on_filter_status(self, msg: FilterStatus) -> None:
+        """The ekf's tilt σ (its ENU attitude-error angles about east and north) for the
+        attitude of ins/state; the parameters are the floor (NaN before the filter levels)."""
+        std = dict(zip(msg.state_names, msg.state_std))
+        att = [std.get(f"att[{i}]", math.nan) for i in range(2)]
+        tilt = max(att) if all(map(math.isfinite, att)) else 0.0
+        self.compass.set_attitude_std(max(math.radians(self.p["roll_std_deg"]), tilt),
+                                      max(math.radians(self.p["pitch_std_deg"]), tilt))
 
     def on_imu(self, msg: Imu) -> None:
         f = vec(msg.linear_acceleration)
@@ -189,6 +217,10 @@ class MagCompassNode(NavNode):
             self.diag.count("magnetometer sample rejected: stamp not after the previous one")
             return
         self._last_mag_t = t
+        if self._uncorrected:
+            self.diag.count("ins/state not corrected by a filter yet (roll/pitch unknown): "
+                            "heading withheld")
+            return
         if self.attitude is None or abs(t - self.attitude[0]) > self.p["max_attitude_age_s"]:
             self.diag.count("no roll/pitch within max_attitude_age_s: heading withheld")
             return
