@@ -165,3 +165,14 @@ def test_rate_option_1200hz():
     assert len(traj) == 2401 and traj.dt == pytest.approx(1 / 1200)
     with pytest.raises(ValueError):
         tr.generate(tr.CarMotion(route), LAT0, LON0, H0, 2.0, oversample=3)
+
+
+def test_decimation_to_a_sensor_rate():
+    route = tr.Route(speed0=5.0).hold(1.0)
+    traj = tr.generate(tr.CarMotion(route), LAT0, LON0, H0, 1.0, rate=200.0)
+    assert traj.decimation(200.0) == 1 and traj.decimation(50.0) == 4
+    assert traj.decimation(0.5) == 400
+    for rate in (30.0, 400.0):
+        with pytest.raises(ValueError, match=f"{rate:g} Hz does not divide the trajectory rate "
+                                             "200 Hz"):
+            traj.decimation(rate)

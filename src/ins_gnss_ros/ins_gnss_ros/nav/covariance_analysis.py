@@ -81,12 +81,7 @@ def monte_carlo(state0, dthetas, dvs, dt, grade, n_runs, rng, sigma_pos, sigma_v
 
     Parameters
     ----------
-    state0 : NavState
-        True initial state.
-    dthetas, dvs : array_like, shape (N, 3)
-        Ideal increments [rad], [m/s] in body axes.
-    dt : float
-        Increment interval [s].
+    state0, dthetas, dvs, dt : as in :func:`propagate_covariance`
     grade : ImuGrade
         Sensor error budget (all processes of :mod:`ins_gnss_ros.nav.sensor_errors`).
     n_runs : int

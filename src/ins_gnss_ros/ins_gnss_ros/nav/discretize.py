@@ -93,8 +93,7 @@ def picard_predict(P, F, Q, dt, order=DEFAULT_ORDER):
     ----------
     P : (n, n) array_like
         Covariance at the start of the step.
-    F, Q, dt, order
-        As in :func:`picard_process_noise`.
+    F, Q, dt, order : as in :func:`picard_process_noise`
 
     Returns
     -------
@@ -117,8 +116,7 @@ def book_process_noise(F, Q, dt):
 
     Parameters
     ----------
-    F, Q, dt
-        As in :func:`picard_process_noise`.
+    F, Q, dt : as in :func:`picard_process_noise`
 
     Returns
     -------
@@ -134,8 +132,7 @@ def van_loan(F, Q, dt):
 
     Parameters
     ----------
-    F, Q, dt
-        As in :func:`picard_process_noise`.
+    F, Q, dt : as in :func:`picard_process_noise`
 
     Returns
     -------

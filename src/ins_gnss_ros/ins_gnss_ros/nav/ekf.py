@@ -68,6 +68,9 @@ KNOWN_EXTRAS = ("td", "mag", "nhc", "log")
 class StateSpace:
     """Error-state vector: an error_model layout followed by extra blocks.
 
+    The layout's blocks keep their indices; the extras follow in the order of ``extras``.
+    ``space[name]`` is the slice of a block and ``name in space`` says whether it is there.
+
     Attributes
     ----------
     layout : StateLayout

@@ -134,9 +134,7 @@ def simulate_imu(traj: Trajectory, spec: ImuSpec, seed: int) -> ImuMeasurements:
     -------
     ImuMeasurements
     """
-    factor = int(round(1.0 / (traj.dt * spec.rate)))
-    if factor < 1 or abs(factor * traj.dt * spec.rate - 1.0) > 1e-9:
-        raise ValueError("trajectory rate must be an integer multiple of the IMU rate")
+    factor = traj.decimation(spec.rate)
     dt = traj.dt * factor
     dtheta = decimate_increments(traj.dtheta, factor)
     dv = decimate_increments(traj.dv, factor)

@@ -126,10 +126,7 @@ def simulate_log(traj: Trajectory, current: CurrentModel = CurrentModel(),
     -------
     LogMeasurements
     """
-    factor = int(round(1.0 / (traj.dt * spec.rate)))
-    if factor < 1 or abs(factor * traj.dt * spec.rate - 1.0) > 1e-9:
-        raise ValueError("trajectory rate must be an integer multiple of the log rate")
-    idx = np.arange(0, len(traj), factor)
+    idx = np.arange(0, len(traj), traj.decimation(spec.rate))
     rng = np.random.default_rng(seed)
     t = traj.t[idx]
     c_n = simulate_current(t, current, rng)

@@ -128,10 +128,7 @@ def simulate_magnetometer(traj: Trajectory, earth_field, errors: MagErrors = Mag
     -------
     MagMeasurements
     """
-    factor = int(round(1.0 / (traj.dt * rate)))
-    if factor < 1 or abs(factor * traj.dt * rate - 1.0) > 1e-9:
-        raise ValueError("trajectory rate must be an integer multiple of the magnetometer rate")
-    idx = np.arange(0, len(traj), factor)
+    idx = np.arange(0, len(traj), traj.decimation(rate))
     b_n = np.broadcast_to(np.asarray(earth_field, float), (len(traj), 3))[idx]
     if frame.upper() == "NED":
         b_n = ned_to_enu(b_n)

@@ -156,15 +156,9 @@ def sea(duration: float = 600.0, seed: int = 0, rate: float = 200.0,
 
     Parameters
     ----------
-    duration : float
-        Length, s.
-    seed : int
-    rate : float
-        IMU rate, Hz.
+    duration, seed, rate, start, oversample : as in :func:`car`
     sea_state : SeaState
     hull : HullResponse
-    start : (lat, lon, h)
-    oversample : int
 
     Returns
     -------

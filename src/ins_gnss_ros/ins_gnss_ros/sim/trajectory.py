@@ -380,6 +380,20 @@ class Trajectory:
     def __len__(self) -> int:
         return len(self.t)
 
+    def decimation(self, rate: float) -> int:
+        """Samples of the record per sample of a sensor at ``rate`` Hz.
+
+        Raises
+        ------
+        ValueError
+            If ``rate`` does not divide the record's rate.
+        """
+        dt = self.dt
+        factor = int(round(1.0 / (dt * rate)))
+        if factor < 1 or abs(factor * dt * rate - 1.0) > 1e-9:
+            raise ValueError(f"{rate:g} Hz does not divide the trajectory rate {1.0 / dt:g} Hz")
+        return factor
+
 
 def euler_rates_to_body_rate(rpy, rpy_rate):
     """Angular rate ω_nb^b (rad/s, body axes) from ROS Euler angles and their rates.

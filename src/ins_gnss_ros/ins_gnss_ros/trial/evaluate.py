@@ -140,7 +140,8 @@ class OutageDrift:
 
 @dataclass(frozen=True)
 class Evaluation:
-    """Result of `evaluate`.
+    """Result of `evaluate`: how far the estimate is from the truth, over the whole run and in
+    each GNSS outage, and whether its covariances cover that.
 
     Attributes
     ----------
