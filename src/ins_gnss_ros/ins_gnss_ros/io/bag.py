@@ -1,43 +1,36 @@
 """Trial bags: rosbag2-compatible MCAP folders written and read with ``rosbags``.
 
 A bag folder holds ``metadata.yaml`` and one ``.mcap`` file, the layout ``ros2 bag record -s
-mcap`` produces, so ``ros2 bag play``, Foxglove and the ``mcap`` tools open it. Payloads are CDR,
-serialised like rclpy does (``rclpy.serialization`` or, for the fixed-layout types of the
-high-rate topics, the same CDR several times faster: :mod:`ins_gnss_ros.nodes.fast_messages`),
+mcap`` produces, so ``ros2 bag play``, Foxglove and the ``mcap`` tools open it. Payloads are CDR
+laid out by :mod:`ins_gnss_ros.io.cdr` (padding zero: the same messages give the same bytes),
 and read back into the rclpy message classes, so a replay feeds the nodes the same objects DDS
 would deliver.
 ``rosbags`` is used only for the container: its typestore supplies the message definitions that
 MCAP stores as schemas (the project's own ``ins_gnss_msgs`` are registered from their .msg files).
 Readers for which speed matters (the offline replay) take the undecoded rows (:func:`read_raw`;
 a one-file MCAP bag is parsed here directly) and decode fixed-layout topics in bulk
-(:mod:`ins_gnss_ros.trial.cdr`); :meth:`BagWriter.write_raw` takes payloads encoded that way.
+(:func:`ins_gnss_ros.io.cdr.decode_columns`); :meth:`BagWriter.write_raw` takes payloads encoded
+that way.
 
 The log time of every message is its header stamp (sensor time; CONTRACT.md "Stamps"); messages
 are written in stamp order and a reader returns them in stamp order, ties in writing order.
 """
 from __future__ import annotations
 
-import math
 import os
 import struct
 from dataclasses import dataclass
 from functools import lru_cache
-from importlib import import_module
 from operator import itemgetter
 from pathlib import Path
 from typing import Any, Iterable, Iterator, NamedTuple
 
-import numpy as np
-from rclpy.serialization import deserialize_message, serialize_message
-from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StoragePlugin, Writer
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-
-from ins_gnss_ros.nav.conventions import seed_angles_from_quat
-from ins_gnss_ros.nodes.fast_messages import codec
+from .cdr import Unsupported, codec
+from .messages import MessageTypeError, msg_class, msgtype_of
+from .stamps import msg_stamp_ns
 
 #: Package whose .msg files are registered in the typestore besides the ROS 2 Jazzy ones.
 CUSTOM_PACKAGE = "ins_gnss_msgs"
-
 
 class BagError(ValueError):
     """A bag that cannot be read or written (missing, malformed, unknown message type)."""
@@ -63,6 +56,8 @@ def _msg_dirs() -> list[Path]:
 @lru_cache(maxsize=1)
 def typestore():
     """ROS 2 Jazzy typestore with ``ins_gnss_msgs`` registered from its .msg definitions."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
     store = get_typestore(Stores.ROS2_JAZZY)
     folder = next((d for d in _msg_dirs() if d.is_dir()), None)
     if folder is None:
@@ -75,72 +70,38 @@ def typestore():
     return store
 
 
-def messages_equal(a, b) -> bool:
-    """Field-by-field equality of two messages, NaN equal to NaN (rclpy's ``==`` says NaN !=
-    NaN, and the CDR bytes cannot be compared: rclpy leaves alignment padding uninitialised)."""
-    return first_difference(a, b) is None
-
-
-def first_difference(a, b, path="") -> str | None:
-    """Dotted path and values of the first field where messages a and b differ (NaN equal to
-    NaN), or None when they are equal."""
-    if hasattr(a, "get_fields_and_field_types"):
-        if type(a) is not type(b):
-            return f"{path or 'message'}: type {type(a).__name__} vs {type(b).__name__}"
-        for name in a.get_fields_and_field_types():
-            diff = first_difference(getattr(a, name), getattr(b, name),
-                                    f"{path}.{name}" if path else name)
-            if diff is not None:
-                return diff
-        return None
-    if isinstance(a, (list, tuple, np.ndarray)) or type(a).__name__ == "array":
-        if len(a) != len(b):
-            return f"{path}: length {len(a)} vs {len(b)}"
-        for i, (x, y) in enumerate(zip(a, b)):
-            diff = first_difference(x, y, f"{path}[{i}]")
-            if diff is not None:
-                return diff
-        return None
-    if isinstance(a, float) or isinstance(b, float):
-        same = (math.isnan(a) and math.isnan(b)) or a == b
-    else:
-        same = a == b
-    return None if same else f"{path}: {a!r} vs {b!r}"
-
-
-def msgtype_of(msg) -> str:
-    """ROS type name ``pkg/msg/Name`` of an rclpy message object."""
-    return _msgtype_of_class(type(msg))
-
-
-@lru_cache(maxsize=None)
-def _msgtype_of_class(cls) -> str:
-    return f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"
-
-
-@lru_cache(maxsize=None)
-def msg_class(msgtype: str):
-    """rclpy class of a type name ``pkg/msg/Name`` (also ``pkg/Name``)."""
-    parts = msgtype.split("/")
-    if len(parts) not in (2, 3) or (len(parts) == 3 and parts[1] != "msg"):
-        raise BagError(f"not a message type name: {msgtype!r}")
-    try:
-        return getattr(import_module(f"{parts[0]}.msg"), parts[-1])
-    except (ImportError, AttributeError):
-        raise BagError(f"message type {msgtype!r} is not installed") from None
-
-
 def serialize(msg) -> bytes:
-    """CDR payload of an rclpy message (:mod:`ins_gnss_ros.nodes.fast_messages` where it has
-    a codec for the type, else rclpy)."""
-    fast = codec(type(msg))
-    return fast.encode(msg) if fast else serialize_message(msg)
+    """CDR payload of an rclpy message (:mod:`ins_gnss_ros.io.cdr`, padding zero).
+
+    Raises
+    ------
+    BagError
+        A type with wide strings, which the layout does not cover.
+    """
+    try:
+        return codec(type(msg)).encode(msg)
+    except Unsupported as err:
+        raise BagError(f"cannot write {msgtype_of(msg)}: {err}") from None
 
 
-def stamp_ns(msg) -> int:
-    """Header stamp of a message in ns (rosgraph/Clock: its clock field)."""
-    stamp = msg.header.stamp if hasattr(msg, "header") else msg.clock
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
+def decode_message(raw: RawMessage, path="bag"):
+    """The rclpy message of a :class:`RawMessage`.
+
+    Raises
+    ------
+    BagError
+        The type is not installed or not supported (wide strings), or the payload does not
+        decode (``path`` names the bag in the message).
+    """
+    try:
+        cls = msg_class(raw.msgtype)
+    except MessageTypeError as err:
+        raise BagError(f"{path}: {err}") from None
+    try:
+        return codec(cls).decode(raw.data)
+    except Exception as err:
+        raise BagError(f"{path}: message on {raw.topic} at {raw.t_ns} ns does not decode "
+                       f"({first_line(err)})") from None
 
 
 def resolve(topic: str) -> str:
@@ -169,7 +130,7 @@ class BagWriter:
 
     def write(self, topic: str, msg, t_ns: int | None = None) -> None:
         """Queue ``msg`` on ``topic`` at log time ``t_ns`` (default: its header stamp)."""
-        self.write_raw(topic, msgtype_of(msg), stamp_ns(msg) if t_ns is None else t_ns,
+        self.write_raw(topic, msgtype_of(msg), msg_stamp_ns(msg) if t_ns is None else t_ns,
                        serialize(msg))
 
     def write_raw(self, topic: str, msgtype: str, t_ns: int, data: bytes) -> None:
@@ -187,6 +148,8 @@ class BagWriter:
             self.write(topic, msg)
 
     def close(self) -> Path:
+        from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
+
         # (stamp, writing order) decide: the order is unique, so no key function is needed.
         self._rows.sort()
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -252,7 +215,7 @@ class RawMessage(NamedTuple):
 
 def read_raw(path, topics: Iterable[str] | None = None) -> list[RawMessage]:
     """The messages of a bag (or of ``topics``) undecoded, in stamp order, ties in writing
-    order: for readers that decode in bulk (:mod:`ins_gnss_ros.trial.cdr`) or not at all."""
+    order: for readers that decode in bulk (:func:`ins_gnss_ros.io.cdr.decode_columns`) or not at all."""
     wanted = None if topics is None else {resolve(t) for t in topics}
     try:
         with _open(path) as reader:
@@ -335,26 +298,9 @@ def _mcap_rows(reader, connections) -> list | None:
     return rows
 
 
-def decode_message(raw: RawMessage, path="bag"):
-    """The rclpy message of a :class:`RawMessage`.
-
-    Raises
-    ------
-    BagError
-        The payload does not decode (``path`` names the bag in the message).
-    """
-    cls = msg_class(raw.msgtype)
-    fast = codec(cls)
-    try:
-        return fast.decode(raw.data) if fast else deserialize_message(bytes(raw.data), cls)
-    except BagError:
-        raise
-    except Exception as err:
-        raise BagError(f"{path}: message on {raw.topic} at {raw.t_ns} ns does not decode "
-                       f"({first_line(err)})") from None
-
-
 def _open(path):
+    from rosbags.rosbag2 import Reader
+
     path = Path(path)
     if not (path / "metadata.yaml").is_file():
         raise BagError(f"{path}: not a bag folder (no metadata.yaml)")
@@ -382,131 +328,3 @@ def first_line(err: Exception) -> str:
     """First line of an exception's message (for one-line error reports)."""
     text = str(err).strip().splitlines()
     return text[0] if text else type(err).__name__
-
-
-# ---------------------------------------------------------------------------------------------
-# The contract's bag topics as messages (imports are local: only writers need the classes)
-# ---------------------------------------------------------------------------------------------
-def to_stamp(t_ns: int):
-    """builtin_interfaces/Time of an integer time in ns."""
-    from builtin_interfaces.msg import Time
-
-    sec, nanosec = divmod(int(t_ns), 1_000_000_000)
-    return Time(sec=sec, nanosec=nanosec)
-
-
-def seconds_to_ns(t, t0_ns: int = 0):
-    """Integer ns on the ROS time axis of times ``t`` (s) after ``t0_ns``; exact for repeats."""
-    import numpy as np
-
-    return int(t0_ns) + np.round(np.asarray(t, float) * 1e9).astype(np.int64)
-
-
-def _vector3(v):
-    from geometry_msgs.msg import Vector3
-
-    return Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
-
-
-def _header(t_ns, frame_id):
-    from std_msgs.msg import Header
-
-    return Header(stamp=to_stamp(t_ns), frame_id=frame_id)
-
-
-def imu_msg(t_ns, gyro, accel, frame_id="imu_link"):
-    """sensor_msgs/Imu of raw rates (rad/s) and specific force (m/s^2), no orientation."""
-    from sensor_msgs.msg import Imu
-
-    msg = Imu(header=_header(t_ns, frame_id), angular_velocity=_vector3(gyro),
-              linear_acceleration=_vector3(accel))
-    msg.orientation_covariance[0] = -1.0  # REP-145: orientation not provided
-    return msg
-
-
-def delta_msg(t_ns, dtheta, dv, dt, frame_id="base_link"):
-    """ins_gnss_msgs/ImuDelta over [t - dt, t]."""
-    from ins_gnss_msgs.msg import ImuDelta
-
-    return ImuDelta(header=_header(t_ns, frame_id), delta_angle=_vector3(dtheta),
-                    delta_velocity=_vector3(dv), dt=float(dt))
-
-
-def fix_msg(t_ns, lat, lon, h, cov_enu_diag, frame_id="gnss"):
-    """sensor_msgs/NavSatFix (degrees on the wire, as REP/NavSatFix define) with diagonal ENU
-    covariance, m^2."""
-    import math
-
-    from sensor_msgs.msg import NavSatFix, NavSatStatus
-
-    msg = NavSatFix(header=_header(t_ns, frame_id), latitude=math.degrees(lat),
-                    longitude=math.degrees(lon), altitude=float(h))
-    msg.status.status, msg.status.service = NavSatStatus.STATUS_FIX, NavSatStatus.SERVICE_GPS
-    msg.position_covariance[0::4] = [float(c) for c in cov_enu_diag]
-    msg.position_covariance_type = NavSatFix.COVARIANCE_TYPE_DIAGONAL_KNOWN
-    return msg
-
-
-def twist_msg(t_ns, linear, cov_diag, frame_id):
-    """geometry_msgs/TwistWithCovarianceStamped: velocity (m/s) and its variances ((m/s)^2);
-    angular parts unknown (variance -1). NaN marks a component that is not measured."""
-    from geometry_msgs.msg import TwistWithCovarianceStamped
-
-    msg = TwistWithCovarianceStamped(header=_header(t_ns, frame_id))
-    msg.twist.twist.linear = _vector3(linear)
-    cov = [0.0] * 36
-    cov[0], cov[7], cov[14] = (float(c) for c in cov_diag)
-    cov[21] = cov[28] = cov[35] = -1.0
-    msg.twist.covariance = cov
-    return msg
-
-
-def mag_msg(t_ns, field_t, variance, frame_id="imu_link"):
-    """sensor_msgs/MagneticField, T."""
-    from sensor_msgs.msg import MagneticField
-
-    msg = MagneticField(header=_header(t_ns, frame_id), magnetic_field=_vector3(field_t))
-    msg.magnetic_field_covariance[0::4] = [float(variance)] * 3
-    return msg
-
-
-def ins_state_msg(t_ns, lat, lon, h, v_enu, q_nb, omega_b=None, f_b=None, gyro_bias=None,
-                  accel_bias=None):
-    """ins_gnss_msgs/InsState (as ins/state and truth/state); unknown vectors are NaN."""
-    import numpy as np
-    from geometry_msgs.msg import Quaternion
-    from ins_gnss_msgs.msg import InsState
-
-    nan3 = np.full(3, np.nan)
-    q = q_nb if q_nb is not None else np.full(4, np.nan)
-    msg = InsState(header=_header(t_ns, "map"), latitude=float(lat), longitude=float(lon),
-                   altitude=float(h), mode=InsState.MODE_NAVIGATING)
-    msg.velocity = _vector3(nan3 if v_enu is None else v_enu)
-    msg.orientation = Quaternion(w=float(q[0]), x=float(q[1]), y=float(q[2]), z=float(q[3]))
-    msg.angular_velocity = _vector3(nan3 if omega_b is None else omega_b)
-    msg.specific_force = _vector3(nan3 if f_b is None else f_b)
-    msg.gyro_bias = _vector3(nan3 if gyro_bias is None else gyro_bias)
-    msg.accel_bias = _vector3(nan3 if accel_bias is None else accel_bias)
-    return msg
-
-
-def heading_msg(t_ns, q_nb=None, azimuth=None, azimuth_variance=0.0, source=None,
-                reference=None, with_tilt=True):
-    """ins_gnss_msgs/Heading of attitude ``q_nb`` (azimuth, and pitch/roll if ``with_tilt``) or
-    of a bare ``azimuth`` (rad, clockwise from north); defaults: TRUE reference, RECEIVER."""
-    import math
-
-    from ins_gnss_msgs.msg import Heading
-
-    msg = Heading(header=_header(t_ns, "base_link"), pitch=math.nan, roll=math.nan,
-                  pitch_variance=math.nan, roll_variance=math.nan,
-                  reference=Heading.REFERENCE_TRUE if reference is None else reference,
-                  source=Heading.SOURCE_RECEIVER if source is None else source,
-                  declination=0.0, baseline_length=math.nan, ambiguity_ratio=math.nan,
-                  status=Heading.STATUS_FIXED)
-    if q_nb is not None:
-        azimuth, pitch, roll = (float(a) for a in seed_angles_from_quat(q_nb))
-        if with_tilt:
-            msg.pitch, msg.roll, msg.pitch_variance, msg.roll_variance = pitch, roll, 0.0, 0.0
-    msg.azimuth, msg.azimuth_variance = float(azimuth), float(azimuth_variance)
-    return msg
