@@ -5,14 +5,16 @@
   comparison.
 * :mod:`.cdr` -- the one CDR layout: message objects (:func:`codec`) and numpy columns of many
   payloads (:func:`decode_columns`, :func:`encode_columns`); padding written as zeros.
+* :mod:`.mcap_reader` -- the records of an MCAP file, also of one cut short.
 * :mod:`.bag` -- bag folders: :class:`BagWriter`, :func:`read_bag`, :func:`read_raw`.
 
 Used by the nodes (stamps, :func:`new`), the trial tooling and fault injection; imports
 nothing of them.
 """
-from .bag import (BagError, BagMessage, BagWriter, RawMessage, bag_topics, decode_message,
-                  first_line, iter_bag, read_bag, read_raw, resolve, serialize, typestore)
+from .bag import (BagError, BagMessage, BagWriter, bag_topics, decode_message, first_line,
+                  iter_bag, read_bag, read_raw, resolve, serialize, typestore)
 from .cdr import CdrLayoutError, Codec, codec, column_layout, decode_columns, encode_columns
+from .mcap_reader import RawMessage
 from .messages import (MessageTypeError, first_difference, messages_equal, msg_class,
                        msgtype_of, new)
 from .stamps import (NS, msg_stamp_ns, ns_to_stamp, sec_to_ns, sec_to_stamp, set_stamp_ns,

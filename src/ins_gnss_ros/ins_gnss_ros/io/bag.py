@@ -1,36 +1,47 @@
-"""Trial bags: rosbag2-compatible MCAP folders written and read with ``rosbags``.
+"""Trial bags: rosbag2 folders of one MCAP file, written with ``rosbags`` and read here.
 
 A bag folder holds ``metadata.yaml`` and one ``.mcap`` file, the layout ``ros2 bag record -s
 mcap`` produces, so ``ros2 bag play``, Foxglove and the ``mcap`` tools open it. Payloads are CDR
 laid out by :mod:`ins_gnss_ros.io.cdr` (padding zero: the same messages give the same bytes),
 and read back into the rclpy message classes, so a replay feeds the nodes the same objects DDS
-would deliver.
-``rosbags`` is used only for the container: its typestore supplies the message definitions that
-MCAP stores as schemas (the project's own ``ins_gnss_msgs`` are registered from their .msg files).
-Readers for which speed matters (the offline replay) take the undecoded rows (:func:`read_raw`;
-a one-file MCAP bag is parsed here directly) and decode fixed-layout topics in bulk
-(:func:`ins_gnss_ros.io.cdr.decode_columns`); :meth:`BagWriter.write_raw` takes payloads encoded
-that way.
+would deliver. ``rosbags``' public :class:`~rosbags.rosbag2.Writer` writes the container; its
+typestore supplies the message definitions that MCAP stores as schemas (the project's own
+``ins_gnss_msgs`` are registered from their .msg files).
+
+Reading parses ``metadata.yaml`` and walks the MCAP files (:mod:`ins_gnss_ros.io.mcap_reader`),
+which also reads a recording that was cut short, up to where it ends, with a warning on the
+``ins_gnss_ros.io.bag`` logger saying what was lost; bags of other storage (sqlite3) or with
+whole-file compression go through ``rosbags``' public :class:`~rosbags.rosbag2.Reader`.
+Readers for which speed matters (the offline replay) take the undecoded rows (:func:`read_raw`)
+and decode fixed-layout topics in bulk (:func:`ins_gnss_ros.io.cdr.decode_columns`);
+:meth:`BagWriter.write_raw` takes payloads encoded that way.
 
 The log time of every message is its header stamp (sensor time; CONTRACT.md "Stamps"); messages
 are written in stamp order and a reader returns them in stamp order, ties in writing order.
 """
 from __future__ import annotations
 
+import logging
 import os
-import struct
 from dataclasses import dataclass
 from functools import lru_cache
 from operator import itemgetter
-from pathlib import Path
-from typing import Any, Iterable, Iterator, NamedTuple
+from pathlib import Path, PurePath
+from typing import Any, Iterable, Iterator
 
+from ..params_io import ParamsFileError, load_yaml_file
 from .cdr import Unsupported, codec
+from .mcap_reader import RawMessage, read_mcap
 from .messages import MessageTypeError, msg_class, msgtype_of
 from .stamps import msg_stamp_ns
 
 #: Package whose .msg files are registered in the typestore besides the ROS 2 Jazzy ones.
 CUSTOM_PACKAGE = "ins_gnss_msgs"
+#: Newest rosbag2 metadata version read (Jazzy writes 9).
+METADATA_VERSION = 9
+
+log = logging.getLogger(__name__)
+
 
 class BagError(ValueError):
     """A bag that cannot be read or written (missing, malformed, unknown message type)."""
@@ -174,9 +185,8 @@ class BagWriter:
 
 
 def bag_topics(path) -> dict[str, str]:
-    """Topics of a bag with their type names."""
-    with _open(path) as reader:
-        return {c.topic: c.msgtype for c in reader.connections}
+    """Topics of a bag with their type names (from its metadata.yaml)."""
+    return {topic: msgtype for topic, (msgtype, _) in _metadata(Path(path))[1].items()}
 
 
 def read_bag(path, topics: Iterable[str] | None = None) -> list[BagMessage]:
@@ -203,30 +213,30 @@ def iter_bag(path, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
         yield BagMessage(raw.topic, raw.t_ns, decode_message(raw, path))
 
 
-class RawMessage(NamedTuple):
-    """One undecoded message: absolute topic, log time (ns), type name and CDR payload (a
-    named tuple: a bag has a few hundred thousand of them)."""
-
-    topic: str
-    t_ns: int
-    msgtype: str
-    data: bytes
-
-
 def read_raw(path, topics: Iterable[str] | None = None) -> list[RawMessage]:
     """The messages of a bag (or of ``topics``) undecoded, in stamp order, ties in writing
-    order: for readers that decode in bulk (:func:`ins_gnss_ros.io.cdr.decode_columns`) or not at all."""
+    order: for readers that decode in bulk (:mod:`ins_gnss_ros.io.cdr`) or not at all.
+
+    A bag whose MCAP file ends early (a recording that was killed) is read up to where it
+    ends; a warning on the ``ins_gnss_ros.io.bag`` logger says how much was read.
+    """
+    path = Path(path)
+    info, listed = _metadata(path)
     wanted = None if topics is None else {resolve(t) for t in topics}
     try:
-        with _open(path) as reader:
-            connections = [c for c in reader.connections if wanted is None or c.topic in wanted]
-            rows = _mcap_rows(reader, connections) if connections else []
-            if rows is None:
-                rows = [RawMessage(c.topic, t, c.msgtype, data)
-                        for c, t, data in reader.messages(connections=connections)]
+        if info["storage_identifier"] == "mcap" and not info.get("compression_mode"):
+            rows = []
+            for file in _files(path, info):
+                contents = read_mcap(file, wanted)
+                _check_types(path, contents.channels, listed)
+                rows += contents.messages
+                if contents.cut_at is not None:
+                    _warn_cut(path, file, contents, info, listed, wanted)
+        else:
+            rows = _read_with_rosbags(path, wanted)
     except BagError:
         raise
-    except Exception as err:  # rosbags, mcap and yaml raise many types on a damaged file
+    except Exception as err:  # mcap_reader, rosbags and the decompressors raise many types
         raise BagError(f"{path}: unreadable bag ({type(err).__name__}: {first_line(err)})") \
             from None
     # Stable: ties stay in file order. The rows are built once, in their final type (a bag
@@ -235,93 +245,81 @@ def read_raw(path, topics: Iterable[str] | None = None) -> list[RawMessage]:
     return rows
 
 
-#: MCAP file magic and the record opcodes read here (MCAP specification, "Records").
-_MCAP_MAGIC = b"\x89MCAP0\r\n"
-_OP_FOOTER, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_DATA_END = 0x02, 0x04, 0x05, 0x06, 0x0F
-
-
-def _mcap_rows(reader, connections) -> list | None:
-    """The :class:`RawMessage` rows of a one-file MCAP bag in file order, parsed here.
-
-    rosbags' reader costs several microseconds per message (a stream object per record and a
-    heap merge across chunks), about twice what this costs, which was a sizeable part of the
-    offline replay (docs/results/replay.md); this walks the records of the data section directly (MCAP specification: a record is an opcode
-    byte, a uint64 length and its content; a chunk holds compressed records; a message is
-    channel id u16, sequence u32, log time u64, publish time u64 and the payload). Stable
-    sorting by time afterwards gives rosbags' order (time, then file order). None (use
-    rosbags) for other storage, several files or a topic with several types. The file was
-    opened and checked by rosbags first.
-    """
-    from rosbags.rosbag2.storage_mcap import McapReader, decompress
-
-    # The file rosbags opened (its reader's attributes; anything unexpected: rosbags reads).
-    files = getattr(getattr(reader, "storage", None), "storages", None) or []
-    types = {}
-    if len(files) != 1 or not isinstance(files[0], McapReader) or any(
-            types.setdefault(c.topic, c.msgtype) != c.msgtype for c in connections):
-        return None
-    data = Path(files[0].path).read_bytes()
-    if not data.startswith(_MCAP_MAGIC):
-        raise BagError(f"{files[0].path}: not an MCAP file")
-    channels: dict[int, str] = {}
-    rows: list = []
-
-    def walk(buf, pos, end):
-        unpack = struct.unpack_from
-        while pos < end:
-            op = buf[pos]
-            body = pos + 9
-            pos = body + unpack("<Q", buf, pos + 1)[0]
-            if pos > end:
-                raise BagError(f"{reader.path}: truncated MCAP record")
-            if op == _OP_MESSAGE:
-                channel, _, t = unpack("<HIQ", buf, body)
-                if channel in channels:
-                    topic = channels[channel]
-                    rows.append(RawMessage(topic, t, types[topic], buf[body + 22:pos]))
-            elif op == _OP_CHANNEL:
-                channel, _, size = unpack("<HHI", buf, body)
-                topic = buf[body + 8:body + 8 + size].decode()
-                if topic in types:
-                    channels[channel] = topic
-            elif op == _OP_CHUNK:
-                _, _, size, crc, n = unpack("<QQQII", buf, body)
-                compression = buf[body + 32:body + 32 + n].decode()
-                start = body + 32 + n + 8
-                length = unpack("<Q", buf, start - 8)[0]
-                chunk = decompress(buf[start:start + length], compression, size, crc)
-                walk(chunk, 0, len(chunk))
-            elif op in (_OP_DATA_END, _OP_FOOTER):
-                return
-
-    walk(data, len(_MCAP_MAGIC), len(data))
-    return rows
-
-
-def _open(path):
-    from rosbags.rosbag2 import Reader
-
-    path = Path(path)
+def _metadata(path: Path) -> tuple[dict, dict]:
+    """The rosbag2 metadata of a bag folder, and {topic: (type, message count)} from it."""
     if not (path / "metadata.yaml").is_file():
         raise BagError(f"{path}: not a bag folder (no metadata.yaml)")
     try:
-        reader = Reader(path)
-        reader.open()
-    except Exception as err:
-        raise BagError(f"{path}: unreadable bag ({type(err).__name__}: {first_line(err)})") \
-            from None
-    return _Closing(reader)
+        info = load_yaml_file(path / "metadata.yaml")["rosbag2_bagfile_information"]
+        if info["version"] > METADATA_VERSION:
+            raise BagError(f"{path}: rosbag2 metadata version {info['version']} (this reads "
+                           f"up to {METADATA_VERSION})")
+        if info["storage_identifier"] not in ("mcap", "sqlite3"):
+            raise BagError(f"{path}: storage {info['storage_identifier']!r} is not supported")
+        listed = {}
+        for entry in info["topics_with_message_count"]:
+            meta = entry["topic_metadata"]
+            if meta["serialization_format"] != "cdr":
+                raise BagError(f"{path}: {meta['name']} is {meta['serialization_format']}, "
+                               "not CDR")
+            listed[meta["name"]] = (meta["type"], int(entry["message_count"]))
+    except BagError:
+        raise
+    except ParamsFileError as err:
+        raise BagError(f"{path}: unreadable bag ({first_line(err)})") from None
+    except (KeyError, TypeError, ValueError, AttributeError) as err:
+        raise BagError(f"{path}: malformed metadata.yaml ({type(err).__name__}: "
+                       f"{first_line(err)})") from None
+    return info, listed
 
 
-class _Closing:
-    def __init__(self, reader):
-        self.reader = reader
+def _check_types(path: Path, channels: set, listed: dict) -> None:
+    """The MCAP channels carry the types metadata.yaml lists (rosbag2 would mis-decode)."""
+    for topic, msgtype in channels:
+        if topic in listed and listed[topic][0] != msgtype:
+            raise BagError(f"{path}: {topic} carries {msgtype}, metadata.yaml says "
+                           f"{listed[topic][0]}")
 
-    def __enter__(self):
-        return self.reader
 
-    def __exit__(self, *exc):
-        self.reader.close()
+def _files(path: Path, info: dict) -> list[Path]:
+    files = [path / PurePath(name).name for name in info["relative_file_paths"]]
+    missing = [file.name for file in files if not file.is_file()]
+    if missing:
+        raise BagError(f"{path}: missing storage file(s) {', '.join(missing)}")
+    return files
+
+
+def _warn_cut(path: Path, file: Path, contents, info: dict, listed: dict, wanted) -> None:
+    """Log what a cut MCAP file (a recording that was killed) lost."""
+    rows = contents.messages
+    expected = sum(count for topic, (_, count) in listed.items()
+                   if wanted is None or topic in wanted)
+    read = f"{len(rows):,} of the {expected:,} messages metadata.yaml lists" \
+        if expected > len(rows) else f"{len(rows):,} messages"
+    try:
+        start = info["starting_time"]["nanoseconds_since_epoch"]
+        duration = info["duration"]["nanoseconds"] * 1e-9
+        span = f", the first {(max(r.t_ns for r in rows) - start) * 1e-9:.1f} s of " \
+               f"{duration:.1f} s" if rows else ""
+    except (KeyError, TypeError):
+        span = ""
+    where = "between records" if contents.cut_at == contents.size else \
+        f"inside a record that starts at byte {contents.cut_at:,}"
+    log.warning("%s: %s ends at byte %s, %s, without the end of its data (the recording was "
+                "cut short): read %s%s; the rest is lost", path, file.name,
+                f"{contents.size:,}", where, read, span)
+
+
+def _read_with_rosbags(path: Path, wanted) -> list[RawMessage]:
+    """The rows of a bag that is not plain MCAP, through rosbags' public reader."""
+    from rosbags.rosbag2 import Reader
+
+    with Reader(path) as reader:
+        connections = [c for c in reader.connections if wanted is None or c.topic in wanted]
+        if not connections:
+            return []
+        return [RawMessage(c.topic, t, c.msgtype, data)
+                for c, t, data in reader.messages(connections=connections)]
 
 
 def first_line(err: Exception) -> str:
