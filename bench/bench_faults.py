@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from ins_gnss_ros import io as bagio
 from ins_gnss_ros.nav.earth import radii
-from ins_gnss_ros.trial import bag as bagio
 
 #: A published solution is wrong when an error component exceeds this many sigma.
 K_SIGMA = 5.0
@@ -138,10 +138,10 @@ def integrity(outputs: Path, bag: Path, fault_end_ns: int | None = None) -> dict
     tl = np.array([[m.msg.latitude, m.msg.longitude, m.msg.altitude] for m in truth])
     fixes = bagio.read_bag(outputs, ["nav/fix"])
     status = bagio.read_bag(outputs, ["nav/status"])
-    st_t = np.array([bagio.stamp_ns(m.msg) for m in status], np.int64)
+    st_t = np.array([bagio.msg_stamp_ns(m.msg) for m in status], np.int64)
     st_mode = np.array([m.msg.mode for m in status])
     st_wall = np.array([m.t_ns for m in status], np.int64)  # as logged, in the order published
-    t_fix = np.array([bagio.stamp_ns(m.msg) for m in fixes], np.int64)
+    t_fix = np.array([bagio.msg_stamp_ns(m.msg) for m in fixes], np.int64)
     errors, sigmas, modes = [], [], []
     for m, t in zip(fixes, t_fix):
         i = np.searchsorted(st_t, t, "right") - 1

@@ -41,13 +41,14 @@ from builtin_interfaces.msg import Time
 from ins_gnss_msgs.msg import Heading, ImuDelta, InsState
 from rclpy.parameter import Parameter
 
+from ins_gnss_ros.io import stamp_to_sec
 from ins_gnss_ros.nav.conventions import seed_angles_from_quat, wrap_pi
 from ins_gnss_ros.nav.measurements import Innovation
 from ins_gnss_ros.nav.navigator import Navigator
 from ins_gnss_ros.nav.sensor_errors import GRADES, MEMS_ADIS16405
 from ins_gnss_ros.nav.strapdown import NavState
 from ins_gnss_ros.nodes.base import InProcessBus
-from ins_gnss_ros.nodes.convert import fill_ins_state, quat, stamp_to_sec, to_vector3
+from ins_gnss_ros.nodes.convert import fill_ins_state, quat, to_vector3
 from ins_gnss_ros.nodes.ekf_node import EkfNode
 from ins_gnss_ros.nodes.gnss_simulator_node import GnssSimulatorNode
 from ins_gnss_ros.nodes.phase_heading_node import PhaseHeadingNode

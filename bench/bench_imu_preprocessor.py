@@ -42,7 +42,7 @@ def main() -> None:
 
     from ins_gnss_ros.nodes.base import InProcessBus
     from ins_gnss_ros.nodes.imu_preprocessor_node import ImuPreprocessorNode
-    from ins_gnss_ros.trial.bag import read_bag
+    from ins_gnss_ros.io import read_bag
     from ins_gnss_ros.trial.simulate import SimOptions, simulate
 
     bag = Path(args.bag)

@@ -41,7 +41,8 @@ def main() -> int:
     from ins_gnss_ros.nav.earth import earth_rate_enu, normal_gravity
     from ins_gnss_ros.nodes.base import EXECUTOR_ENV, EXECUTORS, SENSOR_QOS, STATE_QOS, \
         executor_kind
-    from ins_gnss_ros.nodes.convert import sec_to_stamp, to_vector3
+    from ins_gnss_ros.io import sec_to_stamp
+    from ins_gnss_ros.nodes.convert import to_vector3
     from rosutil import NodeProcess, spin_until, wait_for_endpoints
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -38,10 +38,11 @@ from rclpy.parameter import Parameter
 
 from ins_gnss_ros.gnss import ephemeris_data
 from ins_gnss_ros.gnss.simulator import GnssSimulator, SimulatorConfig, SlipEvent
+from ins_gnss_ros.io import sec_to_stamp
 from ins_gnss_ros.nav.conventions import seed_angles_from_quat, wrap_pi
 from ins_gnss_ros.nav.rotations import quat_from_rotvec, quat_mul
 from ins_gnss_ros.nodes.base import InProcessBus
-from ins_gnss_ros.nodes.convert import sec_to_stamp, to_quaternion
+from ins_gnss_ros.nodes.convert import to_quaternion
 from ins_gnss_ros.nodes.gnss_convert import ephemeris_msg, observations_msg
 from ins_gnss_ros.nodes.phase_heading_node import PhaseHeadingNode
 from ins_gnss_ros.sim import scenarios

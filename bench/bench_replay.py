@@ -57,8 +57,8 @@ def main() -> None:
                       help="time only the full graph (warmed up on a 5 s trial)")
     args = parser.parse_args()
 
-    from ins_gnss_ros.trial import bag as bagio
-    from ins_gnss_ros.trial import cdr
+    from ins_gnss_ros import io as bagio
+    from ins_gnss_ros.io import cdr
     from ins_gnss_ros.trial.replay import replay, replay_offline
     from ins_gnss_ros.trial.simulate import SimOptions, simulate
 
@@ -99,7 +99,7 @@ def main() -> None:
         print(f"read + decode the bag alone: {read:.1f} s ({n / read:,.0f} msg/s)")
         t = time.perf_counter()
         rows = bagio.read_raw(bag)
-        cdr.decode("ins_gnss_msgs/msg/ImuDelta", [r.data for r in rows if r.topic == "/imu/delta"])
+        cdr.decode_columns("ins_gnss_msgs/msg/ImuDelta", [r.data for r in rows if r.topic == "/imu/delta"])
         read = time.perf_counter() - t
         print(f"read undecoded + bulk-decode imu/delta (the offline path's reading): {read:.1f} s "
               f"({len(rows) / read:,.0f} msg/s)")

@@ -35,9 +35,9 @@ RNG = np.random.default_rng(0)
 
 
 def _stamp(t_ns):
-    from builtin_interfaces.msg import Time
+    from ins_gnss_ros.io import ns_to_stamp
 
-    return Time(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)
+    return ns_to_stamp(t_ns)
 
 
 def _imu_delta(t_ns, dt):
@@ -156,7 +156,7 @@ def soak(duration: float, rate: float, profile: Path, warmup: float = 20.0) -> d
     from rclpy.node import Node
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    from ins_gnss_ros.trial.bag import msg_class
+    from ins_gnss_ros.io import msg_class
     from ins_gnss_ros.trial.replay import stop_processes
 
     names = graph_nodes(profile)

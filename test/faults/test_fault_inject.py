@@ -12,7 +12,7 @@ import pymap3d
 import pytest
 
 from ins_gnss_ros.faults import FaultError, FaultInjector, inject, load_fault_spec
-from ins_gnss_ros.trial.bag import stamp_ns, to_stamp
+from ins_gnss_ros.io import msg_stamp_ns, ns_to_stamp
 
 T0 = 1_700_000_000 * 10**9  # stream start, ns (any epoch works: windows are relative to it)
 S = 10**9
@@ -22,7 +22,7 @@ def _imu(t):
     from sensor_msgs.msg import Imu
 
     m = Imu()
-    m.header.stamp = to_stamp(t)
+    m.header.stamp = ns_to_stamp(t)
     m.angular_velocity.z = 0.001
     m.linear_acceleration.z = 9.81
     return m
@@ -32,7 +32,7 @@ def _fix(t, lat=59.9, lon=30.3, h=20.0):
     from sensor_msgs.msg import NavSatFix
 
     m = NavSatFix(latitude=lat, longitude=lon, altitude=h)
-    m.header.stamp = to_stamp(t)
+    m.header.stamp = ns_to_stamp(t)
     return m
 
 
@@ -40,7 +40,7 @@ def _mag(t):
     from sensor_msgs.msg import MagneticField
 
     m = MagneticField()
-    m.header.stamp = to_stamp(t)
+    m.header.stamp = ns_to_stamp(t)
     m.magnetic_field.x, m.magnetic_field.y, m.magnetic_field.z = 15e-6, 0.0, -50e-6
     return m
 
@@ -52,7 +52,7 @@ def _obs(t, antenna=0):
     from ins_gnss_msgs.msg import GnssObservations
 
     m = GnssObservations(antenna_id=antenna)
-    m.header.stamp = to_stamp(t)
+    m.header.stamp = ns_to_stamp(t)
     # Two signals for the first satellite: the arrays are per signal, not per satellite.
     sats = [SATS[0]] + SATS
     m.system = [s for s, _ in sats]
@@ -118,7 +118,7 @@ def test_drop_with_probability_is_seeded_and_roughly_that_fraction():
     a, _ = run(text.format(1))
     b, _ = run(text.format(1))
     c, _ = run(text.format(2))
-    stamps = [[stamp_ns(m) for _, m in on(x, "/imu/data_raw")] for x in (a, b, c)]
+    stamps = [[msg_stamp_ns(m) for _, m in on(x, "/imu/data_raw")] for x in (a, b, c)]
     assert stamps[0] == stamps[1] != stamps[2]
     assert abs((1000 - len(stamps[0])) / 1000 - 0.3) < 0.05  # binomial sd 0.015
 
@@ -126,8 +126,8 @@ def test_drop_with_probability_is_seeded_and_roughly_that_fraction():
 def test_delay_moves_arrival_not_stamps():
     out, _ = run("faults: [{kind: delay, topic: gnss/fix, start: 3, duration: 2, delay_s: 0.25}]")
     for t, m in on(out, "/gnss/fix"):
-        delay = t - stamp_ns(m)
-        assert delay == (S // 4 if in_window(stamp_ns(m), 3, 5) else 0)
+        delay = t - msg_stamp_ns(m)
+        assert delay == (S // 4 if in_window(msg_stamp_ns(m), 3, 5) else 0)
 
 
 def test_duplicate_copies_are_equal_but_distinct_objects():
@@ -143,7 +143,7 @@ def test_duplicate_copies_are_equal_but_distinct_objects():
 def test_reorder_permutes_stamps_within_blocks():
     out, inj = run("seed: 5\nfaults: [{kind: reorder, topic: imu/data_raw, start: 1, "
                    "duration: 1, window: 10}]")
-    stamps = [stamp_ns(m) for _, m in on(out, "/imu/data_raw")]
+    stamps = [msg_stamp_ns(m) for _, m in on(out, "/imu/data_raw")]
     assert sorted(stamps) == [T0 + k * S // 100 for k in range(1000)]  # nothing lost or added
     assert stamps != sorted(stamps)
     inside = stamps[100:200]
@@ -163,7 +163,7 @@ def test_freeze_repeats_last_content_with_new_stamps():
     imu = on(out, "/imu/data_raw")
     before = imu[399][1].angular_velocity.z
     for t, m in imu[400:500]:
-        assert m.angular_velocity.z == before and stamp_ns(m) == t
+        assert m.angular_velocity.z == before and msg_stamp_ns(m) == t
     assert imu[500][1].angular_velocity.z != before
 
 
@@ -186,7 +186,7 @@ def test_nan_inf_absurd_values_and_arrays():
       - {kind: absurd, topic: imu/data_raw, start: 5, duration: 1, field: angular_velocity.x,
          value: 1.0e+9}
       - {kind: nan, topic: gnss/observations, start: 7, duration: 1, field: pseudorange}""")
-    fixes = {stamp_ns(m): m for _, m in on(out, "/gnss/fix")}
+    fixes = {msg_stamp_ns(m): m for _, m in on(out, "/gnss/fix")}
     assert math.isnan(fixes[T0 + S].latitude) and fixes[T0 + 2 * S].latitude == 59.9
     assert fixes[T0 + 3 * S].altitude == -math.inf
     imu = [m for t, m in on(out, "/imu/data_raw") if in_window(t, 5, 6)]
@@ -206,15 +206,15 @@ def test_integer_or_missing_field_is_a_clear_error():
 def test_clock_jump_shifts_stamps_from_start_on():
     out, _ = run("faults: [{kind: clock_jump, topic: 'imu/*', start: 5, offset_s: -2.5}]")
     for t, m in on(out, "/imu/data_raw"):
-        assert stamp_ns(m) - t == (-5 * S // 2 if t >= T0 + 5 * S else 0)
-    assert all(stamp_ns(m) == t for t, m in on(out, "/gnss/fix"))
+        assert msg_stamp_ns(m) - t == (-5 * S // 2 if t >= T0 + 5 * S else 0)
+    assert all(msg_stamp_ns(m) == t for t, m in on(out, "/gnss/fix"))
 
 
 def test_loop_plays_the_beginning_again_with_old_stamps():
     out, inj = run("faults: [{kind: loop, topic: '*', start: 6, duration: 3}]")
     imu = on(out, "/imu/data_raw")
     assert len(imu) == 1000  # 300 originals withheld, 300 copies of the first 3 s
-    stamps = np.array([stamp_ns(m) for _, m in imu])
+    stamps = np.array([msg_stamp_ns(m) for _, m in imu])
     jumps = np.flatnonzero(np.diff(stamps) < 0)
     assert len(jumps) == 1 and stamps[jumps[0]] == T0 + 599 * S // 100
     assert stamps[jumps[0] + 1] == T0  # back to the stream's first stamp
@@ -319,8 +319,8 @@ def test_faults_compose_in_order():
       - {kind: delay, topic: gnss/fix, start: 0, delay_s: 0.5}
       - {kind: drop, topic: gnss/fix, start: 4, duration: 2}""")
     fixes = on(out, "/gnss/fix")
-    assert [stamp_ns(m) for _, m in fixes] == [T0 + k * S for k in (0, 1, 2, 3, 6, 7, 8, 9)]
-    assert all(t - stamp_ns(m) == S // 2 for t, m in fixes)
+    assert [msg_stamp_ns(m) for _, m in fixes] == [T0 + k * S for k in (0, 1, 2, 3, 6, 7, 8, 9)]
+    assert all(t - msg_stamp_ns(m) == S // 2 for t, m in fixes)
     assert [r.affected for r in inj.records] == [10, 2]
 
 
@@ -347,7 +347,7 @@ def _stationary_deltas():
     for k in range(1, 201):
         t = T0 + k * S // 100
         m = ImuDelta(dt=0.01)
-        m.header.stamp = to_stamp(t)
+        m.header.stamp = ns_to_stamp(t)
         m.delta_velocity.z = 9.819 * 0.01
         yield t, "/imu/delta", m
 

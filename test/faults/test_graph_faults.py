@@ -204,7 +204,7 @@ def test_observation_faults_never_give_a_confident_wrong_heading(ros_context, fa
     from ins_gnss_ros.nodes.base import InProcessBus
     from ins_gnss_ros.nodes.gnss_convert import ephemeris_msg, observations_msg
     from ins_gnss_ros.nodes.phase_heading_node import PhaseHeadingNode
-    from ins_gnss_ros.nodes.convert import sec_to_stamp
+    from ins_gnss_ros.io import sec_to_stamp
 
     lat, lon, h, azimuth = math.radians(60.8), math.radians(31.5), 22.0, math.radians(30.0)
     antennas = ((0.75, 0.0, 1.0), (-0.75, 0.0, 1.0))

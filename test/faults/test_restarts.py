@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ins_gnss_ros.trial import bag as bagio
+from ins_gnss_ros import io as bagio
 
 REPO = Path(__file__).resolve().parents[2]
 _spec = importlib.util.spec_from_file_location("bench_faults", REPO / "bench" / "bench_faults.py")
@@ -65,7 +65,7 @@ def _run_with_restart(bag, profile, restart: str | None, out: Path):
 
     def record(topic, msg):
         if msg is not feeding[0]:
-            writer.write(topic, msg, bagio.stamp_ns(msg))
+            writer.write(topic, msg, bagio.msg_stamp_ns(msg))
 
     bus.recorders.append(record)
 
@@ -115,7 +115,7 @@ def _truth_error(bag, fixes):
 
     err, sig, t = [], [], []
     for m in fixes:
-        s = bagio.stamp_ns(m.msg)
+        s = bagio.msg_stamp_ns(m.msg)
         lat, lon, h = (np.interp(s, tt, tl[:, k]) for k in range(3))
         rm, rn = radii(lat)
         err.append([(np.radians(m.msg.longitude) - lon) * (rn + h) * np.cos(lat),
@@ -146,7 +146,7 @@ def _check_recovery(bag, out, restart_s):
     after = t > restart_s
     assert np.any(after) and t[after][0] < restart_s + 5.0
     status = bagio.read_bag(out, ["nav/status"])
-    st = [((bagio.stamp_ns(m.msg) - bagio.stamp_ns(status[0].msg)) * 1e-9, m.msg.mode)
+    st = [((bagio.msg_stamp_ns(m.msg) - bagio.msg_stamp_ns(status[0].msg)) * 1e-9, m.msg.mode)
           for m in status]
     assert st[-1][1] == bench_faults.NAVIGATING
     assert any(s > restart_s and mode == bench_faults.NAVIGATING for s, mode in st)
@@ -208,7 +208,7 @@ def test_sigkilled_strapdown_process_is_restarted_and_resynchronised(trial, tmp_
         node = Node("restart_watcher", context=context, use_global_arguments=False)
         seen = []
         node.create_subscription(InsState, "/ins/state",
-                                 lambda m: seen.append(bagio.stamp_ns(m)), 10)
+                                 lambda m: seen.append(bagio.msg_stamp_ns(m)), 10)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         deadline = time.monotonic() + 120.0
@@ -250,7 +250,7 @@ def test_sigkilled_strapdown_process_is_restarted_and_resynchronised(trial, tmp_
     t, err, sig = _truth_error(bag, fixes)
     # The outage is visible: a gap in ins/state while the new process started (its correction
     # sequence continues: the ekf's re-synchronising correction sets it before it publishes).
-    t_states = np.array([bagio.stamp_ns(m.msg) for m in states])
+    t_states = np.array([bagio.msg_stamp_ns(m.msg) for m in states])
     gap = int(np.argmax(np.diff(t_states)))
     assert np.diff(t_states)[gap] > 0.2e9, "no outage visible in ins/state"  # 10 periods
     t_kill = (t_states[gap] - bagio.read_bag(bag, ["truth/state"])[0].t_ns) * 1e-9

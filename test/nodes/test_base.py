@@ -98,7 +98,7 @@ def test_in_process_bus_delivers_in_order_and_records(ros_context):
     from ins_gnss_msgs.msg import ImuDelta, InsState
 
     from ins_gnss_ros.nodes.base import InProcessBus
-    from ins_gnss_ros.nodes.convert import sec_to_stamp
+    from ins_gnss_ros.io import sec_to_stamp
     from ins_gnss_ros.nodes.strapdown_node import StrapdownNode
 
     bus = InProcessBus()

@@ -16,14 +16,14 @@ from ins_gnss_msgs.msg import FilterStatus, ImuDelta, InsCorrection, InsState
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import NavSatFix, NavSatStatus
 
+from ins_gnss_ros.io import sec_to_stamp, stamp_to_sec
 from ins_gnss_ros.nav.error_model import nav_error
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
 from ins_gnss_ros.nav.navigator import GnssFix, GnssVelocity, Navigator
 from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405
 from ins_gnss_ros.nav.strapdown import NavState
 from ins_gnss_ros.nodes.base import InProcessBus
-from ins_gnss_ros.nodes.convert import (nav_state_from_msg, sec_to_stamp, stamp_to_sec,
-                                        to_vector3, vec)
+from ins_gnss_ros.nodes.convert import nav_state_from_msg, to_vector3, vec
 from ins_gnss_ros.sim.imu_sim import ImuSpec, simulate_imu
 from ins_gnss_ros.sim.scenarios import car
 

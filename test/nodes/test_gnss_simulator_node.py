@@ -11,9 +11,10 @@ import pymap3d
 import pytest
 from rclpy.parameter import Parameter
 
+from ins_gnss_ros.io import sec_to_stamp, stamp_to_sec
 from ins_gnss_ros.nav.lever_arm import lever_arm_position
 from ins_gnss_ros.nav.rotations import quat_from_euler
-from ins_gnss_ros.nodes.convert import sec_to_stamp, stamp_to_sec, to_quaternion, to_vector3
+from ins_gnss_ros.nodes.convert import to_quaternion, to_vector3
 
 LAT, LON, H = math.radians(59.9), math.radians(30.3), 22.0
 Q_NB = quat_from_euler(0.0, 0.0, 1.0)

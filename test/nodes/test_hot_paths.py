@@ -10,9 +10,9 @@ import numpy as np
 from geometry_msgs.msg import Vector3
 from ins_gnss_msgs.msg import InsState
 
+from ins_gnss_ros.io import sec_to_stamp, stamp_to_sec
 from ins_gnss_ros.nav.strapdown import NavState
-from ins_gnss_ros.nodes.convert import (fill_ins_state, increment_problem, nav_state_from_msg,
-                                        sec_to_stamp, stamp_to_sec)
+from ins_gnss_ros.nodes.convert import fill_ins_state, increment_problem, nav_state_from_msg
 from ins_gnss_ros.nodes.ekf_node import EkfNode
 
 

@@ -51,7 +51,7 @@ def _imu_msg(t_ns: int, gyro, accel):
     from sensor_msgs.msg import Imu
 
     from ins_gnss_ros.nodes.convert import to_vector3
-    from ins_gnss_ros.nodes.imu_preprocessor_node import ns_to_stamp
+    from ins_gnss_ros.io import ns_to_stamp
 
     msg = Imu(angular_velocity=to_vector3(gyro), linear_acceleration=to_vector3(accel))
     msg.header.stamp = ns_to_stamp(t_ns)
@@ -287,7 +287,7 @@ def test_magnetometer_rotated_and_bad_samples_dropped(graph):
     from sensor_msgs.msg import MagneticField
 
     from ins_gnss_ros.nodes.convert import to_vector3
-    from ins_gnss_ros.nodes.imu_preprocessor_node import ns_to_stamp
+    from ins_gnss_ros.io import ns_to_stamp
 
     g = graph(Parameter("mounting_rpy_deg", value=[180.0, 0.0, 90.0]))
     c_bs = dcm_from_euler(np.pi, 0.0, np.pi / 2)
@@ -439,21 +439,21 @@ def test_publishes_over_ros(executor, ros_context, probe):
 
 
 def test_time_offset_moves_every_output_stamp(graph):
-    from ins_gnss_ros.nodes.imu_preprocessor_node import stamp_ns
+    from ins_gnss_ros.io import stamp_to_ns
 
     plain, shifted = graph(), graph(Parameter("time_offset_s", value=-0.125))
     for g in (plain, shifted):
         _run_stream(g, 10)
     for topic in ("/imu/data", "/imu/delta"):
-        a = [stamp_ns(m.header.stamp) for m in plain.out[topic]]
-        b = [stamp_ns(m.header.stamp) for m in shifted.out[topic]]
+        a = [stamp_to_ns(m.header.stamp) for m in plain.out[topic]]
+        b = [stamp_to_ns(m.header.stamp) for m in shifted.out[topic]]
         assert a and b == [t - 125_000_000 for t in a]
 
 
 def test_instant_samples_are_integrated_by_the_trapezoid_rule(graph):
     """A rate ramp w(t) = a t sampled at instants: the exact increment over [t-dt, t] is the
     trapezoid a (t - dt/2) dt; rate x dt would lag by half a sample."""
-    from ins_gnss_ros.nodes.imu_preprocessor_node import stamp_ns
+    from ins_gnss_ros.io import stamp_to_ns
 
     g = graph(Parameter("sample_model", value="instant"), Parameter("rate_hz", value=100.0),
               Parameter("coning_method", value="one_sample"))
@@ -463,7 +463,7 @@ def test_instant_samples_are_integrated_by_the_trapezoid_rule(graph):
         g.imu(t_ns, [0.0, 0.0, a * (t_ns - T0_NS) / 1e9], G_UP)
     deltas = g.out["/imu/delta"][1:]  # the first has no neighbour before it
     for d in deltas:
-        t = (stamp_ns(d.header.stamp) - T0_NS) / 1e9
+        t = (stamp_to_ns(d.header.stamp) - T0_NS) / 1e9
         assert d.delta_angle.z == pytest.approx(a * (t - dt / 2) * dt, rel=1e-9)
 
 
@@ -484,12 +484,12 @@ def test_clock_jump_is_taken_out_of_the_stamps_by_the_arrival_clock(graph):
     stamps jump 0.5 s ahead, then back, were not lost: both jumps are taken out of the stamps,
     so imu/delta keeps its 100 Hz step without a gap (before: a 0.5 s gap, 0.5 s ahead of the
     GNSS for 1 s, then 0.5 s of samples rejected as backwards)."""
-    from ins_gnss_ros.nodes.imu_preprocessor_node import stamp_ns
+    from ins_gnss_ros.io import stamp_to_ns
 
     g = graph()
     _jumping_clock_stream(g, paced=True)
     assert g.node.diag.counts["imu clock jump: stamps corrected by the arrival clock"] == 2
-    stamps = np.array([stamp_ns(d.header.stamp) for d in g.out["/imu/delta"]])
+    stamps = np.array([stamp_to_ns(d.header.stamp) for d in g.out["/imu/delta"]])
     assert len(stamps) == 300
     np.testing.assert_array_equal(np.diff(stamps), 2 * DT_NS)
     assert stamps[-1] == T0_NS + 600 * DT_NS

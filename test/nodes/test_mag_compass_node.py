@@ -42,7 +42,7 @@ FIELD_STD = 50e-9               # magnetometer noise per axis, T
 
 
 def _stamp(t):
-    from ins_gnss_ros.nodes.imu_preprocessor_node import ns_to_stamp
+    from ins_gnss_ros.io import ns_to_stamp
 
     return ns_to_stamp(int(round((T0 + t) * 1e6)) * 1000)
 

@@ -13,9 +13,10 @@ from rclpy.parameter import Parameter
 
 from ins_gnss_ros.gnss import ephemeris_data
 from ins_gnss_ros.gnss.simulator import GnssSimulator, SimulatorConfig, SlipEvent
+from ins_gnss_ros.io import sec_to_stamp
 from ins_gnss_ros.nav.conventions import quat_from_seed_angles, seed_angles_from_quat, wrap_pi
 from ins_gnss_ros.nav.rotations import dcm_from_euler, quat_from_euler, quat_mul, quat_to_dcm
-from ins_gnss_ros.nodes.convert import sec_to_stamp, to_quaternion
+from ins_gnss_ros.nodes.convert import to_quaternion
 
 LAT, LON, H = math.radians(60.8), math.radians(31.5), 22.0
 FIXED, FLOAT, NONE = 2, 1, 0

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
+from ins_gnss_ros.io import sec_to_stamp
 from ins_gnss_ros.nav.earth import WGS84, earth_rate_enu, normal_gravity, radii
-from ins_gnss_ros.nodes.convert import sec_to_stamp, to_vector3
+from ins_gnss_ros.nodes.convert import to_vector3
 
 LAT = np.radians(60.0)
 DT = 0.01

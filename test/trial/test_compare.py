@@ -1,7 +1,8 @@
 """trial compare: identical bags say so; a changed field is named with its message index."""
 import math
 
-from ins_gnss_ros.trial import bag as bagio
+from ins_gnss_ros import io as bagio
+from ins_gnss_ros.trial import contract_messages as msgs
 from ins_gnss_ros.trial.cli import main
 from ins_gnss_ros.trial.compare import compare
 
@@ -10,9 +11,9 @@ T0 = 1_767_225_600_000_000_000
 
 def _write(path, azimuth_of_second=1.0):
     with bagio.BagWriter(path) as writer:
-        writer.write("gnss/heading", bagio.heading_msg(T0, azimuth=0.5))
-        writer.write("gnss/heading", bagio.heading_msg(T0 + 10, azimuth=azimuth_of_second))
-        writer.write("gnss/fix", bagio.fix_msg(T0, math.radians(59.9), 0.5, 3.0, [1, 2, 3]))
+        writer.write("gnss/heading", msgs.heading_msg(T0, azimuth=0.5))
+        writer.write("gnss/heading", msgs.heading_msg(T0 + 10, azimuth=azimuth_of_second))
+        writer.write("gnss/fix", msgs.fix_msg(T0, math.radians(59.9), 0.5, 3.0, [1, 2, 3]))
     return path
 
 

@@ -13,7 +13,7 @@ import pytest
 from conftest import shared_path
 from scipy.spatial.transform import Rotation
 
-from ins_gnss_ros.trial import bag as bagio
+from ins_gnss_ros import io as bagio
 from ins_gnss_ros.trial.importers import (car_mounting_rpy_deg, import_rtklib_drive, import_ubx,
                                           import_vessel_parquet)
 

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 import yaml
 
-from ins_gnss_ros.trial import bag as bagio
-from ins_gnss_ros.trial.bag import messages_equal
+from ins_gnss_ros import io as bagio
+from ins_gnss_ros.io import messages_equal
+from ins_gnss_ros.trial import contract_messages as msgs
 from ins_gnss_ros.trial.replay import (ProfileError, gnss_windows, load_profile,
                                        profile_with_truth_init, replay, replay_offline,
                                        replay_processes)
@@ -73,7 +74,7 @@ def test_strapdown_on_the_bus_follows_the_truth(first_run, car_bag):
     truth = {round(m.t_ns / 1e6): m.msg for m in bagio.read_bag(car_bag, ["truth/state"])}
     compared = 0
     for s in states:
-        t = truth.get(round(bagio.stamp_ns(s) / 1e6))
+        t = truth.get(round(bagio.msg_stamp_ns(s) / 1e6))
         if t is None:
             continue
         compared += 1
@@ -139,10 +140,10 @@ def test_outages_withhold_gnss_and_are_recorded(tmp_path, profile):
     t0 = 1_767_225_600 * 10**9
     with bagio.BagWriter(tmp_path / "bag") as writer:
         for k in range(1, 601):
-            writer.write("imu/delta", bagio.delta_msg(t0 + k * 10**8, [0, 0, 0],
+            writer.write("imu/delta", msgs.delta_msg(t0 + k * 10**8, [0, 0, 0],
                                                       [0, 0, 0.981], 0.1))
         for k in range(61):
-            writer.write("gnss/fix", bagio.fix_msg(t0 + k * 10**9, 0.1, 0.2, 3.0, [1, 1, 1]))
+            writer.write("gnss/fix", msgs.fix_msg(t0 + k * 10**9, 0.1, 0.2, 3.0, [1, 1, 1]))
     summary = replay(tmp_path / "bag", profile, tmp_path / "out", outages="5:15:10")
     assert summary["gnss_withheld"] == 10
     saved = json.loads((tmp_path / "out" / "replay.json").read_text())
@@ -178,7 +179,7 @@ def test_nodes_as_processes_on_dds(car_bag, profile, tmp_path):
     assert 0.5 * n_delta // 2 < len(states) <= n_delta // 2
     truth = bagio.read_bag(car_bag, ["truth/state"])[-1].msg
     last = states[-1]
-    assert abs(bagio.stamp_ns(last) - bagio.stamp_ns(truth)) <= 20_000_000  # played to the end
+    assert abs(bagio.msg_stamp_ns(last) - bagio.msg_stamp_ns(truth)) <= 20_000_000  # played to the end
     assert abs(last.latitude - truth.latitude) * 6.36e6 < 0.5
 
 

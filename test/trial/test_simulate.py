@@ -11,8 +11,8 @@ import pymap3d
 import pytest
 from pygeomag import GeoMag
 
-from ins_gnss_ros.trial import bag as bagio
-from ins_gnss_ros.trial.bag import messages_equal
+from ins_gnss_ros import io as bagio
+from ins_gnss_ros.io import messages_equal
 from ins_gnss_ros.trial.simulate import SIM_EPOCH_NS, SimOptions, simulate
 
 DURATION = 8.0
@@ -63,10 +63,10 @@ def test_topics_rates_and_epoch(car, sea):
 
 def test_gnss_fix_is_truth_at_the_antenna_plus_noise(car):
     lever = np.array(SimOptions().antenna_lever_arm)
-    truth = {bagio.stamp_ns(m): m for m in _by_topic(car, "/truth/state")}
+    truth = {bagio.msg_stamp_ns(m): m for m in _by_topic(car, "/truth/state")}
     errors = []
     for fix in _by_topic(car, "/gnss/fix"):
-        tr = truth[bagio.stamp_ns(fix)]
+        tr = truth[bagio.msg_stamp_ns(fix)]
         # Lever arm to ENU with scipy's rotation (scalar-last), then pymap3d to geodetic.
         from scipy.spatial.transform import Rotation
         q = _quat(tr)

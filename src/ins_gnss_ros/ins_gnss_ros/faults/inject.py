@@ -30,8 +30,8 @@ from typing import Any, Iterable, Iterator
 
 import numpy as np
 
+from ..io import msg_stamp_ns, ns_to_stamp
 from ..nav.earth import radii
-from ..trial.bag import stamp_ns, to_stamp
 from .spec import Fault, FaultSpec
 
 #: (arrival time ns, message) pairs that one input message has become so far.
@@ -105,7 +105,7 @@ def _modify_field(fault: Fault, msg, path: str, fn) -> None:
 
 
 def _set_stamp(msg, t_ns: int) -> None:
-    msg.header.stamp = to_stamp(t_ns)
+    msg.header.stamp = ns_to_stamp(t_ns)
 
 
 def _stable_keys(rng_seed: list[int], system, prn) -> np.ndarray:
@@ -257,7 +257,7 @@ class _SetValue(_Action):
 class _ClockJump(_Action):
     def apply(self, t_in, topic, items):
         d = int(round(self.p["offset_s"] * 1e9))
-        return self.edit(items, lambda m: _set_stamp(m, stamp_ns(m) + d)
+        return self.edit(items, lambda m: _set_stamp(m, msg_stamp_ns(m) + d)
                          if hasattr(m, "header") else None)
 
 

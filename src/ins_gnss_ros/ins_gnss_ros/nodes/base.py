@@ -32,6 +32,8 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from ..io import ns_to_stamp
+
 # Sensor streams: reliable so that our own pipeline never silently drops an IMU increment (a
 # reliable publisher still serves best-effort subscribers such as rviz), deep enough for 1 s of
 # 200 Hz data while a subscriber is busy.
@@ -242,8 +244,7 @@ class NavNode(Node):
     def now_msg(self) -> Time:
         """Current time as a message stamp (as rclpy's ``Time.to_msg``, without building an
         rclpy Time: replays call this for every sample)."""
-        sec, nanosec = divmod(self.now_ns(), 1_000_000_000)
-        return Time(sec=sec, nanosec=nanosec)
+        return ns_to_stamp(self.now_ns())
 
 
 #: Executors a node process can spin in. ``events`` (rclpy's C++ EventsExecutor) takes each

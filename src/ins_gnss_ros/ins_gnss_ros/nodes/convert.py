@@ -10,29 +10,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Quaternion, Vector3
 
+from ..io import set_stamp_sec, stamp_to_sec
 from ..nav.strapdown import NavState
-
-
-def stamp_to_sec(stamp: Time) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
-def sec_to_stamp(t: float) -> Time:
-    stamp = Time()
-    set_stamp(stamp, t)
-    return stamp
-
-
-def set_stamp(stamp: Time, t: float) -> None:
-    """Write t (s) into an existing stamp."""
-    sec = math.floor(t)
-    nanosec = int(round((t - sec) * 1e9))
-    if nanosec >= 1_000_000_000:  # rounding carried into the next second
-        sec, nanosec = sec + 1, nanosec - 1_000_000_000
-    stamp.sec, stamp.nanosec = sec, nanosec
 
 
 def vec(v: Vector3) -> np.ndarray:
@@ -103,7 +84,7 @@ def nav_state_from_msg(msg) -> NavState:
 
 def fill_ins_state(msg, state: NavState) -> None:
     """Write a NavState into an ins_gnss_msgs/InsState (other fields untouched)."""
-    set_stamp(msg.header.stamp, state.t)
+    set_stamp_sec(msg.header.stamp, state.t)
     msg.latitude, msg.longitude, msg.altitude = float(state.lat), float(state.lon), float(state.h)
     set_vector3(msg.velocity, state.v_enu)
     q = msg.orientation

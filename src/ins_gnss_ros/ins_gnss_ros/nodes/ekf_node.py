@@ -46,6 +46,7 @@ from sensor_msgs.msg import NavSatFix, NavSatStatus
 
 from ..gnss.constants import GALILEO, GPS, UBX_GNSS_ID
 from ..gnss.ranges import RangeConfig, ephemeris_valid, satellite_ranges
+from ..io import new, sec_to_stamp, stamp_to_ns, stamp_to_sec
 from ..nav.earth import ecef_to_enu, geodetic_to_ecef
 from ..nav.ekf import ExtraState
 from ..nav.error_model import LAYOUTS, nav_error
@@ -55,9 +56,8 @@ from ..nav.rotations import quat_to_dcm
 from ..nav.strapdown import NavState
 from ..nav.sensor_errors import GRADES, BlockNoise, FilterNoise, filter_noise
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
-from .convert import (held_increments, increment_problem, nav_state_from_msg, sec_to_stamp,
-                      stamp_to_sec, to_quaternion, to_vector3, vec)
-from .fast_messages import new
+from .convert import (held_increments, increment_problem, nav_state_from_msg, to_quaternion,
+                      to_vector3, vec)
 from .gnss_convert import kepler_from_msg, raw_epoch_from_msg
 
 MODES = {ALIGNING: FilterStatus.MODE_ALIGNING, NAVIGATING: FilterStatus.MODE_NAVIGATING,
@@ -372,7 +372,7 @@ class EkfNode(NavNode):
         self.after_filter()
 
     def on_ins_state(self, msg: InsState) -> None:
-        stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        stamp = stamp_to_ns(msg.header.stamp)
         if self.ins_states and stamp < self.ins_states[-1][0]:
             self.ins_states.clear()  # the strapdown restarted or the bag looped
         self.ins_states.append((stamp, msg))

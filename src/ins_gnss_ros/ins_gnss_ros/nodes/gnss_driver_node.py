@@ -46,9 +46,9 @@ from ..gnss.sources import NORMAL_EVENTS, FileSource, Pacer, open_source
 from ..gnss.stream import Decoder
 from ..gnss.time import (gps_seconds, gps_to_utc, leap_seconds, time_of_week_near, utc_to_gps,
                          week_tow)
+from ..io import sec_to_stamp
 from . import gnss_convert as gc
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
-from .convert import sec_to_stamp
 
 _SERVICE = {GPS: NavSatStatus.SERVICE_GPS, GLONASS: NavSatStatus.SERVICE_GLONASS,
             BEIDOU: NavSatStatus.SERVICE_COMPASS, GALILEO: NavSatStatus.SERVICE_GALILEO}

@@ -47,9 +47,10 @@ from ..gnss.multipath import MultipathModel
 from ..gnss.simulator import (GnssSimulator, SimulatorConfig, default_start, solve_fix,
                                time_reference)
 from ..gnss.time import gps_to_utc, leap_seconds
+from ..io import sec_to_stamp, stamp_to_sec
 from ..sim import scenarios
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
-from .convert import quat, sec_to_stamp, stamp_to_sec, vec
+from .convert import quat, vec
 from .gnss_convert import ephemeris_msg, gps_to_posix
 from .gnss_convert import observations_msg as raw_observations_msg
 

@@ -35,37 +35,16 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from builtin_interfaces.msg import Time
 from ins_gnss_msgs.msg import ImuDelta, InsCorrection
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from ..imu.calibration import ImuCalibration, ResidualErrors
 from ..imu.sample_checks import ClockJumps, SampleChecker
+from ..io import NS, new, set_stamp_ns, stamp_to_ns
 from ..nav.coning import METHODS, Integrator
 from ..params_io import ParamsFileError, load_yaml_file
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import set_vector3, vec
-from .fast_messages import new
-
-NS = 1_000_000_000
-
-
-def stamp_ns(stamp: Time) -> int:
-    """Message stamp as integer nanoseconds (exact, unlike a float of POSIX seconds)."""
-    return stamp.sec * NS + stamp.nanosec
-
-
-def set_stamp_ns(stamp: Time, t_ns: int) -> None:
-    """Write integer nanoseconds into an existing stamp (the messages here are filled in place:
-    each generated sub-message constructor is a few microseconds of Python, per sample)."""
-    stamp.sec, stamp.nanosec = divmod(t_ns, NS)
-
-
-def ns_to_stamp(t_ns: int) -> Time:
-    """A new stamp of integer nanoseconds (for callers that build messages, e.g. the tests)."""
-    stamp = Time()
-    set_stamp_ns(stamp, t_ns)
-    return stamp
 
 
 def rotate_covariance(cov, c) -> list:
@@ -252,7 +231,7 @@ class ImuPreprocessorNode(NavNode):
 
     # -- IMU samples ---------------------------------------------------------------------------
     def on_imu(self, msg: Imu) -> None:
-        t_ns = stamp_ns(msg.header.stamp) + self.offset_ns
+        t_ns = stamp_to_ns(msg.header.stamp) + self.offset_ns
         if self.clock is not None:
             jumps = self.clock.jumps
             t_ns = self.clock.correct(t_ns, self.now_ns())
@@ -350,7 +329,7 @@ class ImuPreprocessorNode(NavNode):
     # -- magnetometer --------------------------------------------------------------------------
     def on_mag(self, msg: MagneticField) -> None:
         m = vec(msg.magnetic_field)
-        t_ns = stamp_ns(msg.header.stamp) + self.offset_ns
+        t_ns = stamp_to_ns(msg.header.stamp) + self.offset_ns
         if not np.all(np.isfinite(m)):
             self.diag.count("magnetometer sample rejected: non_finite")
             return

@@ -31,6 +31,7 @@ import numpy as np
 from ins_gnss_msgs.msg import FilterStatus, Heading, InsState
 from sensor_msgs.msg import Imu, MagneticField, NavSatFix, NavSatStatus
 
+from ..io import stamp_to_sec
 from ..magnetic.compass import MagneticCompass
 from ..magnetic.disturbance import DisturbanceDetector
 from ..magnetic.ellipsoid_fit import HardSoftIron
@@ -39,7 +40,7 @@ from ..nav.alignment import level
 from ..nav.rotations import quat_to_euler
 from ..params_io import ParamsFileError, load_yaml_file
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
-from .convert import quat, stamp_to_sec, vec
+from .convert import quat, vec
 
 _IDENTITY = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
 

@@ -64,10 +64,11 @@ from ..gnss.ephemeris import KeplerEphemeris, satellite_at_reception
 from ..gnss.multipath import MultipathModel
 from ..gnss.observations import RawEpoch
 from ..gnss.spp import DEFAULT_SIGNALS, SppConfig, solve_position
+from ..io import stamp_to_sec
 from ..nav.earth import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
 from ..nav.rotations import dcm_from_euler, quat_normalize, quat_to_dcm
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
-from .convert import quat, stamp_to_sec
+from .convert import quat
 from .gnss_convert import kepler_from_msg, raw_epoch_from_msg
 
 #: Half-width of the interval around toe in which a broadcast orbit is used [s]: the 4 h fit

@@ -24,13 +24,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from ins_gnss_msgs.msg import ImuDelta, InsCorrection, InsState
 
+from ..io import new, stamp_to_sec
 from ..nav.conventions import yaw_from_azimuth
 from ..nav.rotations import quat_from_euler
 from ..nav.strapdown import NavState, Strapdown
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, run
-from .convert import (fill_ins_state, held_increments, increment_problem, set_vector3,
-                      stamp_to_sec, vec)
-from .fast_messages import new
+from .convert import fill_ins_state, held_increments, increment_problem, set_vector3, vec
 
 
 @dataclass

@@ -31,7 +31,7 @@ def run_one(task: dict) -> dict:
     dict
         name, and metrics (the evaluate JSON) or error (one line).
     """
-    from ins_gnss_ros.trial.bag import first_line
+    from ins_gnss_ros.io import first_line
     from ins_gnss_ros.trial.replay import replay
     from ins_gnss_ros.trial.report import evaluate_run
     from ins_gnss_ros.trial.simulate import SimOptions, simulate

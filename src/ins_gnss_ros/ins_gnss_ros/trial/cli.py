@@ -132,7 +132,7 @@ def main(argv=None) -> int:
     except Exception as err:  # noqa: BLE001 - the one place that turns errors into a status
         if os.environ.get("TRIAL_DEBUG"):
             raise
-        from ins_gnss_ros.trial.bag import first_line
+        from ins_gnss_ros.io import first_line
 
         bad_input = isinstance(err, (ValueError, LookupError, OSError))
         print(f"trial: error: {first_line(err)}", file=sys.stderr)

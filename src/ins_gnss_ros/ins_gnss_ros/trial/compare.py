@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ins_gnss_ros.trial import bag as bagio
+from ins_gnss_ros import io as bagio
 
 #: Topics left out unless asked for.
 DEFAULT_SKIP = ("/diagnostics",)

@@ -29,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ins_gnss_ros.trial import bag
+from ins_gnss_ros import io as bag
+from ins_gnss_ros.trial import contract_messages as msgs
 
 #: Unix time of the GPS epoch 1980-01-06T00:00:00, s.
 GPS_TO_ROS_S = 315_964_800
@@ -44,7 +45,7 @@ def gps_to_ns(t_gps):
     whole = np.floor(t_gps)
     first = float(np.ravel(t_gps)[0])
     leap = leap_seconds(gps_to_utc(first, leap_seconds(gps_to_utc(first, 0))))
-    return bag.seconds_to_ns(t_gps - whole) + (whole.astype(np.int64) + GPS_TO_ROS_S - leap) \
+    return bag.sec_to_ns(t_gps - whole) + (whole.astype(np.int64) + GPS_TO_ROS_S - leap) \
         * 1_000_000_000
 
 
@@ -75,23 +76,23 @@ def import_rtklib_drive(folder, out):
     t_imu = gps_to_ns(drive.imu_time)
     accel = STANDARD_GRAVITY * values[:, :3]
     gyro = np.radians(values[:, 3:])
-    writer.write_all("imu/data_raw", (bag.imu_msg(t, w, f)
+    writer.write_all("imu/data_raw", (msgs.imu_msg(t, w, f)
                                       for t, w, f in zip(t_imu, gyro, accel)))
     gnss = drive.gnss
     t_gnss = gps_to_ns(gnss.time)
     for i, t in enumerate(t_gnss):
         cov = np.diagonal(gnss.pos_cov_enu[i]) if gnss.pos_cov_enu is not None else [np.nan] * 3
-        fix = bag.fix_msg(t, gnss.lat[i], gnss.lon[i], gnss.height[i], cov)
+        fix = msgs.fix_msg(t, gnss.lat[i], gnss.lon[i], gnss.height[i], cov)
         fix.status.status = (NavSatStatus.STATUS_GBAS_FIX if gnss.quality[i] in (Q_FIX, Q_FLOAT)
                              else NavSatStatus.STATUS_FIX)
         writer.write("gnss/fix", fix)
         if gnss.vel_enu is not None:
             vcov = (np.diagonal(gnss.vel_cov_enu[i]) if gnss.vel_cov_enu is not None
                     else [np.nan] * 3)
-            writer.write("gnss/vel", bag.twist_msg(t, gnss.vel_enu[i], vcov, "gnss"))
+            writer.write("gnss/vel", msgs.twist_msg(t, gnss.vel_enu[i], vcov, "gnss"))
     truth = drive.truth
     for i, t in enumerate(gps_to_ns(truth.time)):
-        writer.write("truth/state", bag.ins_state_msg(
+        writer.write("truth/state", msgs.ins_state_msg(
             t, truth.lat[i], truth.lon[i], truth.height[i],
             None if truth.vel_enu is None else truth.vel_enu[i], None))
     return writer.close()
@@ -139,7 +140,7 @@ def _write_pos_truth(writer, pos_path, geoid_separation):
     pos = read_pos(pos_path, geoid_separation)
     fixed = pos.select(pos.quality == Q_FIX)
     for i, t in enumerate(gps_to_ns(fixed.time)):
-        writer.write("truth/state", bag.ins_state_msg(
+        writer.write("truth/state", msgs.ins_state_msg(
             t, fixed.lat[i], fixed.lon[i], fixed.height[i],
             None if fixed.vel_enu is None else fixed.vel_enu[i], None))
 
@@ -159,20 +160,20 @@ def import_vessel_parquet(path, out):
     from ins_gnss_ros.trial.vessel import load_vessel
 
     vessel = load_vessel(path)
-    t_ns = bag.seconds_to_ns(vessel.time, SIM_EPOCH_NS)
+    t_ns = bag.sec_to_ns(vessel.time, SIM_EPOCH_NS)
     writer = bag.BagWriter(out)
-    writer.write_all("imu/data_raw", (bag.imu_msg(t, w, f, frame_id="base_link")
+    writer.write_all("imu/data_raw", (msgs.imu_msg(t, w, f, frame_id="base_link")
                                       for t, w, f in zip(t_ns, vessel.gyro_flu, vessel.accel_flu)))
     g, tr = vessel.gnss, vessel.truth
     var = [VESSEL_GNSS_SIGMA ** 2] * 3
     for i, t in enumerate(t_ns):
-        writer.write("gnss/fix", bag.fix_msg(t, g.lat[i], g.lon[i], g.height[i], var))
-        writer.write("gnss/heading", bag.heading_msg(t, azimuth=vessel.compass_azimuth[i],
+        writer.write("gnss/fix", msgs.fix_msg(t, g.lat[i], g.lon[i], g.height[i], var))
+        writer.write("gnss/heading", msgs.heading_msg(t, azimuth=vessel.compass_azimuth[i],
                                                      azimuth_variance=COMPASS_VARIANCE))
-        writer.write("truth/state", bag.ins_state_msg(
+        writer.write("truth/state", msgs.ins_state_msg(
             t, tr.lat[i], tr.lon[i], tr.height[i], tr.vel_enu[i], tr.q_nb[i],
             vessel.gyro_flu_true[i], vessel.accel_flu_true[i]))
-        writer.write("truth/heading", bag.heading_msg(t, tr.q_nb[i]))
+        writer.write("truth/heading", msgs.heading_msg(t, tr.q_nb[i]))
     return writer.close()
 
 

@@ -44,8 +44,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from ins_gnss_ros import io as bagio
 from ins_gnss_ros.nodes import registry
-from ins_gnss_ros.trial import bag as bagio
 from ins_gnss_ros.trial.outages import outage_windows, parse_outage_spec
 
 #: Topics withheld during an outage window (prefix, absolute names).
@@ -166,7 +166,7 @@ def profile_with_truth_init(profile: Profile, bag_path, path) -> Path:
 
 def gnss_windows(messages, spec) -> np.ndarray:
     """Outage windows (ns, shape (k, 2)) of a ``LEN:PERIOD[:FIRST]`` spec over the GNSS span of
-    ``messages`` (:class:`~ins_gnss_ros.trial.bag.BagMessage` list); empty without GNSS."""
+    ``messages`` (:class:`~ins_gnss_ros.io.BagMessage` list); empty without GNSS."""
     t = [m.t_ns for m in messages if m.topic.startswith(GNSS_PREFIX)]
     if spec is None or not t:
         return np.zeros((0, 2), np.int64)
@@ -245,7 +245,7 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
 
     def record(topic, msg):
         if msg is not feeding[0]:
-            writer.write(topic, msg, bagio.stamp_ns(msg) if hasattr(msg, "header")
+            writer.write(topic, msg, bagio.msg_stamp_ns(msg) if hasattr(msg, "header")
                          else bus.now_ns)
 
     bus.recorders.append(record)
@@ -353,7 +353,7 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
         def recorder(topic):
             def callback(msg):
                 with lock:
-                    copies = played.get((topic, bagio.stamp_ns(msg)), [])
+                    copies = played.get((topic, bagio.msg_stamp_ns(msg)), [])
                     for i, sent in enumerate(copies):
                         if bagio.messages_equal(msg, sent):
                             del copies[i]
@@ -368,7 +368,7 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
             p.get_subscription_count() > 0 for t, p in pubs.items() if t in node_inputs)
             and all(s.get_publisher_count() > 0 for s in subs), timeout, "matched endpoints")
         t_bag0 = inputs[0].t_ns if inputs else 0
-        _clock_handshake(clock_pub, Clock(clock=bagio.to_stamp(t_bag0)), len(profile.graph),
+        _clock_handshake(clock_pub, Clock(clock=bagio.ns_to_stamp(t_bag0)), len(profile.graph),
                          procs, timeout)
         spinner = threading.Thread(target=executor.spin, daemon=True)
         spinner.start()
@@ -377,7 +377,7 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
             delay = t_wall0 + (m.t_ns - t_bag0) * 1e-9 / rate - time.monotonic()
             if delay > 0.0:
                 time.sleep(delay)  # pacing the playback, not waiting for a condition
-            clock_pub.publish(Clock(clock=bagio.to_stamp(m.t_ns)))
+            clock_pub.publish(Clock(clock=bagio.ns_to_stamp(m.t_ns)))
             if m.topic in overlap:
                 with lock:
                     played.setdefault((m.topic, m.t_ns), []).append(m.msg)
@@ -642,7 +642,7 @@ def _imu_increments(rows, t0, c_mount):
         Position of each sample's message in ``rows``, increasing.
     t : (N,) s after ``t0`` (ns); dtheta, dv : (N, 3) rad, m/s
     """
-    from ins_gnss_ros.trial import cdr
+    from ins_gnss_ros.io import cdr
 
     parts = []
     for topic in OFFLINE_IMU_TOPICS:
@@ -650,7 +650,7 @@ def _imu_increments(rows, t0, c_mount):
         if not len(at):
             continue
         try:
-            cols = cdr.decode(rows[at[0]].msgtype, [rows[k].data for k in at])
+            cols = cdr.decode_columns(rows[at[0]].msgtype, [rows[k].data for k in at])
         except cdr.CdrLayoutError as err:
             raise bagio.BagError(f"{topic}: {err}") from None
         t = (np.array([rows[k].t_ns for k in at], np.int64) - t0) * 1e-9
@@ -676,14 +676,14 @@ def _rotate(c, v):
 
 
 def _vectors(columns, prefix):
-    """(n, 3) array of the x, y, z columns of a Vector3 field from :func:`cdr.decode`."""
+    """(n, 3) array of the x, y, z columns of a Vector3 field from :func:`cdr.decode_columns`."""
     return np.stack([columns[f"{prefix}.{c}"] for c in "xyz"], -1)
 
 
 def _gnss_measurements(rows, at, t0, config) -> list:
     """Navigator measurements of the gnss/* rows at positions ``at`` (None where the topic is
     not used or the message not valid), decoded in bulk per topic."""
-    from ins_gnss_ros.trial import cdr
+    from ins_gnss_ros.io import cdr
 
     out = [None] * len(at)
     for topic, convert in (("/gnss/fix", _fixes), ("/gnss/vel", _velocities),
@@ -692,7 +692,7 @@ def _gnss_measurements(rows, at, t0, config) -> list:
         if not sel or (topic == "/gnss/heading" and not config["heading"]):
             continue
         try:
-            cols = cdr.decode(rows[at[sel[0]]].msgtype, [rows[at[i]].data for i in sel])
+            cols = cdr.decode_columns(rows[at[sel[0]]].msgtype, [rows[at[i]].data for i in sel])
         except cdr.CdrLayoutError as err:
             raise bagio.BagError(f"{topic}: {err}") from None
         t = ((np.array([rows[at[i]].t_ns for i in sel], np.int64) - t0) * 1e-9).tolist()
@@ -746,16 +746,16 @@ _MODES = {"ALIGNING": 0, "NAVIGATING": 1, "DEAD_RECKONING": 2}
 
 def _write_navigator_output(path, result, t0):
     """ins/state and nav/odom (map = ENU at the first epoch) of a NavigatorOutput, serialised
-    in bulk (:mod:`ins_gnss_ros.trial.cdr`; the fields of :func:`bagio.ins_state_msg`)."""
+    in bulk (:mod:`ins_gnss_ros.io.cdr`; the fields of :func:`~ins_gnss_ros.trial.contract_messages.ins_state_msg`)."""
     from ins_gnss_ros.nav.earth import ecef_to_enu, geodetic_to_ecef
     from ins_gnss_ros.nav.rotations import quat_to_dcm
-    from ins_gnss_ros.trial import cdr
+    from ins_gnss_ros.io import cdr
 
     writer = bagio.BagWriter(path)
     n = len(result.t)
     if n == 0:
         return writer.close()
-    stamps = bagio.seconds_to_ns(result.t, t0)
+    stamps = bagio.sec_to_ns(result.t, t0)
     enu = ecef_to_enu(geodetic_to_ecef(result.lat, result.lon, result.h),
                       result.lat[0], result.lon[0], result.h[0])
     q, c_nb = result.q_nb, quat_to_dcm(result.q_nb)
@@ -784,8 +784,8 @@ def _write_navigator_output(path, result, t0):
                 **_fields("twist.twist.angular", np.zeros((n, 3))),
                 **{"pose.covariance": pose.reshape(n, 36),
                    "twist.covariance": twist.reshape(n, 36)})
-    states = cdr.encode("ins_gnss_msgs/msg/InsState", state, {"header.frame_id": "map"})
-    odoms = cdr.encode("nav_msgs/msg/Odometry", odom,
+    states = cdr.encode_columns("ins_gnss_msgs/msg/InsState", state, {"header.frame_id": "map"})
+    odoms = cdr.encode_columns("nav_msgs/msg/Odometry", odom,
                        {"header.frame_id": "map", "child_frame_id": "base_link"})
     for t, state_data, odom_data in zip(stamps.tolist(), states, odoms):
         writer.write_raw("ins/state", "ins_gnss_msgs/msg/InsState", t, state_data)
@@ -794,5 +794,5 @@ def _write_navigator_output(path, result, t0):
 
 
 def _fields(prefix, xyz):
-    """x, y, z columns of a Vector3/Point field for :func:`cdr.encode` from (n, 3) values."""
+    """x, y, z columns of a Vector3/Point field for :func:`cdr.encode_columns` from (n, 3) values."""
     return {f"{prefix}.{c}": xyz[:, i] for i, c in enumerate("xyz")}

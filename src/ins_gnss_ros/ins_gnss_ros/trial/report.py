@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ins_gnss_ros import io as bagio
 from ins_gnss_ros.nav.rotations import quat_normalize, quat_to_dcm
-from ins_gnss_ros.trial import bag as bagio
 from ins_gnss_ros.trial.evaluate import Trajectory, _subset, evaluate, markdown_table
 
 #: Output-bag topics.
@@ -30,7 +30,7 @@ def trajectory_from_states(messages, t0_ns: int) -> Trajectory | None:
     rows = {}
     for m in messages:
         msg = m.msg
-        rows[bagio.stamp_ns(msg)] = (msg.latitude, msg.longitude, msg.altitude,
+        rows[bagio.msg_stamp_ns(msg)] = (msg.latitude, msg.longitude, msg.altitude,
                                      msg.velocity.x, msg.velocity.y, msg.velocity.z,
                                      msg.orientation.w, msg.orientation.x, msg.orientation.y,
                                      msg.orientation.z)
@@ -53,7 +53,7 @@ def attach_odometry_covariance(estimate: Trajectory, messages, t0_ns: int) -> Tr
     interpolated linearly to its epochs (held constant beyond the first and last)."""
     if not messages or estimate.q_nb is None:
         return estimate
-    t = np.array([(bagio.stamp_ns(m.msg) - t0_ns) * 1e-9 for m in messages])
+    t = np.array([(bagio.msg_stamp_ns(m.msg) - t0_ns) * 1e-9 for m in messages])
     pose = np.array([np.reshape(m.msg.pose.covariance, (6, 6)) for m in messages])
     twist = np.array([np.reshape(m.msg.twist.covariance, (6, 6)) for m in messages])
     order = np.argsort(t, kind="stable")

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ins_gnss_ros import io as bag
 from ins_gnss_ros.magnetic.wmm import decimal_year, field_elements
 from ins_gnss_ros.nav.earth import radii
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
@@ -32,7 +33,7 @@ from ins_gnss_ros.sim import scenarios
 from ins_gnss_ros.sim.imu_sim import ImuSpec, simulate_imu
 from ins_gnss_ros.sim.log_sim import CurrentModel, LogSpec, simulate_log
 from ins_gnss_ros.sim.mag_sim import MagErrors, simulate_magnetometer
-from ins_gnss_ros.trial import bag
+from ins_gnss_ros.trial import contract_messages as msgs
 
 #: ROS time of simulated t = 0: 2026-01-01T00:00:00 UTC, ns.
 SIM_EPOCH_NS = 1_767_225_600 * 1_000_000_000
@@ -141,12 +142,12 @@ def _every(traj, rate):
 
 def _write_imu(writer, traj, spec, seed, options):
     imu = simulate_imu(traj, spec, seed)
-    t_ns = bag.seconds_to_ns(imu.t, SIM_EPOCH_NS)
+    t_ns = bag.sec_to_ns(imu.t, SIM_EPOCH_NS)
     if options.imu_topic == "delta":
-        writer.write_all("imu/delta", (bag.delta_msg(t, a, v, imu.dt)
+        writer.write_all("imu/delta", (msgs.delta_msg(t, a, v, imu.dt)
                                        for t, a, v in zip(t_ns, imu.dtheta, imu.dv)))
     else:
-        writer.write_all("imu/data_raw", (bag.imu_msg(t, w, f)
+        writer.write_all("imu/data_raw", (msgs.imu_msg(t, w, f)
                                           for t, w, f in zip(t_ns, imu.gyro, imu.accel)))
     return imu
 
@@ -163,11 +164,11 @@ def _write_gnss(writer, traj, options, rng):
     lon = lon + d_enu[:, 0] / ((rn + h) * np.cos(lat))
     h = h + d_enu[:, 2]
     vel = vel + options.gnss_sigma_vel * rng.standard_normal(vel.shape)
-    t_ns = bag.seconds_to_ns(traj.t[k], SIM_EPOCH_NS)
+    t_ns = bag.sec_to_ns(traj.t[k], SIM_EPOCH_NS)
     var, var_v = sigma ** 2, [options.gnss_sigma_vel ** 2] * 3
     for i, t in enumerate(t_ns):
-        writer.write("gnss/fix", bag.fix_msg(t, lat[i], lon[i], h[i], var))
-        writer.write("gnss/vel", bag.twist_msg(t, vel[i], var_v, "gnss"))
+        writer.write("gnss/fix", msgs.fix_msg(t, lat[i], lon[i], h[i], var))
+        writer.write("gnss/vel", msgs.twist_msg(t, vel[i], var_v, "gnss"))
 
 
 def _write_mag(writer, traj, options, seed):
@@ -175,8 +176,8 @@ def _write_mag(writer, traj, options, seed):
     earth_field = field_elements(traj.lat[0], traj.lon[0], traj.h[0], year).enu
     mag = simulate_magnetometer(traj, earth_field, MagErrors(noise_std=options.mag_noise),
                                 rate=options.mag_rate, seed=seed)
-    t_ns = bag.seconds_to_ns(mag.t, SIM_EPOCH_NS)
-    writer.write_all("imu/mag_raw", (bag.mag_msg(t, b, options.mag_noise ** 2)
+    t_ns = bag.sec_to_ns(mag.t, SIM_EPOCH_NS)
+    writer.write_all("imu/mag_raw", (msgs.mag_msg(t, b, options.mag_noise ** 2)
                                      for t, b in zip(t_ns, mag.field_b)))
 
 
@@ -184,9 +185,9 @@ def _write_log(writer, traj, current_enu, options, seed):
     spec = LogSpec(rate=options.log_rate, noise_std=options.log_noise,
                    lever_arm_b=np.asarray(options.log_lever_arm, float))
     log = simulate_log(traj, CurrentModel(mean_enu=np.asarray(current_enu, float)), spec, seed)
-    t_ns = bag.seconds_to_ns(log.t, SIM_EPOCH_NS)
+    t_ns = bag.sec_to_ns(log.t, SIM_EPOCH_NS)
     var = [options.log_noise ** 2, np.nan, np.nan]
-    writer.write_all("log/speed", (bag.twist_msg(t, (v, np.nan, np.nan), var, "base_link")
+    writer.write_all("log/speed", (msgs.twist_msg(t, (v, np.nan, np.nan), var, "base_link")
                                    for t, v in zip(t_ns, log.speed)))
 
 
@@ -196,9 +197,9 @@ def _write_truth(writer, traj, imu, options):
     # filter's bias estimates; the first epoch takes the first interval).
     j = np.clip(np.searchsorted(imu.t, traj.t[k] - 1e-9), 0, len(imu.t) - 1)
     gyro_bias, accel_bias = imu.gyro_bias, imu.accel_bias
-    t_ns = bag.seconds_to_ns(traj.t[k], SIM_EPOCH_NS)
+    t_ns = bag.sec_to_ns(traj.t[k], SIM_EPOCH_NS)
     for n, i in enumerate(k):
-        writer.write("truth/state", bag.ins_state_msg(
+        writer.write("truth/state", msgs.ins_state_msg(
             t_ns[n], traj.lat[i], traj.lon[i], traj.h[i], traj.v_enu[i], traj.q_nb[i],
             traj.omega_ib_b[i], traj.f_b[i], gyro_bias[j[n]], accel_bias[j[n]]))
-        writer.write("truth/heading", bag.heading_msg(t_ns[n], traj.q_nb[i]))
+        writer.write("truth/heading", msgs.heading_msg(t_ns[n], traj.q_nb[i]))

@@ -1,21 +1,20 @@
-"""Bulk CDR decoding/encoding (trial/cdr.py) and the direct MCAP reader of trial/bag.py against
-the reference implementations: rclpy's serialisation (the rmw's CDR) and rosbags' reader."""
+"""io/cdr.py numpy columns (bulk decoding and encoding) against rclpy's serialisation (the rmw's
+CDR) and against the object codec."""
 import math
 
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 
-from ins_gnss_ros.trial import bag as bagio
-from ins_gnss_ros.trial import cdr
-from ins_gnss_ros.trial.bag import messages_equal
+from ins_gnss_ros.io import cdr, messages_equal
+from ins_gnss_ros.trial import contract_messages as msgs
 
 T0 = 1_767_225_600_123_456_789
 RNG = np.random.default_rng(7)
 
 
 def _delta(k, frame_id):
-    msg = bagio.delta_msg(T0 + 5_000_000 * k, RNG.normal(size=3) * 1e-3, RNG.normal(size=3),
+    msg = msgs.delta_msg(T0 + 5_000_000 * k, RNG.normal(size=3) * 1e-3, RNG.normal(size=3),
                           0.005, frame_id)
     if k == 3:
         msg.delta_velocity.y = math.nan
@@ -25,13 +24,13 @@ def _delta(k, frame_id):
 
 @pytest.mark.parametrize("msgtype, make", [
     ("ins_gnss_msgs/msg/ImuDelta", _delta),
-    ("sensor_msgs/msg/Imu", lambda k, frame: bagio.imu_msg(
+    ("sensor_msgs/msg/Imu", lambda k, frame: msgs.imu_msg(
         T0 + k, RNG.normal(size=3), RNG.normal(size=3), frame)),
 ])
 def test_decode_equals_rclpy_for_any_frame_id(msgtype, make):
     # Frame ids of every length modulo 8 shift the doubles by different paddings.
     msgs = [make(k, "imu_link"[:k % 9]) for k in range(40)]
-    columns = cdr.decode(msgtype, [serialize_message(m) for m in msgs])
+    columns = cdr.decode_columns(msgtype, [serialize_message(m) for m in msgs])
     for k, msg in enumerate(msgs):
         for path, values in columns.items():
             expected = msg
@@ -53,7 +52,7 @@ def test_encode_gives_what_rclpy_decodes_to_the_same_message():
                                                    "twist.twist.angular")
            for i, c in enumerate("xyz")}
     quat = {f"pose.pose.orientation.{c}": q[:, i] for i, c in enumerate("wxyz")}
-    payloads = cdr.encode("nav_msgs/msg/Odometry",
+    payloads = cdr.encode_columns("nav_msgs/msg/Odometry",
                           dict(header, **vec, **quat, **{"pose.covariance": cov,
                                                          "twist.covariance": -cov}),
                           {"header.frame_id": "map", "child_frame_id": "base_link"})
@@ -68,45 +67,19 @@ def test_encode_gives_what_rclpy_decodes_to_the_same_message():
         msg.pose.covariance, msg.twist.covariance = cov[k].tolist(), (-cov[k]).tolist()
         assert len(data) == len(serialize_message(msg))
         assert messages_equal(deserialize_message(data, Odometry), msg)
+        assert data == cdr.codec(Odometry).encode(msg)   # one layout, objects and columns
 
 
 def test_refused_layouts_and_payloads():
     with pytest.raises(cdr.CdrLayoutError, match="fixed layout"):
-        cdr.layout("diagnostic_msgs/msg/DiagnosticArray", (0,))
+        cdr.column_layout("diagnostic_msgs/msg/DiagnosticArray", (0,))
     with pytest.raises(cdr.CdrLayoutError, match="more than one string"):
-        cdr.decode("nav_msgs/msg/Odometry", [])
-    good = serialize_message(bagio.delta_msg(T0, [0, 0, 0], [0, 0, 0], 0.01))
+        cdr.decode_columns("nav_msgs/msg/Odometry", [])
+    good = serialize_message(msgs.delta_msg(T0, [0, 0, 0], [0, 0, 0], 0.01))
     with pytest.raises(cdr.CdrLayoutError, match="little-endian"):
-        cdr.decode("ins_gnss_msgs/msg/ImuDelta", [b"\x00\x00" + good[2:]])
+        cdr.decode_columns("ins_gnss_msgs/msg/ImuDelta", [b"\x00\x00" + good[2:]])
     with pytest.raises(cdr.CdrLayoutError):
-        cdr.decode("ins_gnss_msgs/msg/ImuDelta", [good[:40]])
+        cdr.decode_columns("ins_gnss_msgs/msg/ImuDelta", [good[:40]])
     with pytest.raises(cdr.CdrLayoutError, match="missing: delta_angle.x.*, dt, header"):
-        cdr.encode("ins_gnss_msgs/msg/ImuDelta", {"header.stamp.sec": 1},
+        cdr.encode_columns("ins_gnss_msgs/msg/ImuDelta", {"header.stamp.sec": 1},
                    {"header.frame_id": "x"})
-
-
-def test_direct_mcap_reader_equals_rosbags(tmp_path, monkeypatch):
-    """Several zstd chunks (the writer's chunks hold about 1 MB), ties in stamp across topics."""
-    path = tmp_path / "bag"
-    n = 15_000
-    payloads = cdr.encode("ins_gnss_msgs/msg/ImuDelta", {
-        "header.stamp.sec": 1_767_225_600 + np.arange(n) // 200,
-        "header.stamp.nanosec": (np.arange(n) % 200) * 5_000_000,
-        **{f"{v}.{c}": RNG.normal(size=n) for v in ("delta_angle", "delta_velocity")
-           for c in "xyz"}, "dt": 0.005}, {"header.frame_id": "base_link"})
-    with bagio.BagWriter(path) as writer:
-        for k, data in enumerate(payloads):
-            t = (1_767_225_600 + k // 200) * 1_000_000_000 + (k % 200) * 5_000_000
-            writer.write_raw("imu/delta", "ins_gnss_msgs/msg/ImuDelta", t, data)
-            if k % 40 == 0:
-                writer.write("gnss/fix", bagio.fix_msg(t, 0.1, 0.2, k, [1, 1, 1]))
-    from mcap.reader import make_reader
-
-    with open(next(path.glob("*.mcap")), "rb") as f:
-        assert len(make_reader(f).get_summary().chunk_indexes) >= 2
-    direct = bagio.read_raw(path)
-    monkeypatch.setattr(bagio, "_mcap_rows", lambda reader, connections: None)
-    assert bagio.read_raw(path) == direct
-    assert len(direct) == n + n // 40
-    assert [m.topic for m in direct[:2]] == ["/imu/delta", "/gnss/fix"]  # tie: writing order
-    assert bagio.read_raw(path, ["gnss/fix"]) == [m for m in direct if m.topic == "/gnss/fix"]

@@ -1,0 +1,70 @@
+"""Message stamps: conversions between ``builtin_interfaces/Time``, integer ns and float s.
+
+Every time on the ROS time axis here is sensor time as UTC (POSIX; CONTRACT.md "Stamps").
+Names say what goes in and what comes out: ``stamp`` is a ``builtin_interfaces/Time``, ``ns`` an
+integer count of nanoseconds, ``sec`` a float of seconds. Integer ns are exact; a float of POSIX
+seconds resolves only about 0.2 µs, so code that differences stamps (the IMU increments, bag log
+times) works in ns and converts to seconds last.
+
+The ``set_stamp_*`` functions write into the stamp a message already has: a generated message's
+constructor is a few microseconds of Python, and the nodes stamp several messages per IMU
+sample.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from builtin_interfaces.msg import Time
+
+#: Nanoseconds per second.
+NS = 1_000_000_000
+
+
+def stamp_to_ns(stamp: Time) -> int:
+    """Integer ns of a stamp (exact)."""
+    return stamp.sec * NS + stamp.nanosec
+
+
+def stamp_to_sec(stamp: Time) -> float:
+    """Seconds (float) of a stamp."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def msg_stamp_ns(msg) -> int:
+    """Integer ns of a message's header stamp (``rosgraph_msgs/Clock``: of its clock field)."""
+    return stamp_to_ns(msg.header.stamp if hasattr(msg, "header") else msg.clock)
+
+
+def set_stamp_ns(stamp: Time, t_ns: int) -> None:
+    """Write integer ns (a Python int) into an existing stamp."""
+    stamp.sec, stamp.nanosec = divmod(t_ns, NS)
+
+
+def set_stamp_sec(stamp: Time, t: float) -> None:
+    """Write ``t`` (s) into an existing stamp, rounded to the nearest ns."""
+    sec = math.floor(t)
+    nanosec = int(round((t - sec) * 1e9))
+    if nanosec >= NS:  # rounding carried into the next second
+        sec, nanosec = sec + 1, nanosec - NS
+    stamp.sec, stamp.nanosec = sec, nanosec
+
+
+def ns_to_stamp(t_ns: int) -> Time:
+    """A new stamp of integer ns (any integer type, numpy's too)."""
+    stamp = Time()
+    set_stamp_ns(stamp, int(t_ns))
+    return stamp
+
+
+def sec_to_stamp(t: float) -> Time:
+    """A new stamp of ``t`` (s), rounded to the nearest ns."""
+    stamp = Time()
+    set_stamp_sec(stamp, t)
+    return stamp
+
+
+def sec_to_ns(t, t0_ns: int = 0) -> np.ndarray:
+    """Integer ns (int64 array) of times ``t`` (s, array_like) after ``t0_ns``; the same
+    offset in s always gives the same ns (rounded, not truncated)."""
+    return int(t0_ns) + np.round(np.asarray(t, float) * 1e9).astype(np.int64)
