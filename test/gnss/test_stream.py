@@ -12,7 +12,8 @@ from ins_gnss_ros.gnss.observations import (NavSubframe, NmeaCourse, NmeaDop, Nm
                                             NmeaFix, NmeaHeading, NmeaRecommended,
                                             NmeaSatellites, PvtFix, RawEpoch, RelPosNed,
                                             TimePulse)
-from ins_gnss_ros.gnss.stream import Decoder, decode_file, nmea_checksum_ok, ubx_checksum
+from ins_gnss_ros.gnss.stream import (Decoder, decode_file, nmea_checksum_ok, split_frames,
+                                     ubx_checksum)
 
 
 def _ubx(cls, msg_id, payload):
@@ -197,22 +198,9 @@ def test_checksum_helpers():
 
 # ------------------------------------------------------------------------------ fuzzing
 
-def _frames(data, limit=400):
-    """Split the start of the recorded stream into its frames (UBX by length, NMEA by LF)."""
-    frames, pos = [], 0
-    while pos < len(data) and len(frames) < limit:
-        if data[pos] == 0xB5:
-            end = pos + 8 + int.from_bytes(data[pos + 4:pos + 6], "little")
-        else:
-            end = data.index(b"\n", pos) + 1
-        frames.append(data[pos:end])
-        pos = end
-    return frames
-
-
 @pytest.fixture(scope="module")
 def real_frames(ubx_bytes):
-    return _frames(ubx_bytes)
+    return split_frames(ubx_bytes, 400)
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
