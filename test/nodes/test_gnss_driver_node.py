@@ -286,7 +286,7 @@ def test_glonass_ephemeris_message_carries_tb_in_moscow_time():
     from builtin_interfaces.msg import Time
 
     from ins_gnss_ros.gnss.glonass import GlonassEphemeris
-    from ins_gnss_ros.nodes.gnss_convert import ephemeris_msg
+    from ins_gnss_ros.nodes.gnss_messages import ephemeris_msg
 
     # tb = 2025-08-28 21:15:00 UTC(SU) + 3 h = 00:15:00 Moscow time on the 29th.
     utc = dt.datetime(2025, 8, 28, 21, 15, 0)
