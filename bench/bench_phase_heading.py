@@ -6,7 +6,7 @@ GnssSimulator` from real broadcast orbits (GPS L1 + Galileo E1, 10 deg mask, 2 m
 phase noise, elevation-dependent Gauss-Markov multipath, Klobuchar + Saastamoinen, one receiver
 clock; GPS L1 C/A phase valid once its half-cycle ambiguity is resolved after 6 s of lock, the
 pilot-tracked Galileo E1-C phase from lock), turned into ``gnss/observations`` and
-``gnss/ephemeris`` messages as the ``gnss_simulator`` node publishes them (``nodes/gnss_convert``),
+``gnss/ephemeris`` messages as the ``gnss_simulator`` node publishes them (``nodes/gnss_messages``),
 and fed to a
 ``PhaseHeadingNode`` on the in-process bus. Nothing of the truth reaches the node, except with
 ``--tilt-prior SIGMA_DEG``: then an ``ins/state`` in MODE_ALIGNING is published with every epoch,
@@ -43,7 +43,7 @@ from ins_gnss_ros.nav.conventions import seed_angles_from_quat, wrap_pi
 from ins_gnss_ros.nav.rotations import quat_from_rotvec, quat_mul
 from ins_gnss_ros.nodes.base import InProcessBus
 from ins_gnss_ros.nodes.convert import to_quaternion
-from ins_gnss_ros.nodes.gnss_convert import ephemeris_msg, observations_msg
+from ins_gnss_ros.nodes.gnss_messages import ephemeris_msg, observations_msg
 from ins_gnss_ros.nodes.phase_heading_node import PhaseHeadingNode
 from ins_gnss_ros.sim import scenarios
 
@@ -136,7 +136,7 @@ def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0, ove
         if len(heads) == n_before:
             continue
         h = heads[-1]
-        sol = node.last_solution
+        sol = node.pipeline.last_solution
         while pending_slips and pending_slips[0].t <= tr.t[k]:
             out.slips_detected += pending_slips.pop(0).sat_id in sol.slipped
         az, pitch, roll = seed_angles_from_quat(tr.q_nb[k])
@@ -184,11 +184,11 @@ def held_ambiguities_true(node, epochs) -> bool:
     """Whether every ambiguity held by the node's solver is the simulator's integer."""
     true = [dict(zip((o.sat_id for o in ep.raw.obs), ep.truth.ambiguity)) for ep in epochs]
     # The store is the solver's internal table (baseline, signal, reference) -> integer.
-    for (k, s, r), n in node.solver.store._n.items():
+    for (k, s, r), n in node.pipeline.solver.store._n.items():
         dd = (true[k][s] - true[0][s]) - (true[k][r] - true[0][r])
         if abs(dd - n) > 1e-6:
             return False
-    return len(node.solver.store) > 0
+    return len(node.pipeline.solver.store) > 0
 
 
 def summarise(trials, label):

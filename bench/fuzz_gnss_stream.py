@@ -19,7 +19,7 @@ from collections import Counter
 from pathlib import Path
 
 from ins_gnss_ros.gnss.observations import NmeaHeading
-from ins_gnss_ros.gnss.stream import Decoder
+from ins_gnss_ros.gnss.stream import Decoder, split_frames
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = REPO.parent / "shared" / "data" / "walk_0827" / "gnss_1730.ubx"
@@ -31,19 +31,6 @@ def nmea(sentence):
     for byte in sentence.encode():
         value ^= byte
     return f"${sentence}*{value:02X}\r\n".encode()
-
-
-def split_frames(data, limit=3000):
-    """Frames of the recorded stream (UBX by its length field, NMEA up to LF)."""
-    frames, pos = [], 0
-    while pos < len(data) and len(frames) < limit:
-        if data[pos] == 0xB5:
-            end = pos + 8 + int.from_bytes(data[pos + 4:pos + 6], "little")
-        else:
-            end = data.index(b"\n", pos) + 1
-        frames.append(data[pos:end])
-        pos = end
-    return frames
 
 
 def make_case(rng, frames):
@@ -77,7 +64,7 @@ def main():
     if not args.data.exists():
         print(f"recorded stream {args.data} not found", file=sys.stderr)
         return 2
-    frames = split_frames(args.data.read_bytes())
+    frames = split_frames(args.data.read_bytes(), 3000)
     rng = random.Random(args.seed)
     marker = nmea("GNHDT,42.0,T")
     flush = bytes(4200)

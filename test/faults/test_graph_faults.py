@@ -202,7 +202,7 @@ def test_observation_faults_never_give_a_confident_wrong_heading(ros_context, fa
     from ins_gnss_ros.gnss.simulator import GnssSimulator, SimulatorConfig
     from ins_gnss_ros.nav.conventions import quat_from_seed_angles, wrap_pi
     from ins_gnss_ros.nodes.base import InProcessBus
-    from ins_gnss_ros.nodes.gnss_convert import ephemeris_msg, observations_msg
+    from ins_gnss_ros.nodes.gnss_messages import ephemeris_msg, observations_msg
     from ins_gnss_ros.nodes.phase_heading_node import PhaseHeadingNode
     from ins_gnss_ros.io import sec_to_stamp
 

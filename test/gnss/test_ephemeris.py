@@ -16,9 +16,9 @@ from conftest import shared_path
 from scipy.optimize import brentq
 
 from ins_gnss_ros.gnss.constants import FREQ_E1, FREQ_E5A, FREQ_E5B, FREQ_L1, FREQ_L2
-from ins_gnss_ros.gnss.ephemeris import (KeplerEphemeris, earth_rotation_correction,
-                                         elevation_azimuth, group_delay,
-                                         satellite_at_reception, sat_position)
+from ins_gnss_ros.gnss.ephemeris import (KeplerEphemeris, accuracy_m,
+                                         earth_rotation_correction, elevation_azimuth,
+                                         group_delay, satellite_at_reception, sat_position)
 from ins_gnss_ros.gnss.nav_decode import NavDataAssembler
 from ins_gnss_ros.gnss.stream import Decoder
 
@@ -186,3 +186,10 @@ def test_transmission_time_from_pseudorange(ephemerides):
     xyz, sv_clock, _, _ = satellite_at_reception(eph, t_rx, pseudorange, rx)
     assert np.linalg.norm(xyz - sat_inertial) < 0.01
     assert np.linalg.norm(xyz - rx) - C * sv_clock == pytest.approx(pseudorange, abs=0.01)
+
+
+def test_broadcast_accuracy_from_ura_and_sisa_indices():
+    assert accuracy_m("G", 0) == 2.4 and accuracy_m("C", 14) == 6144.0
+    assert math.isnan(accuracy_m("G", 15))
+    assert [accuracy_m("E", i) for i in (49, 50, 75, 100)] == pytest.approx([0.49, 0.5, 1.0, 2.0])
+    assert math.isnan(accuracy_m("E", 126))   # no accuracy prediction available

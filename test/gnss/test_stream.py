@@ -7,29 +7,14 @@ import pytest
 from conftest import shared_path
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from receiver_frames import nmea_sentence, ubx_frame
 
 from ins_gnss_ros.gnss.observations import (NavSubframe, NmeaCourse, NmeaDop, NmeaErrors,
                                             NmeaFix, NmeaHeading, NmeaRecommended,
                                             NmeaSatellites, PvtFix, RawEpoch, RelPosNed,
                                             TimePulse)
-from ins_gnss_ros.gnss.stream import Decoder, decode_file, nmea_checksum_ok, ubx_checksum
-
-
-def _ubx(cls, msg_id, payload):
-    """A UBX frame built by hand from the interface description's frame layout."""
-    body = bytes([cls, msg_id]) + len(payload).to_bytes(2, "little") + payload
-    ck_a = ck_b = 0
-    for byte in body:
-        ck_a = (ck_a + byte) % 256
-        ck_b = (ck_b + ck_a) % 256
-    return b"\xb5\x62" + body + bytes([ck_a, ck_b])
-
-
-def _nmea(sentence):
-    value = 0
-    for char in sentence.encode():
-        value ^= char
-    return f"${sentence}*{value:02X}\r\n".encode()
+from ins_gnss_ros.gnss.stream import (Decoder, decode_file, nmea_checksum_ok, split_frames,
+                                     ubx_checksum)
 
 
 def _accounted(decoder):
@@ -100,9 +85,9 @@ def test_any_split_gives_same_records(ubx_bytes):
 
 
 def test_garbage_and_bad_checksums_are_counted_and_skipped():
-    good = _nmea("GPHDT,123.4,T")
+    good = nmea_sentence("GPHDT,123.4,T")
     bad_nmea = good.replace(b"123.4", b"123.5")
-    tp = _ubx(0x0D, 0x01, (1000).to_bytes(4, "little") + bytes(4) + (5).to_bytes(4, "little", signed=True)
+    tp = ubx_frame(0x0D, 0x01, (1000).to_bytes(4, "little") + bytes(4) + (5).to_bytes(4, "little", signed=True)
               + (2381).to_bytes(2, "little") + bytes(2))
     corrupted_tp = bytearray(tp)
     corrupted_tp[10] ^= 0xFF
@@ -119,7 +104,7 @@ def test_garbage_and_bad_checksums_are_counted_and_skipped():
 
 
 def test_oversize_length_is_garbage_and_stream_recovers():
-    hdt = _nmea("GNHDT,10.0,T")
+    hdt = nmea_sentence("GNHDT,10.0,T")
     decoder = Decoder(max_ubx_payload=1000)
     records = decoder.feed(b"\xb5\x62\x02\x15\xff\xff" + hdt)
     assert [type(r) for r in records] == [NmeaHeading]
@@ -127,7 +112,7 @@ def test_oversize_length_is_garbage_and_stream_recovers():
 
 
 def test_partial_frame_waits_then_completes():
-    hdt = _nmea("GNHDT,10.0,T")
+    hdt = nmea_sentence("GNHDT,10.0,T")
     decoder = Decoder()
     assert decoder.feed(hdt[:7]) == [] and decoder.buffered == 7
     assert len(decoder.feed(hdt[7:])) == 1
@@ -135,14 +120,14 @@ def test_partial_frame_waits_then_completes():
 
 def test_unknown_messages_counted():
     decoder = Decoder()
-    records = decoder.feed(_ubx(0x7F, 0x7F, b"abc") + _nmea("GPXYZ,1,2"))
+    records = decoder.feed(ubx_frame(0x7F, 0x7F, b"abc") + nmea_sentence("GPXYZ,1,2"))
     assert records == [] and decoder.stats["unknown"] == 2
     assert decoder.stats["frames_ok"] == 2
 
 
 def test_known_type_with_wrong_length_is_malformed():
     decoder = Decoder()
-    assert decoder.feed(_ubx(0x01, 0x07, bytes(10))) == []  # NAV-PVT needs 92 bytes
+    assert decoder.feed(ubx_frame(0x01, 0x07, bytes(10))) == []  # NAV-PVT needs 92 bytes
     assert decoder.stats["malformed"] == 1
 
 
@@ -154,7 +139,7 @@ def test_nmea_sentences_to_records():
         "GNGSA,A,3,10,23,27,32,,,,,,,,,1.2,0.7,1.0,1",
         "GPGSV,3,1,11,03,03,111,00,04,15,270,00,06,01,010,00,13,06,292,00",
     ]
-    records = Decoder().feed(b"".join(_nmea(s) for s in sentences))
+    records = Decoder().feed(b"".join(nmea_sentence(s) for s in sentences))
     rmc, vtg, gst, gsa, gsv = records
     assert isinstance(rmc, NmeaRecommended) and rmc.valid
     # NMEA example values: 48 deg 07.038' N, 22.4 knots, course 84.4 deg.
@@ -179,7 +164,7 @@ def test_relposned_record():
                + i4(0) + i4(0) + i4(0) + i4(25) + i4(50000) + bytes(4))
     flags = 1 | 2 | 4 | (2 << 3) | (1 << 5) | (1 << 8)
     payload += flags.to_bytes(4, "little")
-    rec = Decoder().feed(_ubx(0x01, 0x3C, payload))[0]
+    rec = Decoder().feed(ubx_frame(0x01, 0x3C, payload))[0]
     assert isinstance(rec, RelPosNed)
     assert np.allclose(rec.rel_pos_ned, [1.0012, -0.5, 0.03])
     assert rec.length == pytest.approx(1.11)
@@ -197,22 +182,9 @@ def test_checksum_helpers():
 
 # ------------------------------------------------------------------------------ fuzzing
 
-def _frames(data, limit=400):
-    """Split the start of the recorded stream into its frames (UBX by length, NMEA by LF)."""
-    frames, pos = [], 0
-    while pos < len(data) and len(frames) < limit:
-        if data[pos] == 0xB5:
-            end = pos + 8 + int.from_bytes(data[pos + 4:pos + 6], "little")
-        else:
-            end = data.index(b"\n", pos) + 1
-        frames.append(data[pos:end])
-        pos = end
-    return frames
-
-
 @pytest.fixture(scope="module")
 def real_frames(ubx_bytes):
-    return _frames(ubx_bytes)
+    return split_frames(ubx_bytes, 400)
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -242,7 +214,7 @@ def test_fuzz_no_exception_and_recovery(real_frames, data):
     decoder.feed(blob)
     # Whatever half-frame the damage left buffered, a clean frame long enough to flush it
     # (any pending UBX length is below max_ubx_payload) ends the stream decodable.
-    marker = _nmea("GNHDT,42.0,T")
+    marker = nmea_sentence("GNHDT,42.0,T")
     tail = bytes(4200) + marker
     records = decoder.feed(tail)
     assert records and isinstance(records[-1], NmeaHeading)

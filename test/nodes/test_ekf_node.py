@@ -170,8 +170,8 @@ def test_tight_coupling_with_three_satellites_through_the_nodes(ros_context):
     from ins_gnss_ros.gnss import ephemeris_data
     from ins_gnss_ros.gnss.simulator import GnssSimulator, SimulatorConfig, solve_fix
     from ins_gnss_ros.nodes.ekf_node import EkfNode
-    from ins_gnss_ros.nodes.gnss_convert import ephemeris_msg, gps_to_posix
-    from ins_gnss_ros.nodes.gnss_simulator_node import observations_msg
+    from ins_gnss_ros.gnss import gps_to_posix
+    from ins_gnss_ros.nodes.gnss_messages import ephemeris_msg, observations_msg
     from ins_gnss_ros.nodes.strapdown_node import StrapdownNode
     from ins_gnss_ros.sim.scenarios import ShadingWindow
 
@@ -216,7 +216,8 @@ def test_tight_coupling_with_three_satellites_through_the_nodes(ros_context):
             send("imu/delta", delta)
             i += 1
         stamp = sec_to_stamp(t0 + ep.t)
-        send("gnss/observations", observations_msg(ep, stamp, [False] * len(ep.raw.obs)))
+        send("gnss/observations", observations_msg(ep.raw, ep.antenna, stamp,
+                                                   f"gnss_antenna_{ep.antenna}", ep.loss_of_lock))
         fix = solve_fix(ep, sim, x0)
         if fix is not None:  # an SPP needs 5 satellites (two systems): none after t_switch
             x0 = fix.xyz

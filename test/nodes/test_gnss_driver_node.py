@@ -24,6 +24,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.parameter import Parameter
 
 from conftest import shared_path
+from receiver_frames import nmea_sentence, ubx_frame
 from rosutil import NodeProcess, spin_until, wait_for_endpoints
 
 C = 299792458.0
@@ -37,29 +38,13 @@ LETTER = {0: "G", 2: "E", 3: "C", 6: "R"}
 NO_SOURCE = "file:///nonexistent?pace=fast"  # never polled: the tests feed bytes directly
 
 
-def _ubx(cls, msg_id, payload):
-    body = bytes([cls, msg_id]) + len(payload).to_bytes(2, "little") + payload
-    a = b = 0
-    for byte in body:
-        a = (a + byte) & 0xFF
-        b = (b + a) & 0xFF
-    return b"\xb5\x62" + body + bytes([a, b])
-
-
-def _nmea(sentence):
-    value = 0
-    for char in sentence.encode():
-        value ^= char
-    return f"${sentence}*{value:02X}\r\n".encode()
-
-
 def _frames(data):
     """(class, id, payload) of every UBX frame with a valid checksum, by the frame layout."""
     out, pos = [], data.find(b"\xb5\x62")
     while 0 <= pos <= len(data) - 8:
         n = int.from_bytes(data[pos + 4:pos + 6], "little")
         frame = data[pos:pos + n + 8]
-        if len(frame) == n + 8 and _ubx(frame[2], frame[3], frame[6:-2]) == frame:
+        if len(frame) == n + 8 and ubx_frame(frame[2], frame[3], frame[6:-2]) == frame:
             out.append((frame[2], frame[3], frame[6:-2]))
             pos = data.find(b"\xb5\x62", pos + n + 8)
         else:
@@ -286,7 +271,7 @@ def test_glonass_ephemeris_message_carries_tb_in_moscow_time():
     from builtin_interfaces.msg import Time
 
     from ins_gnss_ros.gnss.glonass import GlonassEphemeris
-    from ins_gnss_ros.nodes.gnss_convert import ephemeris_msg
+    from ins_gnss_ros.nodes.gnss_messages import ephemeris_msg
 
     # tb = 2025-08-28 21:15:00 UTC(SU) + 3 h = 00:15:00 Moscow time on the 29th.
     utc = dt.datetime(2025, 8, 28, 21, 15, 0)
@@ -407,7 +392,7 @@ def _pvt_frame(itow_ms, utc):
                      utc.minute, utc.second, 0x07)
     struct.pack_into("<iBBBB", payload, 16, utc.microsecond * 1000, 3, 0x81, 0, 20)
     struct.pack_into("<iiii", payload, 24, 300_000_000, 600_000_000, 100_000, 120_000)
-    return _ubx(0x01, 0x07, bytes(payload))
+    return ubx_frame(0x01, 0x07, bytes(payload))
 
 
 def _relposned_frame(itow_ms, ned_cm, heading_deg, acc_heading_deg, flags):
@@ -418,7 +403,7 @@ def _relposned_frame(itow_ms, ned_cm, heading_deg, acc_heading_deg, flags):
                      round(heading_deg * 1e5), 0)
     struct.pack_into("<IIIII", payload, 36, 100, 100, 200, 50, round(acc_heading_deg * 1e5))
     struct.pack_into("<I", payload, 60, flags)
-    return _ubx(0x01, 0x3C, bytes(payload))
+    return ubx_frame(0x01, 0x3C, bytes(payload))
 
 
 # NAV-RELPOSNED flags: gnssFixOK 0x1, diffSoln 0x2, relPosValid 0x4, carrSoln fixed 0x10,
@@ -467,7 +452,7 @@ def test_time_reference_from_tim_tp(context):
     node, bus, out = _bus_node(context, source=NO_SOURCE)
     week, tow_ms, q_err_ps = 2381, 408640000, -1500
     payload = struct.pack("<IIiHBB", tow_ms, 0, q_err_ps, week, 0, 0)  # time base GNSS
-    node.feed(_ubx(0x0D, 0x01, payload))
+    node.feed(ubx_frame(0x0D, 0x01, payload))
     bus.drain()
     (ref,) = out["/gnss/time_reference"]
     utc = GPS_EPOCH + dt.timedelta(weeks=week, milliseconds=tow_ms) - dt.timedelta(seconds=18)
@@ -481,11 +466,11 @@ def test_nmea_only_receiver_gives_fix_velocity_and_hdt_heading(context):
 
     node, bus, out = _bus_node(context, source=NO_SOURCE,
                                heading__azimuth_offset_deg=-2.0)
-    stream = (_nmea("GNRMC,235959.50,A,5955.000,N,03018.000,E,10.0,90.0,310825,,,R,V")
-              + _nmea("GNGGA,000000.00,5955.000,N,03018.000,E,4,12,0.8,15.0,M,17.5,M,1.0,0000")
-              + _nmea("GNGST,000000.00,0.5,0.02,0.01,30.0,0.012,0.015,0.030")
-              + _nmea("GNGGA,000000.25,5955.000,N,03018.000,E,4,12,0.8,15.0,M,17.5,M,1.0,0000")
-              + _nmea("GNHDT,123.4,T"))
+    stream = (nmea_sentence("GNRMC,235959.50,A,5955.000,N,03018.000,E,10.0,90.0,310825,,,R,V")
+              + nmea_sentence("GNGGA,000000.00,5955.000,N,03018.000,E,4,12,0.8,15.0,M,17.5,M,1.0,0000")
+              + nmea_sentence("GNGST,000000.00,0.5,0.02,0.01,30.0,0.012,0.015,0.030")
+              + nmea_sentence("GNGGA,000000.25,5955.000,N,03018.000,E,4,12,0.8,15.0,M,17.5,M,1.0,0000")
+              + nmea_sentence("GNHDT,123.4,T"))
     node.feed(stream)
     bus.drain()
     first, second = out["/gnss/fix"]

@@ -33,7 +33,7 @@ def _flat(antennas):
 def _simulate(antennas, n_epochs, rate=2.0, q_of_t=None, slips=(), seed=7):
     """Simulated epochs [(t, q_nb, [GnssObservations per antenna], [SimEpoch])] and the
     ephemeris messages; the platform is static at (LAT, LON, H) with attitude q_of_t(t)."""
-    from ins_gnss_ros.nodes.gnss_convert import ephemeris_msg, observations_msg
+    from ins_gnss_ros.nodes.gnss_messages import ephemeris_msg, observations_msg
 
     broadcast = ephemeris_data.load(LON)
     sim = GnssSimulator(broadcast, SimulatorConfig(lever_arms=antennas, seed=seed, slips=slips,
@@ -245,7 +245,7 @@ def test_cycle_slips_on_one_antenna_are_detected_without_a_wrong_heading(ros_con
         for m in msgs:
             bus.publish("gnss/observations", m)
         bus.drain()
-        flagged += [(t, s) for s in node.last_solution.slipped]
+        flagged += [(t, s) for s in node.pipeline.last_solution.slipped]
     for ev in slips:
         assert (ev.t, ev.sat_id) in flagged, f"slip {ev} not detected"
     assert node.diag.counts["cycle slip detected (ambiguity re-fixed)"] >= len(slips)
@@ -396,13 +396,13 @@ def test_ins_prior_is_the_tilt_alone_while_the_ins_heading_is_unknown(ros_contex
 
     epochs, ephs = static_two
     node = _node(ros_context, bus, float_window=1)
-    priors, process = [], node.solver.process
+    priors, process = [], node.pipeline.solver.process
 
     def spy(*args, **kwargs):
         priors.append(kwargs)
         return process(*args, **kwargs)
 
-    node.solver.process = spy
+    node.pipeline.solver.process = spy
     heads = []
     bus.recorders.append(lambda topic, msg: heads.append(msg) if topic == "/gnss/heading" else 0)
     for m in ephs:
@@ -465,9 +465,10 @@ def test_recorded_single_antenna_stream_end_to_end(ros_context, bus):
     from ins_gnss_ros.gnss.ephemeris import sat_position
     from ins_gnss_ros.gnss.spp import SppConfig, solve_position
     from ins_gnss_ros.gnss.stream import Decoder
-    from ins_gnss_ros.nodes.gnss_convert import (LockTracker, ephemeris_msg, gps_stamp,
-                                                  kepler_from_msg, observations_msg)
-    from ins_gnss_ros.nodes.phase_heading_node import lines_of_sight, parse_observations
+    from ins_gnss_ros.gnss import LockTracker, lines_of_sight
+    from ins_gnss_ros.nodes.gnss_messages import (ephemeris_msg, gps_stamp, kepler_from_msg,
+                                                  observations_msg)
+    from ins_gnss_ros.nodes.phase_heading_node import parse_observations
 
     # The first 300 kB (about 25 s, 100 epochs) keep the test short; decoding is the slow part.
     stream = shared_path("data", "walk_0827", "gnss_1730.ubx").read_bytes()
@@ -478,7 +479,7 @@ def test_recorded_single_antenna_stream_end_to_end(ros_context, bus):
     stamp0 = gps_stamp(raws[0].week, raws[0].tow, raws[0].leap_s)
     ephs = [ephemeris_msg(e, stamp0, raws[0].leap_s) for e in broadcast.ephemerides.values()]
     node = _node(ros_context, bus, beidou=True)
-    # As the gnss_driver publishes them (nodes/gnss_convert.py).
+    # As the gnss_driver publishes them (nodes/gnss_messages.py).
     lock = LockTracker()
     msgs = [observations_msg(r, 0, gps_stamp(r.week, r.tow, r.leap_s), "gnss", lock.update(r))
             for r in raws]
@@ -526,7 +527,7 @@ def test_publishes_over_ros(executor, ros_context, probe, static_two):
                and pub_eph.get_subscription_count() > 0, what="phase_heading subscriptions")
     for m in ephs:
         pub_eph.publish(m)
-    spin_until(executor, lambda: len(node.eph_msgs) == len(ephs), what="ephemerides")
+    spin_until(executor, lambda: len(node.pipeline.broadcast) == len(ephs), what="ephemerides")
     for _, _, msgs, _ in epochs[:3]:
         for m in msgs:
             pub_obs.publish(m)

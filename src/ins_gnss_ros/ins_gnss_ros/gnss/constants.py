@@ -32,6 +32,10 @@ SECONDS_PER_WEEK = 604800.0
 #: Half a week [s]: the range of a correctly wrapped time difference (IS-GPS-200 §20.3.3.4.3).
 HALF_WEEK = 302400.0
 
+#: Half-width of the broadcast fit interval of Keplerian ephemerides around toe [s]
+#: (IS-GPS-200 §20.3.4.4: 4-hour fit interval; Galileo I/NAV and BeiDou are used likewise).
+FIT_HALF_WIDTH_S = 7200.0
+
 #: One semicircle in radians: GPS and Galileo broadcast angles in semicircles.
 SEMICIRCLE = math.pi
 
@@ -76,6 +80,12 @@ UBX_SIGNALS = {
     (6, 0): ("1C", FREQ_G1_BASE), (6, 2): ("2C", FREQ_G2_BASE),
     (7, 0): ("5A", FREQ_L5),
 }
+#: RINEX system letter -> u-blox gnssId (the numbering of ins_gnss_msgs/GnssObservations).
+SYSTEM_ID = {letter: gnss_id for gnss_id, letter in UBX_GNSS_ID.items()}
+#: (system letter, RINEX signal code) -> u-blox sigId. Where u-blox has two ids for one code
+#: (BeiDou B1I/B2I/B3I D1 and D2), the lower (D1) id is used.
+SIGNAL_ID = {(UBX_GNSS_ID[gid], code): sid  # descending: the lowest sigId is written last
+             for (gid, sid), (code, _) in sorted(UBX_SIGNALS.items(), reverse=True)}
 
 
 def carrier_frequency(system, signal, freq_slot=0):

@@ -19,6 +19,11 @@ from .constants import (BEIDOU, C_LIGHT, FREQ_B1I, FREQ_B3I, FREQ_E1, FREQ_E5A, 
 from .glonass import GlonassEphemeris, glonass_sat_position
 from .time import BDT_MINUS_GPST_S, wrap_week_difference
 
+#: GPS/BeiDou URA index -> metres (IS-GPS-200 §20.3.3.3.1.3 upper bounds; BDS-SIS-ICD-B1I
+#: §5.2.4.5 uses the same table).
+_URA_M = (2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0, 1536.0,
+          3072.0, 6144.0)
+
 
 @dataclass(frozen=True)
 class KeplerEphemeris:
@@ -108,6 +113,22 @@ class KeplerEphemeris:
     def relativistic_f(self):
         """F = -2 sqrt(mu) / c^2 [s/sqrt(m)] (IS-GPS-200 §20.3.3.3.3.1: -4.442807633e-10)."""
         return -2.0 * math.sqrt(self.gm) / C_LIGHT ** 2
+
+
+def accuracy_m(system: str, index: int) -> float:
+    """Broadcast user range accuracy [m] from the URA index (GPS, BeiDou, QZSS) or SISA index
+    (Galileo OS SIS ICD §5.1.12); NaN for 'no accuracy prediction available'."""
+    if system == GALILEO:
+        if index < 50:
+            return index * 0.01
+        if index < 75:
+            return 0.5 + (index - 50) * 0.02
+        if index < 100:
+            return 1.0 + (index - 75) * 0.04
+        if index < 126:
+            return 2.0 + (index - 100) * 0.16
+        return math.nan
+    return _URA_M[index] if 0 <= index < len(_URA_M) else math.nan
 
 
 def eccentric_anomaly(mean_anomaly, e, tol=1e-13):

@@ -28,14 +28,12 @@ import numpy as np
 
 @dataclass(frozen=True)
 class MultipathModel:
-    """Parameters of the multipath error.
+    """Parameters of the multipath error of the module's model.
 
     Attributes
     ----------
-    code_sigma0 : float
-        Code multipath σ at zero elevation [m].
-    phase_sigma0 : float
-        Phase multipath σ at zero elevation [m].
+    code_sigma0, phase_sigma0 : float
+        σ_0, the code and the phase multipath σ at zero elevation [m].
     elevation_scale : float
         E_0 [rad]: σ falls by e every E_0 of elevation.
     code_tau, phase_tau : float

@@ -8,6 +8,7 @@ only gives UTC (NMEA).  Azimuths (headings) are clockwise from north, as in the
 project's Heading message.  NaN marks a value the receiver did not provide.
 """
 import datetime as _dt
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -191,6 +192,17 @@ class RelPosNed:
     is_moving: bool
     carr_soln: int
 
+    @property
+    def heading_fixed(self):
+        """Whether the baseline heading is usable: valid, with carrier ambiguities fixed."""
+        return self.rel_pos_valid and self.heading_valid and self.carr_soln == 2
+
+    @property
+    def elevation(self):
+        """Elevation of the baseline above the horizon [rad] (up = -down)."""
+        n, e, d = self.rel_pos_ned
+        return math.atan2(-d, math.hypot(n, e))
+
 
 @dataclass
 class TimePulse:
@@ -246,6 +258,13 @@ class NmeaRecommended:
     speed_mps: float
     course: float
     mode: str
+
+    @property
+    def vel_enu(self):
+        """ENU ground velocity [m/s] from speed and course over ground (clockwise from true
+        north); the vertical is not reported (0)."""
+        return np.array([self.speed_mps * math.sin(self.course),
+                         self.speed_mps * math.cos(self.course), 0.0])
 
 
 @dataclass

@@ -57,15 +57,12 @@ from ..nav.earth import ecef_to_enu_matrix, geodetic_to_ecef
 from ..nav.lever_arm import lever_arm_position
 from ..nav.navigator import SatelliteRanges
 from .atmosphere import klobuchar_delay, tropo_delay
-from .constants import C_LIGHT, GALILEO, GPS, OMEGA_E
+from .constants import C_LIGHT, FIT_HALF_WIDTH_S, GALILEO, GPS, OMEGA_E
 from .differences import elevation_sigma
 from .ephemeris import elevation_azimuth, group_delay, satellite_at_reception
 from .glonass import GlonassEphemeris
 from .time import wrap_week_difference
 
-#: Half-width of the broadcast fit interval of Keplerian ephemerides around toe [s]
-#: (IS-GPS-200 20.3.4.4: 4-hour fit interval; Galileo I/NAV and BeiDou used likewise).
-KEPLER_FIT_HALF_WIDTH = 7200.0
 #: Largest |t - tb| of a GLONASS ephemeris [s]: the ICD integrates within +-15 min of tb (new
 #: data every 30 min); twice that tolerates one missed update.
 GLONASS_MAX_AGE = 1800.0
@@ -161,7 +158,7 @@ def ephemeris_valid(eph, t_gps):
         return False
     if isinstance(eph, GlonassEphemeris):
         return abs(t_gps - eph.toe) <= GLONASS_MAX_AGE
-    return abs(wrap_week_difference(t_gps - eph.toe)) <= KEPLER_FIT_HALF_WIDTH
+    return abs(wrap_week_difference(t_gps - eph.toe)) <= FIT_HALF_WIDTH_S
 
 
 def atmosphere_delays(t_gps, lat, lon, h, rx_xyz, sat_xyz, frequency_hz, config):

@@ -284,6 +284,16 @@ class Pacer:
         """Record that the item of stream time ``t`` has been released."""
         self._last_t = t
 
+    def due(self, t: float | None) -> bool:
+        """Whether an item of stream time ``t`` [s] (None: untimed, always due) may be released
+        now; a due timed item is recorded as released."""
+        if t is None:
+            return True
+        if self.wait_s(t) > 0.0:
+            return False
+        self.released(t)
+        return True
+
 
 def open_source(url: str, **kwargs) -> ByteSource:
     """The byte source a URL names (see module docstring); ``kwargs`` go to its constructor.

@@ -173,7 +173,7 @@ class Decoder:
             self.stats["checksum_errors"] += 1
             return self._garbage_byte()
         self._accept(len(frame))
-        self._handle_ubx(frame, records)
+        self._handle(frame, records)
         return len(frame)
 
     def _try_nmea(self, buf, pos, records):
@@ -192,54 +192,41 @@ class Decoder:
             self.stats["checksum_errors"] += 1
             return self._garbage_byte()
         self._accept(len(line))
-        self._handle_nmea(line, records)
+        self._handle(line, records)
         return len(line)
 
     def _accept(self, size):
         self.stats["frames_ok"] += 1
         self.stats["frame_bytes"] += size
 
-    def _handle_ubx(self, frame, records):
+    def _handle(self, frame, records):
+        """Parse a checksum-checked UBX or NMEA frame and append its record (if its type is one
+        the navigation system uses); count unknown and malformed messages."""
+        ubx = frame[0] == 0xB5
         try:
-            msg = UBXReader.parse(frame)
-        except Exception:  # pyubx2 raises several types on odd payloads: count, never crash
+            msg = UBXReader.parse(frame) if ubx else NMEAReader.parse(frame)
+        except Exception:  # the parsers raise several types on odd payloads: count, never crash
             self.stats["malformed"] += 1
             return
-        identity = msg.identity
-        if identity.startswith("UNKNOWN"):
+        if ubx:
+            unknown = msg.identity.startswith("UNKNOWN")
+        else:
+            unknown = msg is None or msg.msgID not in NMEA_PAYLOADS_GET
+        if unknown:
             self.stats["unknown"] += 1
             return
-        self.stats["identities"][identity] += 1
-        convert = _UBX_CONVERTERS.get(identity)
+        self.stats["identities"][msg.identity] += 1
+        convert = _UBX_CONVERTERS.get(msg.identity) if ubx else _NMEA_CONVERTERS.get(msg.msgID)
         if convert is None:
             return
-        payload_len = len(frame) - 8
         try:
-            record = convert(msg, payload_len)
+            record = convert(msg, len(frame) - 8) if ubx else convert(msg)
         except (AttributeError, TypeError, ValueError, KeyError, OverflowError):
             record = None
         if record is None:
             self.stats["malformed"] += 1
         else:
             records.append(record)
-
-    def _handle_nmea(self, line, records):
-        try:
-            msg = NMEAReader.parse(line)
-        except Exception:  # pynmeagps raises several types on odd fields: count, never crash
-            self.stats["malformed"] += 1
-            return
-        if msg is None or msg.msgID not in NMEA_PAYLOADS_GET:
-            self.stats["unknown"] += 1
-            return
-        self.stats["identities"][msg.identity] += 1
-        convert = _NMEA_CONVERTERS.get(msg.msgID)
-        if convert is None:
-            return
-        try:
-            records.append(convert(msg))
-        except (AttributeError, TypeError, ValueError, KeyError, OverflowError):
-            self.stats["malformed"] += 1
 
 
 # --------------------------------------------------------------------------- UBX records
@@ -441,4 +428,18 @@ def decode_file(path, chunk_size=4096):
     return records, decoder.stats
 
 
-__all__ = ["Decoder", "decode_file", "ubx_checksum", "nmea_checksum_ok"]
+def split_frames(data, limit=None):
+    """The frames of an intact recorded stream (UBX by its length field, NMEA up to LF), the
+    first ``limit`` of them (None: all), as bytes each; for building test and fuzz cases."""
+    frames, pos = [], 0
+    while pos < len(data) and (limit is None or len(frames) < limit):
+        if data[pos] == 0xB5:
+            end = pos + 8 + int.from_bytes(data[pos + 4:pos + 6], "little")
+        else:
+            end = data.index(b"\n", pos) + 1
+        frames.append(data[pos:end])
+        pos = end
+    return frames
+
+
+__all__ = ["Decoder", "decode_file", "nmea_checksum_ok", "split_frames", "ubx_checksum"]

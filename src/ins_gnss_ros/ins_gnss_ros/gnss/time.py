@@ -13,12 +13,22 @@ Relations used (each system's ICD):
   GGTO offset (a few ns) is ignored.
 * BeiDou Time BDT = GPST - 14 s, BDT week = GPS week - 1356 (BDS-SIS-ICD-B1I §3.3).
 * GLONASS time = UTC(SU) + 3 h (GLONASS ICD ed. 5.1 §3.3.3).
+
+The ROS time axis of the project is UTC as POSIX time, derived from GPS time with the
+receiver's leap seconds: ``posix = t_gps + 315964800 - leap`` (315964800 s = 1980-01-06
+00:00:00 UTC in POSIX time; POSIX time ignores leap seconds, so GPST - UTC is subtracted once).
+NMEA times are UTC already and map directly.
 """
 import datetime as _dt
+import math
 
-from .constants import HALF_WEEK, SECONDS_PER_WEEK
+from . import observations as _obs
+from .constants import BEIDOU, GALILEO, HALF_WEEK, SECONDS_PER_WEEK
 
 GPS_EPOCH = _dt.datetime(1980, 1, 6)
+#: POSIX time of the GPS epoch 1980-01-06 00:00:00 UTC [s].
+GPS_EPOCH_POSIX = 315964800.0
+_POSIX_EPOCH = _dt.datetime(1970, 1, 1)
 GST_WEEK_OFFSET = 1024
 BDT_WEEK_OFFSET = 1356
 BDT_MINUS_GPST_S = -14.0
@@ -83,6 +93,67 @@ def utc_to_gps(utc, leap=None):
 def gps_to_utc(t_gps, leap):
     """Naive UTC datetime from GPS seconds, with GPST - UTC = `leap` [s] (e.g. RXM-RAWX leapS)."""
     return GPS_EPOCH + _dt.timedelta(seconds=t_gps - leap)
+
+
+def gps_to_posix(t_gps: float, leap_s: int) -> float:
+    """POSIX (UTC) seconds of a GPS time [s since the GPS epoch], with GPST - UTC = ``leap_s``."""
+    return t_gps + GPS_EPOCH_POSIX - leap_s
+
+
+def gps_to_posix_ns(week: int, tow: float, leap_s: int) -> tuple[int, int]:
+    """POSIX (UTC) time of a GPS week and time of week [s] as whole seconds and nanoseconds.
+
+    Whole seconds are added as integers so that the receiver's time tag keeps its nanoseconds
+    (a float of POSIX seconds would resolve only 0.24 us).  ``leap_s = 0`` converts a UTC week
+    and time of week (u-blox TIM-TP in the UTC time base).
+    """
+    whole = math.floor(tow)
+    nanosec = round((tow - whole) * 1e9)
+    if nanosec >= 1_000_000_000:  # rounding carried into the next second
+        whole, nanosec = whole + 1, nanosec - 1_000_000_000
+    return (int(GPS_EPOCH_POSIX) + int(week) * int(SECONDS_PER_WEEK) + int(whole) - leap_s,
+            int(nanosec))
+
+
+def utc_to_posix(utc: _dt.datetime) -> float:
+    """POSIX seconds of a naive UTC datetime."""
+    return (utc - _POSIX_EPOCH).total_seconds()
+
+
+def utc_near(time_of_day: _dt.time, ref: _dt.datetime) -> _dt.datetime:
+    """The UTC datetime with this time of day closest to ``ref`` (dates an NMEA GGA time,
+    across midnight too)."""
+    candidate = _dt.datetime.combine(ref.date(), time_of_day)
+    shift = round((ref - candidate).total_seconds() / 86400.0)
+    return candidate + _dt.timedelta(days=shift)
+
+
+def stream_time(record) -> float | None:
+    """GPS time [s] a decoded receiver record is tagged with, for replay pacing; None for
+    untimed records."""
+    if isinstance(record, _obs.RawEpoch):
+        return record.t_gps
+    if isinstance(record, _obs.PvtFix) and math.isfinite(record.t_gps):
+        return record.t_gps
+    if isinstance(record, _obs.NmeaRecommended) and record.utc is not None:
+        return utc_to_gps(record.utc)
+    return None
+
+
+def system_week(t_gps: float, system: str) -> tuple[int, float]:
+    """Week number and seconds of week of a GPS time [s] in ``system``'s own time scale (BDT
+    for BeiDou, GST week numbering for Galileo, GPST otherwise)."""
+    if system == BEIDOU:  # BDT = GPST - 14 s, week counted from 2006-01-01 (BDS ICD §3.3)
+        week, sow = divmod(t_gps + BDT_MINUS_GPST_S, SECONDS_PER_WEEK)
+        return int(week) - BDT_WEEK_OFFSET, sow
+    week, sow = divmod(t_gps, SECONDS_PER_WEEK)
+    return int(week) - (GST_WEEK_OFFSET if system == GALILEO else 0), sow
+
+
+def glonass_time_of_day(t_gps: float, leap: int) -> float:
+    """Seconds of the GLONASS (Moscow, UTC(SU) + 3 h) day of a GPS time [s], with GPST - UTC =
+    ``leap`` [s] (the inverse of :func:`glonass_tod_to_gps`)."""
+    return (t_gps - leap + GLONASS_MINUS_UTC_S) % 86400.0
 
 
 def galileo_to_gps(gst_week, tow):

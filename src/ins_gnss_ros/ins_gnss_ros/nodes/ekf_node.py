@@ -58,7 +58,7 @@ from ..nav.sensor_errors import GRADES, BlockNoise, FilterNoise, filter_noise
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import (held_increments, increment_problem, nav_state_from_msg, to_quaternion,
                       to_vector3, vec)
-from .gnss_convert import kepler_from_msg, raw_epoch_from_msg
+from .gnss_messages import kepler_from_msg, raw_epoch_from_msg
 
 MODES = {ALIGNING: FilterStatus.MODE_ALIGNING, NAVIGATING: FilterStatus.MODE_NAVIGATING,
          DEAD_RECKONING: FilterStatus.MODE_DEAD_RECKONING}

@@ -39,20 +39,15 @@ from rclpy._rclpy_pybind11 import RCLError
 from ins_gnss_msgs.msg import GnssEphemeris, GnssObservations, InsState
 from sensor_msgs.msg import NavSatFix, NavSatStatus, TimeReference
 
-from ..gnss import ephemeris_data
-from ..gnss.clock_model import OCXO, TCXO
-from ..gnss.constants import GALILEO, GPS
-from ..gnss.differences import NoiseModel
-from ..gnss.multipath import MultipathModel
-from ..gnss.simulator import (GnssSimulator, SimulatorConfig, default_start, solve_fix,
-                               time_reference)
-from ..gnss.time import gps_to_utc, leap_seconds
+from ..gnss import (GALILEO, GPS, OCXO, TCXO, GnssSimulator, HalfCycleTracker, MultipathModel,
+                    NoiseModel, SimulatorConfig, antenna_positions, default_start, ephemeris_data,
+                    gps_to_posix, gps_to_utc, leap_seconds, solve_fix, time_reference)
 from ..io import sec_to_stamp, stamp_to_sec
 from ..sim import scenarios
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import quat, vec
-from .gnss_convert import ephemeris_msg, gps_to_posix
-from .gnss_convert import observations_msg as raw_observations_msg
+from .gnss_messages import (ephemeris_msg, fix_msg, observations_msg, service_bits,
+                            time_reference_msg, twist_msg)
 
 NS = 1_000_000_000
 #: A truth stamp this close before the next epoch of the grid is taken as that epoch [ns]: stamps
@@ -60,38 +55,6 @@ NS = 1_000_000_000
 #: POSIX seconds to 0.24 µs), and without it an epoch would wait for the next truth sample or,
 #: with truth at the epoch rate, be lost.
 EPOCH_TOLERANCE_NS = 1_000_000
-
-
-def observations_msg(epoch, stamp: Time, newly_valid) -> GnssObservations:
-    """GnssObservations of one antenna's SimEpoch; ``newly_valid`` flags (per observation) a phase
-    whose half-cycle ambiguity was resolved at this epoch (reported as a loss of lock)."""
-    return raw_observations_msg(epoch.raw, epoch.antenna, stamp, f"gnss_antenna_{epoch.antenna}",
-                                [bool(a or b) for a, b in zip(epoch.loss_of_lock, newly_valid)])
-
-
-def fix_msgs(fix, stamp: Time, systems) -> tuple[NavSatFix, TwistWithCovarianceStamped]:
-    """NavSatFix (degrees, ENU covariance as REP-145/NavSatFix define) and the ENU velocity."""
-    service = (NavSatStatus.SERVICE_GPS if GPS in systems else 0) | (
-        NavSatStatus.SERVICE_GALILEO if GALILEO in systems else 0)
-    nav = NavSatFix(header=_header(stamp, "gnss"), latitude=math.degrees(fix.lat),
-                    longitude=math.degrees(fix.lon), altitude=float(fix.h))
-    nav.status = NavSatStatus(status=NavSatStatus.STATUS_FIX, service=service)
-    nav.position_covariance = [float(v) for v in np.asarray(fix.covariance_enu).ravel()]
-    nav.position_covariance_type = NavSatFix.COVARIANCE_TYPE_KNOWN
-    twist = TwistWithCovarianceStamped(header=_header(stamp, "gnss"))
-    twist.twist.twist.linear.x, twist.twist.twist.linear.y, twist.twist.twist.linear.z = (
-        float(v) for v in fix.vel_enu)
-    cov = np.full((6, 6), 0.0)
-    cov[:3, :3] = fix.vel_covariance_enu
-    cov[3, 3] = cov[4, 4] = cov[5, 5] = -1.0   # angular rate not measured
-    twist.twist.covariance = [float(v) for v in cov.ravel()]
-    return nav, twist
-
-
-def _header(stamp: Time, frame_id: str):
-    from std_msgs.msg import Header
-
-    return Header(stamp=stamp, frame_id=frame_id)
 
 
 class GnssSimulatorNode(NavNode):
@@ -154,10 +117,10 @@ class GnssSimulatorNode(NavNode):
     def __init__(self, **kwargs):
         super().__init__("gnss_simulator", **kwargs)
         p = self.p
-        arms = p["lever_arms"]
-        if len(arms) % 3 or not 1 <= len(arms) // 3 <= 4:
-            raise ParameterError("parameter 'lever_arms': 3, 6, 9 or 12 values (1-4 antennas) "
-                                 f"expected, got {len(arms)}")
+        try:
+            lever_arms = tuple(map(tuple, antenna_positions(p["lever_arms"], 1).tolist()))
+        except ValueError as err:
+            raise ParameterError(f"parameter 'lever_arms': {err}") from None
         systems = tuple(s for s, on in ((GPS, p["gps"]), (GALILEO, p["galileo"])) if on)
         if not systems:
             raise ParameterError("parameters 'gps' and 'galileo': enable at least one system")
@@ -166,7 +129,7 @@ class GnssSimulatorNode(NavNode):
                                     p["multipath.tau_s"], p["multipath.tau_s"])
                      if p["multipath.enabled"] else None)
         self.config = SimulatorConfig(
-            lever_arms=tuple(tuple(arms[i:i + 3]) for i in range(0, len(arms), 3)),
+            lever_arms=lever_arms,
             shared_clock=p["shared_clock"], systems=systems,
             elevation_mask=math.radians(p["elevation_mask_deg"]),
             noise=NoiseModel(p["noise.phase_m"], p["noise.phase_m"], p["noise.code_m"],
@@ -184,7 +147,7 @@ class GnssSimulatorNode(NavNode):
         self.last_second = None
         self.epochs = 0
         self.x0 = None
-        self.valid_phase: dict = {}
+        self.lock = HalfCycleTracker()
         self.pub_obs = self.publisher(GnssObservations, "gnss/observations", SENSOR_QOS)
         self.pub_fix = self.publisher(NavSatFix, "gnss/fix", SENSOR_QOS)
         self.pub_vel = self.publisher(TwistWithCovarianceStamped, "gnss/vel", SENSOR_QOS)
@@ -291,22 +254,15 @@ class GnssSimulatorNode(NavNode):
                 self.pub_eph.publish(ephemeris_msg(eph, stamp, epochs[0].raw.leap_s))
             self.last_ephemeris_t = t_gps
         for epoch in epochs:
-            newly_valid = []
-            for o in epoch.raw.obs:
-                key = (epoch.antenna, o.sat_id)
-                newly_valid.append(o.half_cycle_valid and not self.valid_phase.get(key, False))
-                self.valid_phase[key] = o.half_cycle_valid
-            for key in [k for k in self.valid_phase if k[0] == epoch.antenna and
-                        k[1] not in {o.sat_id for o in epoch.raw.obs}]:
-                del self.valid_phase[key]
-            self.pub_obs.publish(observations_msg(epoch, stamp, newly_valid))
+            self.pub_obs.publish(observations_msg(
+                epoch.raw, epoch.antenna, stamp, f"gnss_antenna_{epoch.antenna}",
+                self.lock.update(epoch.antenna, epoch.raw, epoch.loss_of_lock)))
         second = math.floor(t_gps + 1e-6)
         if second != self.last_second and abs(t_gps - second) < 1e-6:
             _, t_pulse = time_reference(epochs[0], self.p["pps_sigma_s"], self.rng_pps)
             leap = epochs[0].raw.leap_s
-            self.pub_time.publish(TimeReference(header=_header(stamp, "gnss"),
-                                                time_ref=sec_to_stamp(gps_to_posix(t_pulse, leap)),
-                                                source="gps"))
+            self.pub_time.publish(time_reference_msg(
+                stamp, sec_to_stamp(gps_to_posix(t_pulse, leap)), "gnss", "gps"))
         self.last_second = second
         if self.epochs % self.p["fix_every"] == 0:
             fix = solve_fix(epochs[0], self.sim, self.x0)
@@ -315,10 +271,13 @@ class GnssSimulatorNode(NavNode):
                 self.x0 = None
             else:
                 self.x0 = fix.xyz   # the next solution starts from this one
-                nav, twist = fix_msgs(fix, stamp, self.config.systems)
-                self.pub_fix.publish(nav)
+                self.pub_fix.publish(fix_msg(
+                    stamp, "gnss", fix.lat, fix.lon, fix.h, NavSatStatus.STATUS_FIX,
+                    service_bits(self.config.systems), fix.covariance_enu,
+                    NavSatFix.COVARIANCE_TYPE_KNOWN))
                 if np.all(np.isfinite(fix.vel_enu)):
-                    self.pub_vel.publish(twist)
+                    self.pub_vel.publish(twist_msg(fix.vel_enu, fix.vel_covariance_enu, stamp,
+                                                   "gnss"))
         self.epochs += 1
 
 

@@ -28,14 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import GALILEO, GPS
+from ..constants import FIT_HALF_WIDTH_S, GALILEO, GPS
 from ..ephemeris import KeplerEphemeris
 
 #: The stored set.
 DATA_FILE = Path(__file__).with_name("walk_0827.json")
-#: Half-width of the interval around toe in which the broadcast fit is valid [s]
-#: (IS-GPS-200 §20.3.4.4, fit interval 4 h; Galileo I/NAV is used likewise).
-FIT_HALF_WIDTH_S = 7200.0
 
 
 @dataclass(frozen=True)
@@ -154,5 +151,4 @@ def main(argv=None) -> int:
     return 0
 
 
-__all__ = ["BroadcastSet", "DATA_FILE", "FIT_HALF_WIDTH_S", "extract", "load",
-           "rotate_about_earth_axis"]
+__all__ = ["BroadcastSet", "DATA_FILE", "extract", "load", "rotate_about_earth_axis"]
