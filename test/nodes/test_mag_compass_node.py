@@ -22,7 +22,7 @@ from ins_gnss_ros.nav.conventions import azimuth_from_yaw, wrap_pi
 from ins_gnss_ros.nav.rotations import quat_from_euler, quat_to_euler
 from ins_gnss_ros.sim.mag_sim import Dipole, MagErrors, simulate_magnetometer
 from ins_gnss_ros.sim.trajectory import CarMotion, Route, generate
-from ins_gnss_ros.trial import bag as bagio
+from ins_gnss_ros import io as bagio
 from ins_gnss_ros.trial.replay import replay
 from ins_gnss_ros.trial.simulate import simulate
 
@@ -411,7 +411,7 @@ def drive(tmp_path_factory):
 
 
 def _by_stamp(path, topic):
-    return {bagio.stamp_ns(m.msg): m.msg for m in bagio.read_bag(path, [topic])}
+    return {bagio.msg_stamp_ns(m.msg): m.msg for m in bagio.read_bag(path, [topic])}
 
 
 def test_clean_drive_every_heading_once_the_filter_has_corrected_the_strapdown(drive):
