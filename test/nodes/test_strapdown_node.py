@@ -53,13 +53,13 @@ def test_stationary_and_late_correction_recover_truth(node):
     corr.header.stamp = sec_to_stamp(t0 + 0.5)
     corr.position_error.y = 10.0
     node.on_correction(corr)
-    state = node.ins.state
+    state = node.loop.state
     rm, _ = radii(LAT)
     assert state.t == pytest.approx(t0 + 1.0)
     assert (state.lat - LAT) * rm == pytest.approx(0.0, abs=1e-4)
     assert np.degrees(state.lon) == pytest.approx(30.0, abs=1e-9)
     assert np.abs(state.v_enu).max() < 1e-5
-    assert node.correction_sequence == 1
+    assert node.loop.correction_sequence == 1
 
 
 def test_bad_increments_are_counted_not_used(node):
@@ -69,7 +69,7 @@ def test_bad_increments_are_counted_not_used(node):
     bad.delta_angle.x = float("nan")
     node.on_delta(bad)
     node.on_delta(_delta(5.0))  # backwards in time
-    assert node.ins.state.t == pytest.approx(5.0)
+    assert node.loop.state.t == pytest.approx(5.0)
     assert sum(node.diag.counts.values()) == 2
 
 
@@ -86,8 +86,8 @@ def test_gap_is_bridged_by_held_rates_and_a_long_gap_loses_the_imu(node):
         node.on_delta(_delta(t0 + k * DT))
     node.on_delta(_delta(t0 + 1.0))                  # 0.49 s of increments lost
     assert node.diag.counts["gap in increments: bridged by holding the rates"] == 1
-    assert node.ins.state.t == pytest.approx(t0 + 1.0)
-    assert np.abs(node.ins.state.v_enu).max() < 1e-3  # without holding: 4.8 m/s of free fall
+    assert node.loop.state.t == pytest.approx(t0 + 1.0)
+    assert np.abs(node.loop.state.v_enu).max() < 1e-3  # without holding: 4.8 m/s of free fall
     assert published[-1].mode == InsState.MODE_DEAD_RECKONING
     node.on_delta(_delta(t0 + 5.0))                  # 4 s lost: the IMU was lost
     assert node.diag.counts["imu lost: gap in increments beyond max_imu_gap_s, new run"] == 1

@@ -18,48 +18,31 @@ increment, as if restarted (kept history and older corrections dropped), and rep
 
 from __future__ import annotations
 
-from collections import deque
-from dataclasses import dataclass, field
-
 import numpy as np
 from ins_gnss_msgs.msg import ImuDelta, InsCorrection, InsState
 
 from ..io import new, stamp_to_sec
 from ..nav.conventions import yaw_from_azimuth
+from ..nav.increments import SensorErrors, increment_problem
 from ..nav.rotations import quat_from_euler
-from ..nav.strapdown import NavState, Strapdown
+from ..nav.strapdown import NavState
+from ..nav.strapdown_sync import ClosedLoopStrapdown, Correction
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, run
-from .convert import fill_ins_state, held_increments, increment_problem, set_vector3, vec
+from .convert import fill_ins_state, set_vector3, vec
+
+#: ClosedLoopStrapdown events -> diagnostics.
+_EVENTS = {"lost": "imu lost: gap in increments beyond max_imu_gap_s, new run",
+           "bridged": "gap in increments: bridged by holding the rates",
+           "stale": "increment stamp not after the previous one: dropped"}
 
 
-@dataclass
-class SensorCorrection:
-    """Applied estimates: measured increment = (1 + s) * true + b * dt, per axis."""
-
-    gyro_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    accel_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    gyro_scale: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    accel_scale: np.ndarray = field(default_factory=lambda: np.zeros(3))
-
-    def compensate(self, dtheta, dv, dt):
-        return ((dtheta - self.gyro_bias * dt) / (1.0 + self.gyro_scale),
-                (dv - self.accel_bias * dt) / (1.0 + self.accel_scale))
-
-    def add(self, msg: InsCorrection) -> "SensorCorrection":
-        return SensorCorrection(self.gyro_bias + vec(msg.gyro_bias),
-                                self.accel_bias + vec(msg.accel_bias),
-                                self.gyro_scale + vec(msg.gyro_scale_factor),
-                                self.accel_scale + vec(msg.accel_scale_factor))
-
-
-@dataclass
-class _Step:
-    """One mechanised interval: the raw increments and the state they produced."""
-
-    dtheta: np.ndarray
-    dv: np.ndarray
-    dt: float
-    state: NavState
+def correction_from_msg(msg: InsCorrection) -> Correction:
+    """ins_gnss_msgs/InsCorrection -> Correction."""
+    stamp = msg.header.stamp
+    return Correction(stamp.sec * 1_000_000_000 + stamp.nanosec, msg.sequence,
+                      vec(msg.position_error), vec(msg.velocity_error), vec(msg.attitude_error),
+                      SensorErrors(vec(msg.gyro_bias), vec(msg.accel_bias),
+                                   vec(msg.gyro_scale_factor), vec(msg.accel_scale_factor)))
 
 
 class StrapdownNode(NavNode):
@@ -91,123 +74,57 @@ class StrapdownNode(NavNode):
                              yaw_from_azimuth(np.radians(p["init.heading_deg"])))
         state0 = NavState(np.radians(p["init.latitude_deg"]), np.radians(p["init.longitude_deg"]),
                           p["init.altitude_m"], np.array(p["init.velocity_enu"], float), q0, np.nan)
-        # The vertical channel is left free here: the filter's height aiding closes that loop.
-        self.ins = Strapdown(state0)
-        self.sensor = SensorCorrection()
-        self.history: deque[_Step] = deque()
-        self.last_correction_t = -np.inf
-        self.t_start = np.inf  # start of the first increment of this run, s
-        self.correction_sequence = 0
-        self.lost = False  # the IMU was lost (gap beyond max_imu_gap_s), no correction since
+        self.loop = ClosedLoopStrapdown(state0, p["history_s"], p["max_imu_gap_s"],
+                                        p["apply_sensor_corrections"])
         self.count = 0
-        self.last_compensated = None  # (dtheta, dv, dt) of the latest step, sensor-corrected
         self.pub = self.publisher(InsState, "ins/state", SENSOR_QOS)
         self.subscribe(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS)
         self.subscribe(InsCorrection, "ins/correction", self.on_correction, STATE_QOS)
 
-    # -- increments ----------------------------------------------------------------------------
     def on_delta(self, msg: ImuDelta) -> None:
-        problem = increment_problem(msg)
+        a, v = msg.delta_angle, msg.delta_velocity
+        problem = increment_problem((a.x, a.y, a.z), (v.x, v.y, v.z), msg.dt)
         if problem is not None:
             self.diag.count(problem)
             return
-        t = stamp_to_sec(msg.header.stamp)
-        dtheta, dv = vec(msg.delta_angle), vec(msg.delta_velocity)
-        state = self.ins.state
-        interval = t - state.t
-        if interval > self.p["max_imu_gap_s"] + msg.dt:
-            self.diag.count("imu lost: gap in increments beyond max_imu_gap_s, new run")
-            self.lost = not np.isnan(state.t)
-            self.history.clear()
-            state = NavState(state.lat, state.lon, state.h, state.v_enu, state.q_nb, np.nan)
-        steps = [(t, dtheta, dv)]
-        if np.isnan(state.t):  # first increment (of this run) fixes the time axis
-            self.t_start = t - msg.dt
-            self.ins.state = NavState(state.lat, state.lon, state.h, state.v_enu, state.q_nb, t - msg.dt)
-        elif t <= state.t:
-            self.diag.count("increment stamp not after the previous one: dropped")
-            return
-        elif interval - msg.dt > 0.5 * msg.dt:
-            # Hold the increment's rates over the interval its stamp says it covers, in steps
-            # of its length as the ekf does (a correction may refer to an epoch in the gap).
-            self.diag.count("gap in increments: bridged by holding the rates")
-            steps = zip(*held_increments(t, dtheta, dv, msg.dt, interval))
-        for t_k, dtheta_k, dv_k in steps:
-            self._step(dtheta_k, dv_k, t_k - self.ins.state.t)
+        event = self.loop.add(stamp_to_sec(msg.header.stamp), vec(a), vec(v), msg.dt)
+        if event is not None:
+            self.diag.count(_EVENTS[event])
+            if event == "stale":
+                return
         self.count += 1
         if self.count % self.p["publish_every"] == 0:
             self.publish_state()
 
-    def _step(self, dtheta, dv, dt) -> None:
-        comp_dtheta, comp_dv = self._compensate(dtheta, dv, dt)
-        self.ins.step(comp_dtheta, comp_dv, dt)
-        self.last_compensated = (comp_dtheta, comp_dv, dt)
-        self.history.append(_Step(dtheta, dv, dt, self.ins.state))
-        while self.history and self.history[-1].state.t - self.history[0].state.t > self.p["history_s"]:
-            self.history.popleft()
-
-    def _compensate(self, dtheta, dv, dt):
-        if self.p["apply_sensor_corrections"]:
-            return self.sensor.compensate(dtheta, dv, dt)
-        return dtheta, dv
-
-    # -- closed loop ---------------------------------------------------------------------------
     def on_correction(self, msg: InsCorrection) -> None:
         errors = [vec(msg.position_error), vec(msg.velocity_error), vec(msg.attitude_error)]
         if not all(np.all(np.isfinite(e)) for e in errors):
             self.diag.count("non-finite correction rejected")
             return
-        t_c = stamp_to_sec(msg.header.stamp)
-        if not self.history or t_c < self.t_start:
-            # ins/correction is TRANSIENT_LOCAL: a restarted node is first handed the corrections
-            # of its previous run, which refer to another state. Applied to this one they would
-            # be wrong while carrying the filter's current sequence (published as synchronised).
+        event = self.loop.correct(correction_from_msg(msg))
+        if event == "older than this run":
             self.diag.count("correction older than this run ignored", log=False)
-            return
-        # Index of the step whose end state is the correction epoch (half a step tolerance),
-        # searched from the newest: the filter lags the strapdown by a few steps only.
-        replay_from = None
-        for i in range(len(self.history) - 1, -1, -1):
-            step = self.history[i]
-            if abs(step.state.t - t_c) <= 0.5 * step.dt:
-                replay_from = i
-                break
-            if step.state.t < t_c:
-                break
-        if replay_from is None:
-            self.diag.count("correction epoch outside the kept history: applied to the latest state")
-            self.ins.correct(*errors)
-            self.sensor = self.sensor.add(msg)
-        else:
-            later = list(self.history)[replay_from + 1:]
-            for _ in later:
-                self.history.pop()
-            self.ins.state = self.history[-1].state
-            self.ins.correct(*errors)
-            self.history[-1].state = self.ins.state
-            self.sensor = self.sensor.add(msg)
-            for step in later:
-                self._step(step.dtheta, step.dv, step.dt)
-        self.correction_sequence = msg.sequence
-        self.last_correction_t = t_c
-        self.lost = False
+        elif event is not None:
+            self.diag.count("correction epoch outside the kept history: applied to the latest "
+                            "state")
 
     def publish_state(self) -> None:
-        state = self.ins.state
+        loop = self.loop
+        state = loop.state
         msg = new(InsState)
         msg.header.frame_id = "map"
         fill_ins_state(msg, state)
-        dtheta, dv, dt = self.last_compensated
+        dtheta, dv, dt = loop.last_compensated
         set_vector3(msg.angular_velocity, dtheta / dt)
         set_vector3(msg.specific_force, dv / dt)
-        set_vector3(msg.gyro_bias, self.sensor.gyro_bias)
-        set_vector3(msg.accel_bias, self.sensor.accel_bias)
-        set_vector3(msg.gyro_scale_factor, self.sensor.gyro_scale)
-        set_vector3(msg.accel_scale_factor, self.sensor.accel_scale)
-        silent = state.t - self.last_correction_t > self.p["dead_reckoning_after_s"]
-        msg.mode = InsState.MODE_INVALID if self.lost else (
+        set_vector3(msg.gyro_bias, loop.sensor.gyro_bias)
+        set_vector3(msg.accel_bias, loop.sensor.accel_bias)
+        set_vector3(msg.gyro_scale_factor, loop.sensor.gyro_scale)
+        set_vector3(msg.accel_scale_factor, loop.sensor.accel_scale)
+        silent = state.t - loop.last_correction_t > self.p["dead_reckoning_after_s"]
+        msg.mode = InsState.MODE_INVALID if loop.lost else (
             InsState.MODE_DEAD_RECKONING if silent else InsState.MODE_NAVIGATING)
-        msg.correction_sequence = self.correction_sequence
+        msg.correction_sequence = loop.correction_sequence
         self.pub.publish(msg)
 
 
