@@ -283,10 +283,10 @@ def test_imu_gap_is_bridged_and_a_long_one_restarts_the_alignment(ros_context):
     assert np.all(np.sqrt(np.diag(node.navigator.ekf.P)[S["vel"]]) > sigma_v + 0.4)
     run(5.52, 8.0)
     assert np.abs(node.navigator.nav.v_enu).max() < 0.1  # held gravity: no free fall
-    sequence = node.sequence
+    sequence = node.sync.sequence
     run(12.0, 12.01)                                  # 4 s lost: the IMU was lost
     assert node.diag.counts["imu lost: gap in increments beyond max_imu_gap_s, aligning again"] == 1
-    assert node.navigator.nav is None and node.sequence == sequence + 1
+    assert node.navigator.nav is None and node.sync.sequence == sequence + 1
     run(12.01, 15.0)
     assert node.navigator.nav is not None  # aligned again on the new data
     node.destroy_node()

@@ -274,9 +274,10 @@ class StrapdownSync:
 
         Returns
         -------
-        (Correction, bool) or None
-            The correction and whether it had to fall back on the newest state (the strapdown was
-            out of step: no state matched for ``resend_after`` s).
+        (Correction or None, bool) or None
+            None when no kept state compares; else the correction (None if the filter's solution
+            cannot be moved to the state's epoch) and whether it had to fall back on the newest
+            state (the strapdown was out of step: no state matched for ``resend_after`` s).
         """
         match = self._match(int(round(t * 1e9)))
         resent = False
@@ -292,7 +293,7 @@ class StrapdownSync:
         strapdown, applied = self.state_of(match[2])
         target = state_at(strapdown.t)
         if target is None:
-            return None
+            return None, resent
         dp, dv, phi = nav_error(strapdown, target)
         sensor = {}
         for name, blocks in SENSOR_BLOCKS.items():

@@ -14,11 +14,9 @@ process. Navigation logic must therefore use message stamps, never the wall cloc
 
 from __future__ import annotations
 
-import math
 import os
 import sys
 from collections import Counter, defaultdict, deque
-from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import rclpy
@@ -33,6 +31,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..io import ns_to_stamp
+from ..params import Param, ParameterError
 
 # Sensor streams: reliable so that our own pipeline never silently drops an IMU increment (a
 # reliable publisher still serves best-effort subscribers such as rviz), deep enough for 1 s of
@@ -55,64 +54,25 @@ STATE_QOS = QoSProfile(
 )
 
 
-class ParameterError(ValueError):
-    """A parameter value outside its documented range or type."""
-
-
-@dataclass(frozen=True)
-class Param:
-    """One declared parameter: name, default, what it means (with unit) and its admissible range.
-
-    ``low``/``high`` bound numbers (and every element of a numeric list), ``choices`` bounds
-    strings, ``length`` fixes the length of a list (e.g. 3 for a lever arm).
-    """
-
-    name: str
-    default: Any
-    description: str
-    low: float | None = None
-    high: float | None = None
-    choices: tuple[str, ...] | None = None
-    length: int | None = None
-
-    def descriptor(self) -> ParameterDescriptor:
-        d = ParameterDescriptor(name=self.name, description=self.description)
-        constraints = []
-        if self.low is not None or self.high is not None:
-            constraints.append(f"range [{self.low}, {self.high}]")
-            # ROS enforces scalar ranges itself; lists are checked in validate().
-            if isinstance(self.default, float):
-                d.floating_point_range = [
-                    FloatingPointRange(from_value=float(self.low), to_value=float(self.high))
-                ]
-            elif isinstance(self.default, int) and not isinstance(self.default, bool):
-                d.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high))]
-        if self.choices:
-            constraints.append("one of " + ", ".join(self.choices))
-        if self.length is not None:
-            constraints.append(f"{self.length} elements")
-        d.additional_constraints = "; ".join(constraints)
-        return d
-
-    def validate(self, value: Any) -> Any:
-        """Return ``value`` if admissible, else raise :class:`ParameterError` naming the parameter."""
-        values = list(value) if isinstance(value, (list, tuple)) else [value]
-        if self.length is not None and len(values) != self.length:
-            raise ParameterError(f"parameter '{self.name}': expected {self.length} values, got {value!r}")
-        for v in values:
-            if isinstance(v, (int, float)) and not isinstance(v, bool):
-                if not math.isfinite(v):
-                    raise ParameterError(f"parameter '{self.name}': {value!r} is not finite")
-                if (self.low is not None and v < self.low) or (self.high is not None and v > self.high):
-                    raise ParameterError(
-                        f"parameter '{self.name}' = {value!r} is outside [{self.low}, {self.high}]"
-                        f" ({self.description})"
-                    )
-        if self.choices is not None and value not in self.choices:
-            raise ParameterError(
-                f"parameter '{self.name}' = {value!r} is not one of {', '.join(self.choices)}"
-            )
-        return value
+def descriptor(spec: Param) -> ParameterDescriptor:
+    """The ROS descriptor of a parameter spec (ROS enforces scalar ranges itself; lists are
+    checked by :meth:`Param.validate`)."""
+    d = ParameterDescriptor(name=spec.name, description=spec.description)
+    constraints = []
+    if spec.low is not None or spec.high is not None:
+        constraints.append(f"range [{spec.low}, {spec.high}]")
+        if isinstance(spec.default, float):
+            d.floating_point_range = [
+                FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high))
+            ]
+        elif isinstance(spec.default, int) and not isinstance(spec.default, bool):
+            d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high))]
+    if spec.choices:
+        constraints.append("one of " + ", ".join(spec.choices))
+    if spec.length is not None:
+        constraints.append(f"{spec.length} elements")
+    d.additional_constraints = "; ".join(constraints)
+    return d
 
 
 class Diagnostics:
@@ -219,7 +179,7 @@ class NavNode(Node):
         self.bus = bus
         self.p: dict[str, Any] = {}
         for spec in self.PARAMS:
-            self.declare_parameter(spec.name, spec.default, spec.descriptor())
+            self.declare_parameter(spec.name, spec.default, descriptor(spec))
             self.p[spec.name] = spec.validate(self.get_parameter(spec.name).value)
         self.diag = Diagnostics(self)
 

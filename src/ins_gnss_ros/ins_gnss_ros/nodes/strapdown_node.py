@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from ins_gnss_msgs.msg import ImuDelta, InsCorrection, InsState
 
-from ..io import new, stamp_to_sec
+from ..io import new, stamp_to_ns, stamp_to_sec
 from ..nav.conventions import yaw_from_azimuth
 from ..nav.increments import SensorErrors, increment_problem
 from ..nav.rotations import quat_from_euler
@@ -38,8 +38,7 @@ _EVENTS = {"lost": "imu lost: gap in increments beyond max_imu_gap_s, new run",
 
 def correction_from_msg(msg: InsCorrection) -> Correction:
     """ins_gnss_msgs/InsCorrection -> Correction."""
-    stamp = msg.header.stamp
-    return Correction(stamp.sec * 1_000_000_000 + stamp.nanosec, msg.sequence,
+    return Correction(stamp_to_ns(msg.header.stamp), msg.sequence,
                       vec(msg.position_error), vec(msg.velocity_error), vec(msg.attitude_error),
                       SensorErrors(vec(msg.gyro_bias), vec(msg.accel_bias),
                                    vec(msg.gyro_scale_factor), vec(msg.accel_scale_factor)))

@@ -1,0 +1,167 @@
+"""The aiding front end: sensor readings -> navigator measurements, one policy for every path.
+
+What the filter is told about each aiding input is decided here, once: which readings are
+refused (no fix, non-finite, beyond any vehicle), what variance a reading without one gets, the
+variance floors, the receiver's velocity latency, how a magnetic heading is referred to true
+north, and when GNSS ranges replace fix and velocity (tight coupling, seed 004 section 2.1).
+The ``ekf`` node feeds it the topics' messages as plain values; the offline replay feeds it the
+same values from a bag (the configuration both build from the ``ekf`` parameters:
+:mod:`ins_gnss_ros.nav.filter_config`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .navigator import GnssFix, GnssVelocity, HeadingFix, Navigator, SpeedLog
+
+__all__ = ["Aiding", "AidingPolicy"]
+
+#: Variance given to a fix that carries no covariance, m^2 per axis: a single-point fix (5 m).
+UNKNOWN_FIX_VARIANCE = 25.0
+#: Heights this filter navigates at, m (a fix outside is corrupt; the integrity logic would
+#: otherwise force it in after a while).
+HEIGHT_RANGE = (-1000.0, 1e5)
+#: Fastest plausible GNSS velocity, m/s (beyond any vehicle this filter is for).
+MAX_SPEED = 1000.0
+
+
+@dataclass(frozen=True)
+class AidingPolicy:
+    """How aiding readings become measurements.
+
+    Attributes
+    ----------
+    position_sigma_floor : float
+        Floor of the GNSS position sigma per axis, m.
+    velocity_sigma_floor : float
+        Floor of the GNSS velocity sigma per axis, m/s.
+    velocity_delay : float
+        Latency of the receiver's velocity solution: a velocity stamped t is applied at
+        t - delay, s.
+    coupling : str
+        "loose" (fix + velocity), "tight" (ranges) or "auto" (ranges below ``min_satellites``).
+    min_satellites : int
+        Auto coupling: fewer usable satellites than this in an epoch switch to ranges.
+    """
+
+    position_sigma_floor: float = 0.02
+    velocity_sigma_floor: float = 0.02
+    velocity_delay: float = 0.0
+    coupling: str = "loose"
+    min_satellites: int = 5
+
+    @classmethod
+    def from_params(cls, p: dict) -> "AidingPolicy":
+        """The policy of the ``ekf`` node's parameters."""
+        return cls(p["gnss.position_sigma_floor_m"], p["gnss.velocity_sigma_floor_mps"],
+                   p["gnss.velocity_delay_s"], p["coupling"], p["auto.min_satellites"])
+
+
+def _floored(cov: np.ndarray, sigma_floor: float) -> np.ndarray:
+    floor = sigma_floor ** 2
+    return cov + np.diag(np.maximum(floor - np.diag(cov), 0.0))
+
+
+class Aiding:
+    """Feeds a :class:`Navigator` with aiding readings under one :class:`AidingPolicy`.
+
+    Every method takes one reading (plain values, SI units, ENU), hands the navigator the
+    measurement it makes or refuses it, and says so through ``report(text, log)`` (the caller's
+    diagnostics counter). They return True when the navigator got a measurement.
+
+    Parameters
+    ----------
+    navigator : Navigator
+    policy : AidingPolicy
+    report : callable
+        ``report(text, log=True)``: count an event (``log=False``: expected, not worth a log
+        line).
+    """
+
+    def __init__(self, navigator: Navigator, policy: AidingPolicy,
+                 report: Callable[..., None]):
+        self.navigator, self.policy, self.report = navigator, policy, report
+        self.use_ranges = False  # the last observation epoch chose tight coupling
+        self.datum = None  # (lat rad, lon rad, h m) of the first fix used
+
+    def fix(self, t: float, lat_deg: float, lon_deg: float, h: float, cov: np.ndarray,
+            has_fix: bool, covariance_known: bool) -> bool:
+        """A GNSS position fix at t (s): geodetic degrees, ellipsoidal height (m), its ENU
+        covariance (m^2; ``covariance_known`` False when the receiver gave none)."""
+        if self.use_ranges:
+            return False
+        if not has_fix:
+            self.report("gnss/fix without a fix ignored", log=False)
+            return False
+        if not (np.isfinite([lat_deg, lon_deg, h]).all() and np.isfinite(cov).all()):
+            self.report("non-finite gnss/fix rejected")
+            return False
+        if not HEIGHT_RANGE[0] <= h <= HEIGHT_RANGE[1]:
+            self.report("implausible gnss/fix altitude rejected")
+            return False
+        if not covariance_known or cov[0, 0] <= 0.0:
+            cov = np.eye(3) * UNKNOWN_FIX_VARIANCE
+            self.report("gnss/fix without covariance: 5 m assumed", log=False)
+        cov = _floored(cov, self.policy.position_sigma_floor)
+        lat, lon = np.radians(lat_deg), np.radians(lon_deg)
+        if self.datum is None:
+            self.datum = (lat, lon, h)
+        self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov))
+        return True
+
+    def velocity(self, t: float, v_enu: np.ndarray, cov: np.ndarray) -> bool:
+        """A GNSS velocity (m/s, ENU) stamped t (s) with its covariance (m^2/s^2)."""
+        if self.use_ranges:
+            return False
+        if not (np.isfinite(v_enu).all() and np.isfinite(cov).all()):
+            self.report("non-finite gnss/vel rejected")
+            return False
+        if np.linalg.norm(v_enu) > MAX_SPEED:
+            self.report("implausible gnss/vel rejected")
+            return False
+        cov = _floored(cov, self.policy.velocity_sigma_floor)
+        self.navigator.add_measurement(
+            GnssVelocity(t - self.policy.velocity_delay, v_enu, cov))
+        return True
+
+    def heading(self, t: float, azimuth: float, variance: float, declination: float | None,
+                magnetic: bool) -> bool:
+        """An azimuth of the body x axis (rad, clockwise from north) at t (s) with its variance
+        (rad^2). ``declination`` (rad) refers an azimuth from magnetic north to true north
+        (None: already true); ``magnetic`` marks a magnetic compass (its bias state)."""
+        if declination is not None:
+            azimuth = azimuth + declination
+        if not (np.isfinite(azimuth) and np.isfinite(variance) and variance > 0.0):
+            self.report("heading without a finite azimuth and variance rejected")
+            return False
+        self.navigator.add_measurement(HeadingFix(t, float(azimuth), float(variance),
+                                                  magnetic=magnetic))
+        return True
+
+    def speed_log(self, t: float, speed: float, variance: float) -> bool:
+        """A water speed along body x (m/s) at t (s) with its variance (m^2/s^2)."""
+        if not (np.isfinite(speed) and np.isfinite(variance) and variance > 0.0):
+            self.report("log/speed without a finite speed and variance rejected")
+            return False
+        self.navigator.add_measurement(SpeedLog(t, speed, variance))
+        return True
+
+    def choose_ranges(self, usable_satellites: int) -> bool:
+        """Whether this observation epoch's ranges aid the filter in place of fix and velocity
+        (and the following fixes and velocities are ignored until an epoch says otherwise).
+        Ranges need a known heading: before it the filter aligns on fix and velocity."""
+        policy = self.policy
+        self.use_ranges = policy.coupling != "loose" and self.navigator.heading_known and (
+            policy.coupling == "tight" or usable_satellites < policy.min_satellites)
+        return self.use_ranges
+
+    def ranges(self, ranges) -> bool:
+        """An epoch's satellite ranges (:class:`SatelliteRanges`, or None: no usable satellite)."""
+        if ranges is None:
+            self.report("observation epoch without a usable satellite", log=False)
+            return False
+        self.navigator.add_measurement(ranges)
+        return True

@@ -1,0 +1,158 @@
+"""The ``ekf`` node's parameters and the navigator configuration they make, ROS-free.
+
+The live node declares :data:`PARAMS` to ROS; the offline replay resolves a profile's ``ekf``
+section against the same specifications (:func:`ins_gnss_ros.params.resolve`) and builds the
+same :class:`~ins_gnss_ros.nav.navigator.NavigatorConfig` with :func:`navigator_config`, so that
+one profile configures one filter whichever path runs it.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..params import Param
+from .ekf import ExtraState
+from .error_model import LAYOUTS
+from .navigator import NavigatorConfig
+from .sensor_errors import GRADES, BlockNoise, FilterNoise, filter_noise
+
+__all__ = ["PARAMS", "navigator_config", "noise_model"]
+
+#: The ekf node's parameters (the names the profiles' ``ekf`` sections use).
+PARAMS = (
+    Param("layout", "15", "error-state layout (error_model.LAYOUTS key)", choices=tuple(LAYOUTS)),
+    Param("imu_grade", "mems_adis16405", "IMU noise model preset (sensor_errors.GRADES)",
+          choices=tuple(GRADES)),
+    Param("bias_model", "gm", "bias process: gm (constant + Gauss-Markov) or rw (random walk)",
+          choices=("gm", "rw")),
+    Param("noise.gyro_white", 0.0, "gyro white noise, rad/s/sqrt(Hz) (0: the grade's)", 0.0, 1.0),
+    Param("noise.accel_white", 0.0, "accelerometer white noise, m/s^2/sqrt(Hz) (0: the grade's)",
+          0.0, 10.0),
+    Param("noise.gyro_bias_sigma", 0.0, "initial gyro bias sigma, rad/s (0: the grade's)",
+          0.0, 1.0),
+    Param("noise.gyro_bias_walk", 0.0, "gyro bias random walk, rad/s/sqrt(s) (0: the grade's)",
+          0.0, 1.0),
+    Param("noise.accel_bias_sigma", 0.0, "initial accelerometer bias sigma, m/s^2 (0: the "
+          "grade's)", 0.0, 10.0),
+    Param("noise.accel_bias_walk", 0.0, "accelerometer bias random walk, m/s^2/sqrt(s) (0: the "
+          "grade's)", 0.0, 10.0),
+    Param("lever_arm", [0.0, 0.0, 0.0], "GNSS antenna position in base_link (FLU), m",
+          -100.0, 100.0, length=3),
+    Param("gate_probability", 0.9999, "chi-square gate probability of every update", 0.5, 1.0),
+    Param("covariance_interval_s", 0.1, "covariance propagation interval, s", 0.005, 1.0),
+    Param("gnss.position_sigma_floor_m", 0.02, "floor of the GNSS position sigma per axis, m",
+          0.0, 100.0),
+    Param("gnss.velocity_sigma_floor_mps", 0.02, "floor of the GNSS velocity sigma, m/s",
+          0.0, 10.0),
+    Param("gnss.velocity_delay_s", 0.0, "latency of the receiver's velocity solution: a "
+          "gnss/vel stamped t is applied at t - delay, s", 0.0, 2.0),
+    Param("coupling", "loose", "GNSS aiding: loose (fix + velocity), tight (pseudorange + "
+          "Doppler; needs a layout with the clock block, e.g. 24) or auto (tight below "
+          "auto.min_satellites)", choices=("loose", "tight", "auto")),
+    Param("auto.min_satellites", 5, "auto coupling: fewer usable satellites than this in an "
+          "epoch switch to tight", 1, 64),
+    Param("tight.gps", True, "tight coupling uses GPS L1 C/A"),
+    Param("tight.galileo", True, "tight coupling uses Galileo E1 (one receiver clock with GPS)"),
+    Param("tight.code_sigma_m", [0.5, 0.5], "pseudorange sigma a, b of a^2 + b^2/sin^2(el), m",
+          0.0, 100.0, length=2),
+    Param("tight.doppler_sigma_hz", [0.05, 0.05], "Doppler sigma a, b, Hz", 0.0, 100.0,
+          length=2),
+    Param("tight.klobuchar", [0.0] * 8, "broadcast ionosphere alpha0-3, beta0-3 (IS-GPS-200 "
+          "units: s, s/semicircle^n); all zero: no ionosphere correction", -1e7, 1e7, length=8),
+    Param("tight.elevation_mask_deg", 10.0, "satellites below this elevation are not used, deg",
+          0.0, 60.0),
+    Param("use_heading", True, "use gnss/heading (phase-difference or receiver azimuth)"),
+    Param("use_magnetic_heading", False, "use mag/heading as backup heading aiding"),
+    Param("magnetic_bias_sigma_deg", 2.0,
+          "initial sigma of the magnetic-heading bias state, deg (0: no bias state)", 0.0, 30.0),
+    Param("use_speed_log", False,
+          "use log/speed (water speed along body x) with water-current and log-scale states"),
+    Param("speed_log.current_sigma_mps", 0.3, "initial sigma of the water current, m/s",
+          0.0, 10.0),
+    Param("speed_log.scale_sigma", 0.02, "initial sigma of the log scale error, -", 0.0, 1.0),
+    Param("time_offset_sigma_s", 0.0,
+          "initial sigma of the IMU-GNSS time-offset state, s (0: no state)", 0.0, 1.0),
+    Param("nonholonomic_sigma_mps", [0.0, 0.0],
+          "wheeled-vehicle constraint noise (lateral, vertical), m/s; 0 disables", 0.0, 10.0,
+          length=2),
+    Param("init.position_sigma_m", 1.0, "initial position sigma at the first fix, m", 0.0, 1e4),
+    Param("init.velocity_sigma_mps", 0.1, "initial velocity sigma, m/s", 0.0, 100.0),
+    Param("init.tilt_sigma_deg", 1.0, "initial roll/pitch sigma, deg", 0.0, 90.0),
+    Param("align.speed_mps", 0.5, "GNSS speed at which the heading is taken from motion, m/s",
+          0.0, 50.0),
+    Param("align.static_speed_mps", 0.1, "GNSS speed below which the vehicle is at rest, m/s",
+          0.0, 10.0),
+    Param("dead_reckoning_after_s", 2.0, "no accepted aiding for this long: DEAD_RECKONING, s",
+          0.1, 3600.0),
+    Param("history_s", 3.0, "how late a measurement may arrive and still be used, s", 0.1, 60.0),
+    Param("forced.floor_tau_s", 30.0, "time constant of the noise floor a measurement kind "
+          "keeps after it was forced in (decays while the kind is accepted), s", 0.1, 3600.0),
+    Param("forced.degraded_ratio", 3.0, "the mode is DEAD_RECKONING (degraded) while a forced "
+          "kind's floor exceeds this many times its own standard deviation, -", 0.0, 1000.0),
+    Param("max_imu_gap_s", 2.5, "longest gap in imu/delta bridged by holding the rates of the "
+          "increment after it; a longer one loses the IMU and the filter aligns again, s",
+          0.0, 60.0),
+    Param("imu_gap.accel_sigma_mps2", 1.0, "over a bridged imu/delta gap: sigma of the "
+          "difference between the held and the true specific force, m/s^2", 0.0, 100.0),
+    Param("imu_gap.rate_sigma_dps", 5.0, "over a bridged imu/delta gap: sigma of the "
+          "difference between the held and the true angular rate, deg/s", 0.0, 1000.0),
+    Param("sync.min_interval_s", 0.1, "shortest interval between two corrections, s", 0.0, 10.0),
+    Param("sync.resend_after_s", 1.0,
+          "send a correction against the newest ins/state if none matched for this long, s",
+          0.1, 60.0),
+    Param("output_rate_hz", 10.0, "rate of nav/odom and nav/fix (from the synchronised "
+          "ins/state), Hz", 0.1, 1000.0),
+    Param("datum.from_first_fix", True, "map-frame origin at the first fix (else datum.*)"),
+    Param("datum.latitude_deg", 0.0, "map-frame origin latitude, deg", -90.0, 90.0),
+    Param("datum.longitude_deg", 0.0, "map-frame origin longitude, deg", -180.0, 360.0),
+    Param("datum.altitude_m", 0.0, "map-frame origin ellipsoidal height, m", -1000.0, 1e5),
+)
+
+
+def noise_model(p: dict) -> FilterNoise:
+    """The grade's filter noise with the ``noise.*`` parameters that are set put in its place.
+
+    Parameters
+    ----------
+    p : dict
+        The ``ekf`` node's parameters (``imu_grade``, ``bias_model``, ``noise.*``).
+    """
+    noise = filter_noise(GRADES[p["imu_grade"]], p["bias_model"])
+    blocks = dict(noise.blocks)
+    for block, sigma, walk in (("bg", "noise.gyro_bias_sigma", "noise.gyro_bias_walk"),
+                               ("ba", "noise.accel_bias_sigma", "noise.accel_bias_walk")):
+        b = blocks[block]
+        blocks[block] = BlockNoise(p[sigma] or b.sigma0, b.tau,
+                                   p[walk] ** 2 if p[walk] else b.psd)
+    return FilterNoise(p["noise.gyro_white"] ** 2 or noise.gyro_psd,
+                       p["noise.accel_white"] ** 2 or noise.accel_psd, blocks)
+
+
+def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
+    """The navigator configuration of the ``ekf`` node's parameters (names as in its PARAMS).
+
+    ``record`` keeps the per-epoch output and covariance (offline runs); the live node keeps
+    neither.
+    """
+    extras = {}
+    if p["time_offset_sigma_s"] > 0.0:
+        extras["td"] = ExtraState(1, p["time_offset_sigma_s"])
+    if p["use_magnetic_heading"] and p["magnetic_bias_sigma_deg"] > 0.0:
+        extras["mag"] = ExtraState(1, np.radians(p["magnetic_bias_sigma_deg"]))
+    if p["use_speed_log"]:
+        # water current east, north (m/s) and log scale error (-), slowly varying
+        sigma_current = p["speed_log.current_sigma_mps"]
+        extras["log"] = ExtraState(3, np.array([sigma_current, sigma_current,
+                                                p["speed_log.scale_sigma"]]), psd=1e-6)
+    nhc = tuple(p["nonholonomic_sigma_mps"])
+    return NavigatorConfig(
+        noise=noise_model(p),
+        layout=p["layout"], extras=extras, lever_arm_b=np.array(p["lever_arm"], float),
+        cov_interval=p["covariance_interval_s"], gate_prob=p["gate_probability"],
+        sigma_pos0=p["init.position_sigma_m"], sigma_vel0=p["init.velocity_sigma_mps"],
+        sigma_tilt0=np.radians(p["init.tilt_sigma_deg"]), align_speed=p["align.speed_mps"],
+        static_speed=p["align.static_speed_mps"], dr_timeout=p["dead_reckoning_after_s"],
+        nhc_sigma=nhc if min(nhc) > 0.0 else None, history=p["history_s"],
+        floor_tau=p["forced.floor_tau_s"], degraded_ratio=p["forced.degraded_ratio"],
+        gap_accel_sigma=p["imu_gap.accel_sigma_mps2"],
+        gap_rate_sigma=np.radians(p["imu_gap.rate_sigma_dps"]),
+        store_covariance=record, record=record)

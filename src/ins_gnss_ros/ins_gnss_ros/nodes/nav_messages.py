@@ -1,0 +1,77 @@
+"""The navigation solution and the filter's status as ROS messages (``nav/fix``, ``nav/odom``,
+``nav/status``), for the ``ekf`` node and the offline replay alike."""
+from __future__ import annotations
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Vector3
+from ins_gnss_msgs.msg import FilterStatus, MeasurementUpdate
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import NavSatFix, NavSatStatus
+
+from ..io import new, sec_to_stamp
+from ..nav.earth import ecef_to_enu, geodetic_to_ecef
+from ..nav.rotations import quat_to_dcm
+from ..nav.strapdown import NavState
+from .convert import to_quaternion, to_vector3
+
+
+def fix_msg(stamp: Time, st: NavState, cov_pos: np.ndarray) -> NavSatFix:
+    """nav/fix: the solution's position with its ENU covariance (m^2)."""
+    fix = new(NavSatFix)
+    fix.header.stamp, fix.header.frame_id = stamp, "base_link"
+    fix.status.status = NavSatStatus.STATUS_FIX
+    fix.latitude, fix.longitude, fix.altitude = np.degrees(st.lat), np.degrees(st.lon), st.h
+    fix.position_covariance = cov_pos.flatten().tolist()
+    fix.position_covariance_type = NavSatFix.COVARIANCE_TYPE_KNOWN
+    return fix
+
+
+def odom_msg(stamp: Time, st: NavState, P: np.ndarray, S, datum: tuple,
+             angular_velocity: Vector3, rate_variance: float) -> Odometry:
+    """nav/odom: pose in the ENU ``map`` frame around ``datum`` (lat rad, lon rad, h m), twist
+    in base_link, covariances from the filter's P (state space S); the angular rate is not a
+    filter state: its variance (rad^2/s^2) is given."""
+    odom = new(Odometry)
+    odom.header.stamp, odom.header.frame_id, odom.child_frame_id = stamp, "map", "base_link"
+    enu = ecef_to_enu(geodetic_to_ecef(st.lat, st.lon, st.h), *datum)
+    odom.pose.pose.position.x, odom.pose.pose.position.y, odom.pose.pose.position.z = \
+        (float(x) for x in enu)
+    odom.pose.pose.orientation = to_quaternion(st.q_nb)
+    pose_cov = np.zeros((6, 6))
+    pose_cov[:3, :3] = P[S["pos"], S["pos"]]
+    pose_cov[3:, 3:] = P[S["att"], S["att"]]  # small-angle errors about ENU axes
+    odom.pose.covariance = pose_cov.flatten().tolist()
+    # Odometry twists are in the child frame (base_link).
+    c_bn = quat_to_dcm(st.q_nb).T
+    odom.twist.twist.linear = to_vector3(c_bn @ st.v_enu)
+    twist_cov = np.zeros((6, 6))
+    twist_cov[:3, :3] = c_bn @ P[S["vel"], S["vel"]] @ c_bn.T
+    odom.twist.twist.angular = angular_velocity
+    twist_cov[3:, 3:] = np.eye(3) * rate_variance
+    odom.twist.covariance = twist_cov.flatten().tolist()
+    return odom
+
+
+def status_msg(t: float, mode: int, tight: bool, updates, covariance, accepted: int,
+               rejected: int) -> FilterStatus:
+    """nav/status at t (s): FilterStatus mode, coupling, the updates since the last status
+    (navigator update records), ``covariance`` = (state space, P) once the filter runs (else
+    None) and the running accepted/rejected counts."""
+    status = FilterStatus(mode=mode, coupling=FilterStatus.COUPLING_TIGHT
+                          if tight else FilterStatus.COUPLING_LOOSE)
+    status.header.stamp = sec_to_stamp(t)
+    for u in updates:
+        status.updates.append(MeasurementUpdate(
+            name=u.name, stamp=sec_to_stamp(u.t),
+            innovation=[float(x) for x in u.innovation],
+            innovation_variance=[float(x) for x in u.s_diag], nis=float(u.nis),
+            gate=float(u.gate), accepted=bool(u.accepted),
+            reason="" if u.accepted else u.reason))
+    if covariance is not None:
+        space, P = covariance
+        status.state_names = [f"{name}[{i}]" for name in space.blocks
+                              for i in range(space[name].stop - space[name].start)]
+        status.state_std = np.sqrt(np.diag(P)).tolist()
+    status.accepted_count, status.rejected_count = accepted, rejected
+    return status

@@ -1,0 +1,68 @@
+"""nav/aiding.py and nav/filter_config.py: one aiding policy and one configuration for every path."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ins_gnss_ros.nav.aiding import Aiding, AidingPolicy
+from ins_gnss_ros.nav.filter_config import PARAMS, navigator_config
+from ins_gnss_ros.nav.navigator import GnssFix, GnssVelocity, HeadingFix
+from ins_gnss_ros.params import ParameterError, resolve
+
+
+class Recorder:
+    def __init__(self):
+        self.measurements, self.heading_known = [], True
+
+    def add_measurement(self, m):
+        self.measurements.append(m)
+
+
+def aiding(**policy):
+    events = []
+    nav = Recorder()
+    return Aiding(nav, AidingPolicy(**policy), lambda text, log=True: events.append(text)), nav, events
+
+
+def test_fixes_are_refused_floored_or_given_a_variance():
+    front, nav, events = aiding(position_sigma_floor=0.1)
+    cov = np.diag([1e-4, 4.0, 1.0])
+    assert not front.fix(1.0, 59.9, 30.3, 10.0, cov, has_fix=False, covariance_known=True)
+    assert not front.fix(1.0, np.nan, 30.3, 10.0, cov, True, True)
+    assert not front.fix(1.0, 59.9, 30.3, 2e5, cov, True, True)
+    assert front.fix(1.0, 59.9, 30.3, 10.0, cov, True, True)
+    fix = nav.measurements[-1]
+    assert isinstance(fix, GnssFix) and np.allclose(np.diag(fix.cov_enu), [0.01, 4.0, 1.0])
+    assert front.datum == pytest.approx((np.radians(59.9), np.radians(30.3), 10.0))
+    assert front.fix(2.0, 59.9, 30.3, 10.0, np.zeros((3, 3)), True, covariance_known=False)
+    assert np.allclose(np.diag(nav.measurements[-1].cov_enu), 25.0)
+    assert events == ["gnss/fix without a fix ignored", "non-finite gnss/fix rejected",
+                      "implausible gnss/fix altitude rejected",
+                      "gnss/fix without covariance: 5 m assumed"]
+
+
+def test_velocity_delay_heading_declination_and_range_choice():
+    front, nav, events = aiding(velocity_delay=0.1, coupling="auto", min_satellites=5)
+    assert front.velocity(2.0, np.array([1.0, 0.0, 0.0]), np.zeros((3, 3)))
+    vel = nav.measurements[-1]
+    assert isinstance(vel, GnssVelocity) and vel.t == pytest.approx(1.9)
+    assert not front.velocity(2.0, np.array([2000.0, 0.0, 0.0]), np.eye(3))
+    assert front.heading(3.0, 0.5, 1e-4, declination=0.1, magnetic=True)
+    heading = nav.measurements[-1]
+    assert isinstance(heading, HeadingFix) and heading.azimuth == pytest.approx(0.6)
+    assert not front.heading(3.0, 0.5, 0.0, None, magnetic=False)
+    assert front.choose_ranges(4) and not front.fix(4.0, 59.9, 30.3, 0.0, np.eye(3), True, True)
+    assert not front.choose_ranges(8)
+
+
+def test_a_profile_section_configures_the_filter_the_node_would():
+    p = resolve(PARAMS, {"layout": "21", "lever_arm": [0.5, 0.0, 1.0],
+                         "nonholonomic_sigma_mps": [0.1, 0.05]})
+    config = navigator_config(p, record=True)
+    assert config.layout == "21" and config.nhc_sigma == (0.1, 0.05) and config.record
+    assert np.array_equal(config.lever_arm_b, [0.5, 0.0, 1.0])
+    with pytest.raises(ParameterError, match="unknown parameter"):
+        resolve(PARAMS, {"lever_arms": [0.0, 0.0, 0.0]})
+    with pytest.raises(ParameterError, match="gate_probability"):
+        resolve(PARAMS, {"gate_probability": 2.0})

@@ -1,0 +1,71 @@
+"""nav/strapdown_sync.py: the closed loop between strapdown and filter, without ROS."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ins_gnss_ros.nav.increments import SensorErrors
+from ins_gnss_ros.nav.strapdown import NavState
+from ins_gnss_ros.nav.strapdown_sync import ClosedLoopStrapdown, Correction, StrapdownSync
+
+G = 9.81
+LEVEL = np.array([1.0, 0.0, 0.0, 0.0])
+
+
+def at_rest(loop, t_from, t_to, dt=0.01):
+    """Feed level increments that hold the strapdown at rest (gravity along up)."""
+    out = []
+    for k in range(int(round(t_from / dt)), int(round(t_to / dt))):
+        out.append(loop.add((k + 1) * dt, np.zeros(3), np.array([0.0, 0.0, G * dt]), dt))
+    return out
+
+
+def test_a_late_correction_is_applied_at_its_epoch_and_the_increments_since_replayed():
+    loop = ClosedLoopStrapdown(NavState(1.0, 0.5, 0.0, np.zeros(3), LEVEL, np.nan), 5.0, 2.5)
+    assert set(at_rest(loop, 0.0, 2.0)) == {None}
+    epoch = loop.history[-51].state  # 0.5 s before the newest state
+    t_ns = int(round(epoch.t * 1e9))
+    # the filter says the state at that epoch had 0.1 m/s east too much
+    event = loop.correct(Correction(t_ns, 1, np.zeros(3), np.array([0.1, 0.0, 0.0]), np.zeros(3),
+                                    SensorErrors()))
+    assert event is None and loop.correction_sequence == 1
+    assert loop.state.t == 2.0
+    assert abs(loop.state.v_enu[0] + 0.1) < 1e-3  # removed at the epoch, carried to now
+
+
+def test_corrections_of_a_previous_run_are_ignored_and_a_long_gap_starts_a_new_run():
+    loop = ClosedLoopStrapdown(NavState(1.0, 0.5, 0.0, np.zeros(3), LEVEL, np.nan), 5.0, 2.5)
+    at_rest(loop, 0.0, 1.0)
+    assert loop.add(5.0, np.zeros(3), np.array([0.0, 0.0, G * 0.01]), 0.01) == "lost"
+    assert loop.lost
+    stale = Correction(int(0.5e9), 3, np.ones(3), np.zeros(3), np.zeros(3), SensorErrors())
+    assert loop.correct(stale) == "older than this run"
+    assert loop.add(4.0, np.zeros(3), np.zeros(3), 0.01) == "stale"
+
+
+def test_sync_corrects_against_the_matching_state_and_falls_back_when_out_of_step():
+    states = {}
+
+    def state_of(key):
+        return states[key], SensorErrors()
+
+    sync = StrapdownSync(3.0, 0.1, 1.0, state_of)
+    for k in range(10):
+        t = 1.0 + 0.01 * k
+        states[k] = NavState(1.0, 0.5, 0.0, np.zeros(3), LEVEL, t)
+        sync.add_state(int(round(t * 1e9)), 0, k)
+    solution = NavState(1.0, 0.5, 0.0, np.array([0.0, 0.2, 0.0]), LEVEL, 1.05)
+    estimates = {"bg": np.array([1e-4, 0.0, 0.0])}
+    assert sync.due(1.05, 1)
+    c, resent = sync.correction(1.05, lambda t: solution, estimates, 1)
+    assert not resent and c.t_ns == 1_050_000_000 and c.sequence == 1
+    assert np.allclose(c.velocity_error, [0.0, -0.2, 0.0])
+    assert np.array_equal(c.sensor.gyro_bias, estimates["bg"])
+    assert np.array_equal(c.sensor.accel_scale, np.zeros(3))  # no such block: zero
+    assert not sync.due(1.06, 1) and not sync.current(0) and sync.current(1)
+    # nothing carries sequence 1 yet: no match until resend_after, then the newest state
+    assert sync.correction(1.5, lambda t: solution, estimates, 2) is None
+    c, resent = sync.correction(2.2, lambda t: solution, estimates, 2)
+    assert resent and c.t_ns == 1_090_000_000
+    sync.forget_updates(1)
+    assert sync.synced_updates == 1
