@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from geometry_msgs.msg import TwistWithCovarianceStamped
+from diagnostic_msgs.msg import DiagnosticStatus
 from ins_gnss_msgs.msg import FilterStatus, ImuDelta, InsCorrection, InsState
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import NavSatFix, NavSatStatus
@@ -338,3 +339,50 @@ def test_gnss_inside_a_bridged_imu_gap_is_applied_at_its_epochs(trial, ros_conte
     assert len(in_gap) == 2 * 7  # fix and velocity at 4 Hz, 70.25 to 71.75 s
     assert all(u.accepted for u in in_gap)
     assert max(ratios) < 5.0
+
+
+def test_diagnostics_say_what_the_filter_waits_for_and_nav_fix_is_valid_only_navigating(
+        trial, ros_context):
+    from ins_gnss_ros.nodes.ekf_node import EkfNode
+    from ins_gnss_ros.nodes.strapdown_node import StrapdownNode
+
+    traj, imu, gnss = trial
+    bus = InProcessBus()
+    strapdown = StrapdownNode(context=ros_context, bus=bus)
+    ekf = EkfNode(context=ros_context, bus=bus, parameter_overrides=_ekf_params())
+    fixes: list[NavSatFix] = []
+    bus.subscribe("nav/fix", fixes.append)
+
+    def feed(t_from, t_to, topics):
+        g = next(i for i, m in enumerate(gnss) if m[0] >= t_from)
+        for k in range(int(round(t_from / imu.dt)), int(round(t_to / imu.dt))):
+            t = imu.t[k]
+            while g < len(gnss) and gnss[g][0] <= t:
+                tg, lat, lon, h, v, npos, nvel = gnss[g]
+                if "gnss/fix" in topics:
+                    bus.publish("gnss/fix", _fix_msg(tg, lat, lon, h, npos))
+                if "gnss/vel" in topics:
+                    bus.publish("gnss/vel", _vel_msg(tg, v, nvel))
+                bus.drain()
+                g += 1
+            delta = ImuDelta(dt=float(imu.dt))
+            delta.header.stamp = sec_to_stamp(T0 + t)
+            delta.delta_angle, delta.delta_velocity = to_vector3(imu.dtheta[k]), to_vector3(imu.dv[k])
+            bus.publish("imu/delta", delta)
+            bus.drain()
+
+    feed(0.0, 5.0, ())
+    # no GNSS yet: nothing to align on, said so
+    assert ekf.diag._state == (DiagnosticStatus.WARN, "aligning: no gnss/fix received yet")
+    bus.publish("gnss/fix", _fix_msg(5.0, 1.0, 0.5, 2e5, np.zeros(3)))  # corrupt height
+    bus.drain()
+    feed(5.0, 15.0, ("gnss/fix",))  # at rest, fixes only: levelled, no heading source
+    assert ekf.diag._state[1].startswith("aligning: no heading source yet")
+    fix_line = ekf.diag._values["gnss/fix"]  # e.g. "4.10 Hz, last 0.0 s ago, 41 received, 1 refused"
+    assert 3.9 < float(fix_line.split()[0]) < 4.2 and fix_line.endswith("1 refused")
+    assert fixes and all(f.status.status == NavSatStatus.STATUS_NO_FIX for f in fixes)
+    feed(15.0, 60.0, ("gnss/fix", "gnss/vel"))
+    assert ekf.diag._state == (DiagnosticStatus.OK, "navigating")
+    assert fixes[-1].status.status == NavSatStatus.STATUS_FIX
+    strapdown.destroy_node()
+    ekf.destroy_node()

@@ -10,14 +10,16 @@ same values from a bag (the configuration both build from the ``ekf`` parameters
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
-from .navigator import GnssFix, GnssVelocity, HeadingFix, Navigator, SpeedLog
+from .navigator import (ALIGNING, NAVIGATING, GnssFix, GnssVelocity, HeadingFix, Navigator,
+                        SpeedLog)
 
-__all__ = ["Aiding", "AidingPolicy"]
+__all__ = ["Aiding", "AidingPolicy", "InputStats"]
 
 #: Variance given to a fix that carries no covariance, m^2 per axis: a single-point fix (5 m).
 UNKNOWN_FIX_VARIANCE = 25.0
@@ -60,6 +62,31 @@ class AidingPolicy:
                    p["gnss.velocity_delay_s"], p["coupling"], p["auto.min_satellites"])
 
 
+#: What the filter waits for while it has fixes but no heading (ALIGNING).
+NO_HEADING = ("no heading source yet: needs gnss/vel, movement well beyond the fixes' noise, "
+              "mag/heading or gnss/heading")
+
+
+@dataclass
+class InputStats:
+    """What one aiding input delivered: readings received and refused, first and last stamp (s)."""
+
+    received: int = 0
+    refused: int = 0
+    first_t: float = math.nan
+    last_t: float = math.nan
+
+    def rate(self) -> float:
+        """Mean rate of the readings, Hz (nan before two)."""
+        span = self.last_t - self.first_t
+        return (self.received - 1) / span if self.received > 1 and span > 0.0 else math.nan
+
+    def summary(self, t: float) -> str:
+        """One line for diagnostics at time t (s)."""
+        return (f"{self.rate():.2f} Hz, last {t - self.last_t:.1f} s ago, "
+                f"{self.received} received, {self.refused} refused")
+
+
 def _floored(cov: np.ndarray, sigma_floor: float) -> np.ndarray:
     floor = sigma_floor ** 2
     return cov + np.diag(np.maximum(floor - np.diag(cov), 0.0))
@@ -86,22 +113,60 @@ class Aiding:
         self.navigator, self.policy, self.report = navigator, policy, report
         self.use_ranges = False  # the last observation epoch chose tight coupling
         self.datum = None  # (lat rad, lon rad, h m) of the first fix used
+        self.inputs: dict[str, InputStats] = {}
+        self.last_accepted_t = -math.inf  # newest accepted update, s
+        self.forced: set[str] = set()  # kinds forced in since the last accepted one of each
+
+    def _seen(self, name: str, t: float, used: bool) -> bool:
+        stats = self.inputs.setdefault(name, InputStats(first_t=t))
+        stats.received += 1
+        stats.refused += not used
+        stats.last_t = t
+        return used
+
+    def note_updates(self, updates) -> None:
+        """The navigator's update records since the last call (for :meth:`explain`)."""
+        for u in updates:
+            if u.reason == "forced":
+                self.forced.add(u.name)
+            elif u.accepted:
+                self.forced.discard(u.name)
+                self.last_accepted_t = max(self.last_accepted_t, u.t)
+
+    def explain(self, t: float, imu_running: bool) -> str:
+        """Why the navigator is in its mode at time t (s), for a user reading /diagnostics."""
+        nav = self.navigator
+        if not imu_running:
+            return "waiting for imu/delta"
+        if nav.mode == NAVIGATING:
+            return "navigating"
+        if nav.mode == ALIGNING:
+            fix = self.inputs.get("gnss/fix")
+            if fix is None:
+                return "aligning: no gnss/fix received yet"
+            if fix.received == fix.refused:
+                return f"aligning: every gnss/fix refused ({fix.refused})"
+            return "aligning: " + (NO_HEADING if not nav.heading_known else "levelling")
+        if self.forced:
+            return ("dead reckoning (degraded): forced in and not yet confirmed: "
+                    + ", ".join(sorted(self.forced)))
+        return f"dead reckoning: no aiding accepted for {t - self.last_accepted_t:.1f} s"
 
     def fix(self, t: float, lat_deg: float, lon_deg: float, h: float, cov: np.ndarray,
             has_fix: bool, covariance_known: bool) -> bool:
         """A GNSS position fix at t (s): geodetic degrees, ellipsoidal height (m), its ENU
         covariance (m^2; ``covariance_known`` False when the receiver gave none)."""
         if self.use_ranges:
-            return False
+            return self._seen("gnss/fix", t, False)
         if not has_fix:
             self.report("gnss/fix without a fix ignored", log=False)
-            return False
+            return self._seen("gnss/fix", t, False)
         if not (np.isfinite([lat_deg, lon_deg, h]).all() and np.isfinite(cov).all()):
             self.report("non-finite gnss/fix rejected")
-            return False
+            return self._seen("gnss/fix", t, False)
         if not HEIGHT_RANGE[0] <= h <= HEIGHT_RANGE[1]:
             self.report("implausible gnss/fix altitude rejected")
-            return False
+            return self._seen("gnss/fix", t, False)
         if not covariance_known or cov[0, 0] <= 0.0:
             cov = np.eye(3) * UNKNOWN_FIX_VARIANCE
             self.report("gnss/fix without covariance: 5 m assumed", log=False)
@@ -110,22 +175,22 @@ class Aiding:
         if self.datum is None:
             self.datum = (lat, lon, h)
         self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov))
-        return True
+        return self._seen("gnss/fix", t, True)
 
     def velocity(self, t: float, v_enu: np.ndarray, cov: np.ndarray) -> bool:
         """A GNSS velocity (m/s, ENU) stamped t (s) with its covariance (m^2/s^2)."""
         if self.use_ranges:
-            return False
+            return self._seen("gnss/vel", t, False)
         if not (np.isfinite(v_enu).all() and np.isfinite(cov).all()):
             self.report("non-finite gnss/vel rejected")
-            return False
+            return self._seen("gnss/vel", t, False)
         if np.linalg.norm(v_enu) > MAX_SPEED:
             self.report("implausible gnss/vel rejected")
-            return False
+            return self._seen("gnss/vel", t, False)
         cov = _floored(cov, self.policy.velocity_sigma_floor)
         self.navigator.add_measurement(
             GnssVelocity(t - self.policy.velocity_delay, v_enu, cov))
-        return True
+        return self._seen("gnss/vel", t, True)
 
     def heading(self, t: float, azimuth: float, variance: float, declination: float | None,
                 magnetic: bool) -> bool:
@@ -136,18 +201,18 @@ class Aiding:
             azimuth = azimuth + declination
         if not (np.isfinite(azimuth) and np.isfinite(variance) and variance > 0.0):
             self.report("heading without a finite azimuth and variance rejected")
-            return False
+            return self._seen("mag/heading" if magnetic else "gnss/heading", t, False)
         self.navigator.add_measurement(HeadingFix(t, float(azimuth), float(variance),
                                                   magnetic=magnetic))
-        return True
+        return self._seen("mag/heading" if magnetic else "gnss/heading", t, True)
 
     def speed_log(self, t: float, speed: float, variance: float) -> bool:
         """A water speed along body x (m/s) at t (s) with its variance (m^2/s^2)."""
         if not (np.isfinite(speed) and np.isfinite(variance) and variance > 0.0):
             self.report("log/speed without a finite speed and variance rejected")
-            return False
+            return self._seen("log/speed", t, False)
         self.navigator.add_measurement(SpeedLog(t, speed, variance))
-        return True
+        return self._seen("log/speed", t, True)
 
     def choose_ranges(self, usable_satellites: int) -> bool:
         """Whether this observation epoch's ranges aid the filter in place of fix and velocity

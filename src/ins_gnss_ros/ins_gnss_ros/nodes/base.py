@@ -89,6 +89,7 @@ class Diagnostics:
         self._level = DiagnosticStatus.OK
         self._message = "ok"
         self._values: dict[str, str] = {}
+        self._state = (DiagnosticStatus.OK, "ok")  # a lasting condition, see set_state
         if node.bus is None:  # on a bus the replay publishes diagnostics on bag time
             node.create_timer(period_s, self.publish)
 
@@ -104,11 +105,19 @@ class Diagnostics:
     def set_value(self, key: str, value: Any) -> None:
         self._values[key] = str(value)
 
+    def set_state(self, level: int, message: str) -> None:
+        """A lasting condition (e.g. "aligning: no gnss/fix received yet"), reported with every
+        publication until replaced; events of a higher level since the last publication take
+        precedence for that one."""
+        self._state = (level, message)
+
     def publish(self) -> None:
+        level, message = max((self._state, (self._level, self._message)),
+                             key=lambda state: state[0])
         status = DiagnosticStatus(
-            level=self._level,
+            level=level,
             name=f"{self._node.get_namespace().rstrip('/')}/{self._node.get_name()}",
-            message=self._message,
+            message=message,
             hardware_id=self._node.get_name(),
             values=[KeyValue(key=k, value=str(v)) for k, v in sorted(self.counts.items())]
             + [KeyValue(key=k, value=v) for k, v in sorted(self._values.items())],

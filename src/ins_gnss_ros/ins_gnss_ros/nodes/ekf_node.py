@@ -16,7 +16,10 @@ on fix and velocity; ``auto`` switches to tight whenever an epoch has fewer than
 same epochs are never both used (the same data would count twice).
 
 Outputs: ``nav/odom`` (ENU ``map`` frame around a datum, covariance from the filter),
-``nav/fix``, ``nav/status`` (mode, coupling, every update with innovation, NIS and verdict).
+``nav/fix`` (``STATUS_NO_FIX`` unless the filter is NAVIGATING: aligning or dead reckoning is
+not a fix), ``nav/status`` (mode, coupling, every update with innovation, NIS and verdict);
+/diagnostics says why the filter is not navigating (what it waits for) and, per aiding input,
+its rate, staleness and refusals.
 
 Integrity: a measurement kind rejected at the gate for 2 s is forced in with its innovation
 admitted on both sides (the navigator's integrity logic); until the noise floor this leaves decays
@@ -35,6 +38,7 @@ from __future__ import annotations
 import sys
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import TwistWithCovarianceStamped
 from ins_gnss_msgs.msg import FilterStatus, GnssEphemeris, GnssObservations, Heading, ImuDelta, \
     InsCorrection, InsState
@@ -261,6 +265,11 @@ class EkfNode(NavNode):
                 self.diag.count(f"{u.name} rejected: {u.reason}", log=False)
             elif u.reason == "forced":
                 self.diag.count(f"{u.name} forced in: degraded until confirmed")
+        self.aiding.note_updates(updates)
+        self.diag.set_state(DiagnosticStatus.OK if nav.mode == NAVIGATING else DiagnosticStatus.WARN,
+                            self.aiding.explain(t, imu_running=np.isfinite(self.last_delta_t)))
+        for name, stats in self.aiding.inputs.items():
+            self.diag.set_value(name, stats.summary(t))
         self.pub_status.publish(status_msg(
             t, MODES[nav.mode], self.aiding.use_ranges, updates,
             (nav.space, nav.covariance()) if nav.ekf is not None else None,
@@ -270,7 +279,8 @@ class EkfNode(NavNode):
         """nav/fix and nav/odom: the synchronised strapdown state with the filter covariance
         (with the noise floors of forced measurement kinds: Navigator.covariance)."""
         P, S = self.navigator.covariance(), self.navigator.space
-        self.pub_fix.publish(fix_msg(ins.header.stamp, st, P[S["pos"], S["pos"]]))
+        self.pub_fix.publish(fix_msg(ins.header.stamp, st, P[S["pos"], S["pos"]],
+                                     valid=self.navigator.mode == NAVIGATING))
         if self.aiding.datum is not None:
             # one navigation-rate sample of gyro white noise (the rate is not a filter state)
             rate_var = self.config.noise.gyro_psd / self.config.cov_interval

@@ -16,11 +16,12 @@ from ..nav.strapdown import NavState
 from .convert import to_quaternion, to_vector3
 
 
-def fix_msg(stamp: Time, st: NavState, cov_pos: np.ndarray) -> NavSatFix:
-    """nav/fix: the solution's position with its ENU covariance (m^2)."""
+def fix_msg(stamp: Time, st: NavState, cov_pos: np.ndarray, valid: bool) -> NavSatFix:
+    """nav/fix: the solution's position with its ENU covariance (m^2); ``valid`` False (the
+    filter is aligning or dead reckoning) publishes it as STATUS_NO_FIX."""
     fix = new(NavSatFix)
     fix.header.stamp, fix.header.frame_id = stamp, "base_link"
-    fix.status.status = NavSatStatus.STATUS_FIX
+    fix.status.status = NavSatStatus.STATUS_FIX if valid else NavSatStatus.STATUS_NO_FIX
     fix.latitude, fix.longitude, fix.altitude = np.degrees(st.lat), np.degrees(st.lon), st.h
     fix.position_covariance = cov_pos.flatten().tolist()
     fix.position_covariance_type = NavSatFix.COVARIANCE_TYPE_KNOWN
