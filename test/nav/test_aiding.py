@@ -28,18 +28,25 @@ def aiding(**policy):
 def test_fixes_are_refused_floored_or_given_a_variance():
     front, nav, events = aiding(position_sigma_floor=0.1)
     cov = np.diag([1e-4, 4.0, 1.0])
-    assert not front.fix(1.0, 59.9, 30.3, 10.0, cov, has_fix=False, covariance_known=True)
-    assert not front.fix(1.0, np.nan, 30.3, 10.0, cov, True, True)
-    assert not front.fix(1.0, 59.9, 30.3, 2e5, cov, True, True)
-    assert front.fix(1.0, 59.9, 30.3, 10.0, cov, True, True)
+    assert not front.fix(1.0, 59.9, 30.3, 10.0, cov, status=-1, covariance_known=True)
+    assert not front.fix(1.0, np.nan, 30.3, 10.0, cov, 0, True)
+    assert not front.fix(1.0, 59.9, 30.3, 2e5, cov, 0, True)
+    assert front.fix(1.0, 59.9, 30.3, 10.0, cov, 0, True)
     fix = nav.measurements[-1]
     assert isinstance(fix, GnssFix) and np.allclose(np.diag(fix.cov_enu), [0.01, 4.0, 1.0])
     assert front.datum == pytest.approx((np.radians(59.9), np.radians(30.3), 10.0))
-    assert front.fix(2.0, 59.9, 30.3, 10.0, np.zeros((3, 3)), True, covariance_known=False)
-    assert np.allclose(np.diag(nav.measurements[-1].cov_enu), 25.0)
+    # no covariance: a variance that fits the fix's status (single point, SBAS, GBAS)
+    for status, sigma in ((0, 5.0), (1, 2.0), (2, 1.0)):
+        assert front.fix(2.0, 59.9, 30.3, 10.0, np.eye(3), status, covariance_known=False)
+        assert np.allclose(np.diag(nav.measurements[-1].cov_enu), [sigma ** 2, sigma ** 2, 4 * sigma ** 2])
+    assert front.fix(2.0, 59.9, 30.3, 10.0, np.zeros((3, 3)), 0, covariance_known=True)  # zero
+    assert np.allclose(np.diag(nav.measurements[-1].cov_enu), [25.0, 25.0, 100.0])
     assert events == ["gnss/fix without a fix ignored", "non-finite gnss/fix rejected",
                       "implausible gnss/fix altitude rejected",
-                      "gnss/fix without covariance: 5 m assumed"]
+                      "gnss/fix without covariance: 5 m assumed from its status",
+                      "gnss/fix without covariance: 2 m assumed from its status",
+                      "gnss/fix without covariance: 1 m assumed from its status",
+                      "gnss/fix without covariance: 5 m assumed from its status"]
 
 
 def test_velocity_delay_heading_declination_and_range_choice():
@@ -52,7 +59,7 @@ def test_velocity_delay_heading_declination_and_range_choice():
     heading = nav.measurements[-1]
     assert isinstance(heading, HeadingFix) and heading.azimuth == pytest.approx(0.6)
     assert not front.heading(3.0, 0.5, 0.0, None, magnetic=False)
-    assert front.choose_ranges(4) and not front.fix(4.0, 59.9, 30.3, 0.0, np.eye(3), True, True)
+    assert front.choose_ranges(4) and not front.fix(4.0, 59.9, 30.3, 0.0, np.eye(3), 0, True)
     assert not front.choose_ranges(8)
 
 

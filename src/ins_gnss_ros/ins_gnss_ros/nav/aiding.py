@@ -21,8 +21,12 @@ from .navigator import (ALIGNING, NAVIGATING, GnssFix, GnssVelocity, HeadingFix,
 
 __all__ = ["Aiding", "AidingPolicy", "InputStats"]
 
-#: Variance given to a fix that carries no covariance, m^2 per axis: a single-point fix (5 m).
-UNKNOWN_FIX_VARIANCE = 25.0
+#: Horizontal sigma (m) given to a fix that carries no covariance, by its sensor_msgs/NavSatStatus
+#: status (STATUS_FIX 0, STATUS_SBAS_FIX 1, STATUS_GBAS_FIX 2): a single-point fix (~5 m), an
+#: SBAS-corrected fix (~2 m) and a ground-based differential fix (DGNSS or RTK: 1 m, the
+#: conservative end, since NavSatStatus does not tell RTK fixed from float or code DGNSS). The
+#: vertical sigma is taken twice the horizontal (the geometry of a ground receiver).
+UNKNOWN_FIX_SIGMA = {0: 5.0, 1: 2.0, 2: 1.0}
 #: Heights this filter navigates at, m (a fix outside is corrupt; the integrity logic would
 #: otherwise force it in after a while).
 HEIGHT_RANGE = (-1000.0, 1e5)
@@ -153,12 +157,13 @@ class Aiding:
         return f"dead reckoning: no aiding accepted for {t - self.last_accepted_t:.1f} s"
 
     def fix(self, t: float, lat_deg: float, lon_deg: float, h: float, cov: np.ndarray,
-            has_fix: bool, covariance_known: bool) -> bool:
+            status: int, covariance_known: bool) -> bool:
         """A GNSS position fix at t (s): geodetic degrees, ellipsoidal height (m), its ENU
-        covariance (m^2; ``covariance_known`` False when the receiver gave none)."""
+        covariance (m^2; ``covariance_known`` False when the receiver gave none) and its
+        sensor_msgs/NavSatStatus status (-1 no fix ... 2 ground-based augmentation)."""
         if self.use_ranges:
             return self._seen("gnss/fix", t, False)
-        if not has_fix:
+        if status < 0:
             self.report("gnss/fix without a fix ignored", log=False)
             return self._seen("gnss/fix", t, False)
         if not (np.isfinite([lat_deg, lon_deg, h]).all() and np.isfinite(cov).all()):
@@ -167,9 +172,11 @@ class Aiding:
         if not HEIGHT_RANGE[0] <= h <= HEIGHT_RANGE[1]:
             self.report("implausible gnss/fix altitude rejected")
             return self._seen("gnss/fix", t, False)
-        if not covariance_known or cov[0, 0] <= 0.0:
-            cov = np.eye(3) * UNKNOWN_FIX_VARIANCE
-            self.report("gnss/fix without covariance: 5 m assumed", log=False)
+        if not covariance_known or not np.all(np.diag(cov) > 0.0):
+            sigma = UNKNOWN_FIX_SIGMA[min(status, 2)]
+            cov = np.diag([sigma ** 2, sigma ** 2, (2.0 * sigma) ** 2])
+            self.report(f"gnss/fix without covariance: {sigma:g} m assumed from its status",
+                        log=False)
         cov = _floored(cov, self.policy.position_sigma_floor)
         lat, lon = np.radians(lat_deg), np.radians(lon_deg)
         if self.datum is None:

@@ -43,7 +43,7 @@ from geometry_msgs.msg import TwistWithCovarianceStamped
 from ins_gnss_msgs.msg import FilterStatus, GnssEphemeris, GnssObservations, Heading, ImuDelta, \
     InsCorrection, InsState
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import NavSatFix, NavSatStatus
+from sensor_msgs.msg import NavSatFix
 
 from ..gnss.constants import GALILEO, GPS, UBX_GNSS_ID
 from ..gnss.ranges import RangeConfig, ephemeris_valid, satellite_ranges
@@ -156,7 +156,7 @@ class EkfNode(NavNode):
     def on_fix(self, msg: NavSatFix) -> None:
         if self.aiding.fix(stamp_to_sec(msg.header.stamp), msg.latitude, msg.longitude,
                            msg.altitude, np.reshape(msg.position_covariance, (3, 3)),
-                           msg.status.status >= NavSatStatus.STATUS_FIX,
+                           msg.status.status,
                            msg.position_covariance_type != NavSatFix.COVARIANCE_TYPE_UNKNOWN):
             self.after_filter()
 
