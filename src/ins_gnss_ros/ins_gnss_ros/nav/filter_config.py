@@ -155,4 +155,5 @@ def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
         floor_tau=p["forced.floor_tau_s"], degraded_ratio=p["forced.degraded_ratio"],
         gap_accel_sigma=p["imu_gap.accel_sigma_mps2"],
         gap_rate_sigma=np.radians(p["imu_gap.rate_sigma_dps"]),
-        store_covariance=record, record=record)
+        store_covariance=record, record=record,
+        compensated_increments=True)  # imu/delta: coning/sculling-compensated by contract

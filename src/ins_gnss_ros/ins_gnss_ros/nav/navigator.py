@@ -204,6 +204,11 @@ class NavigatorConfig:
         Keep the per-epoch outputs and every update result (:meth:`Navigator.output`). The
         ``ekf`` node runs for hours and turns it off: then only the updates of the last
         `history` seconds are kept (:meth:`Navigator.updates_since`) and memory stays bounded.
+    compensated_increments : bool
+        The increments given to :meth:`Navigator.add_imu` are already coning/sculling/rotation
+        compensated (``imu/delta``, as the imu_preprocessor makes them and the strapdown node
+        integrates them): they are mechanised as they are. False: raw sensor increments, whose
+        second-order terms the navigator adds (one-sample algorithm).
     """
 
     noise: object
@@ -236,6 +241,7 @@ class NavigatorConfig:
     checkpoint_interval: float = 0.5
     store_covariance: bool = True
     record: bool = True
+    compensated_increments: bool = False
 
 
 @dataclass
@@ -375,7 +381,8 @@ class Navigator:
         t : float or array_like, shape (N,)
             End time of each sample's interval (navigation time scale), s, increasing.
         dtheta, dv : array_like, shape (3,) or (N, 3)
-            Raw gyro (rad) and accelerometer (m/s) increments over each interval, body FLU.
+            Gyro (rad) and accelerometer (m/s) increments over each interval, body FLU: raw,
+            or compensated (``NavigatorConfig.compensated_increments``).
         """
         t = np.atleast_1d(np.asarray(t, float))
         dtheta = np.atleast_2d(np.asarray(dtheta, float))
@@ -389,14 +396,21 @@ class Navigator:
         # per-segment work to a subtraction.
         # Each sample's predecessor (filled in place: np.vstack costs more than the copy in
         # the ekf node, which adds one sample per call).
-        prev_th, prev_dv = np.zeros_like(dtheta), np.zeros_like(dv)
-        if len(self._imu_t):
-            prev_th[0], prev_dv[0] = self._imu_th[-1], self._imu_dv[-1]
-        prev_th[1:], prev_dv[1:] = dtheta[:-1], dv[:-1]
-        rot, dvn = coning_sculling(dtheta[:, None, :], dv[:, None, :], "one_sample",
-                                   prev=(prev_th, prev_dv))
+        if self.config.compensated_increments:
+            # Compensated once already: adding the terms again doubles them (a 2.5 mg-class
+            # velocity error in turns on the car drive) and parts the filter from the strapdown
+            # node it keeps in step.
+            d_rot, d_dv = np.zeros_like(dtheta), np.zeros_like(dv)
+        else:
+            prev_th, prev_dv = np.zeros_like(dtheta), np.zeros_like(dv)
+            if len(self._imu_t):
+                prev_th[0], prev_dv[0] = self._imu_th[-1], self._imu_dv[-1]
+            prev_th[1:], prev_dv[1:] = dtheta[:-1], dv[:-1]
+            rot, dvn = coning_sculling(dtheta[:, None, :], dv[:, None, :], "one_sample",
+                                       prev=(prev_th, prev_dv))
+            d_rot, d_dv = rot - dtheta, dvn - dv
         self._trim()
-        self._append_imu(t, dtheta, dv, rot - dtheta, dvn - dv)
+        self._append_imu(t, dtheta, dv, d_rot, d_dv)
         self._advance()
 
     #: The per-sample IMU buffers: views of the first rows of preallocated arrays.
