@@ -12,6 +12,7 @@ import numpy as np
 from geometry_msgs.msg import Quaternion, Vector3
 
 from ..io import set_stamp_sec, stamp_to_sec
+from ..nav.increments import increment_problem
 from ..nav.strapdown import NavState
 
 
@@ -50,3 +51,10 @@ def fill_ins_state(msg, state: NavState) -> None:
     set_vector3(msg.velocity, state.v_enu)
     q = msg.orientation
     q.w, q.x, q.y, q.z = state.q_nb.tolist()
+
+
+def increment_of(msg) -> tuple[str | None, np.ndarray, np.ndarray]:
+    """(problem, dtheta, dv) of an ins_gnss_msgs/ImuDelta: ``problem`` is why it cannot be
+    integrated (:func:`ins_gnss_ros.nav.increments.increment_problem`), None when it can."""
+    a, v = msg.delta_angle, msg.delta_velocity
+    return increment_problem((a.x, a.y, a.z), (v.x, v.y, v.z), msg.dt), vec(a), vec(v)

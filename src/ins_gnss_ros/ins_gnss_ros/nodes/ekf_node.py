@@ -51,13 +51,12 @@ from ..io import new, ns_to_stamp, stamp_to_ns, stamp_to_sec
 from ..nav.aiding import Aiding, AidingPolicy
 from ..nav.error_model import LAYOUTS
 from ..nav.filter_config import PARAMS, navigator_config
-from ..nav.increments import CONTIGUOUS, LOST, SensorErrors, classify_gap, held_increments, \
-    increment_problem
+from ..nav.increments import CONTIGUOUS, LOST, SensorErrors, classify_gap, held_increments
 from ..nav.navigator import ALIGNING, DEAD_RECKONING, NAVIGATING, Navigator
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import StrapdownSync
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, ParameterError, run
-from .convert import nav_state_from_msg, set_vector3, vec
+from .convert import increment_of, nav_state_from_msg, set_vector3, vec
 from .gnss_messages import kepler_from_msg, raw_epoch_from_msg
 from .nav_messages import fix_msg, odom_msg, status_msg
 
@@ -125,12 +124,10 @@ class EkfNode(NavNode):
 
     # -- inputs --------------------------------------------------------------------------------
     def on_delta(self, msg: ImuDelta) -> None:
-        a, v = msg.delta_angle, msg.delta_velocity
-        problem = increment_problem((a.x, a.y, a.z), (v.x, v.y, v.z), msg.dt)
+        problem, dtheta, dv = increment_of(msg)
         if problem is not None:
             self.diag.count(problem)
             return
-        dtheta, dv = vec(a), vec(v)
         t = stamp_to_sec(msg.header.stamp)
         interval = t - self.last_delta_t
         self.last_delta_t = t

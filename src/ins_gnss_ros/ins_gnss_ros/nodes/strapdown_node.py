@@ -23,12 +23,12 @@ from ins_gnss_msgs.msg import ImuDelta, InsCorrection, InsState
 
 from ..io import new, stamp_to_ns, stamp_to_sec
 from ..nav.conventions import yaw_from_azimuth
-from ..nav.increments import SensorErrors, increment_problem
+from ..nav.increments import SensorErrors
 from ..nav.rotations import quat_from_euler
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import ClosedLoopStrapdown, Correction
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, run
-from .convert import fill_ins_state, set_vector3, vec
+from .convert import fill_ins_state, increment_of, set_vector3, vec
 
 #: ClosedLoopStrapdown events -> diagnostics.
 _EVENTS = {"lost": "imu lost: gap in increments beyond max_imu_gap_s, new run",
@@ -81,12 +81,11 @@ class StrapdownNode(NavNode):
         self.subscribe(InsCorrection, "ins/correction", self.on_correction, STATE_QOS)
 
     def on_delta(self, msg: ImuDelta) -> None:
-        a, v = msg.delta_angle, msg.delta_velocity
-        problem = increment_problem((a.x, a.y, a.z), (v.x, v.y, v.z), msg.dt)
+        problem, dtheta, dv = increment_of(msg)
         if problem is not None:
             self.diag.count(problem)
             return
-        event = self.loop.add(stamp_to_sec(msg.header.stamp), vec(a), vec(v), msg.dt)
+        event = self.loop.add(stamp_to_sec(msg.header.stamp), dtheta, dv, msg.dt)
         if event is not None:
             self.diag.count(_EVENTS[event])
             if event == "stale":
