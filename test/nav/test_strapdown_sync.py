@@ -67,5 +67,4 @@ def test_sync_corrects_against_the_matching_state_and_falls_back_when_out_of_ste
     assert sync.correction(1.5, lambda t: solution, estimates, 2) is None
     c, resent = sync.correction(2.2, lambda t: solution, estimates, 2)
     assert resent and c.t_ns == 1_090_000_000
-    sync.forget_updates(1)
-    assert sync.synced_updates == 1
+    assert sync.synced_revision == 2 and not sync.due(3.0, 2) and sync.due(3.0, 3)

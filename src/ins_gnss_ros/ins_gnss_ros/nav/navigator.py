@@ -329,6 +329,10 @@ class Navigator:
         if "gs" in self.space or "ng" in self.space or "na" in self.space:
             raise ValueError("the navigator compensates bias and scale-factor blocks only")
         self.lever = np.asarray(config.lever_arm_b, float)
+        # Corrections of the solution so far, pseudo-measurements (NHC, ZARU) included: what a
+        # follower of the solution (the strapdown node) must hear of. Monotonic, neither reset
+        # nor rewound: a re-run after a delayed measurement changes the solution again.
+        self.revision = 0
         self.reset()
 
     # --------------------------------------------------------------------------------------
@@ -933,6 +937,7 @@ class Navigator:
         self._reject_since.pop(innov.name, None)
         self._rejecting.pop(innov.name, None)
         self._feedback()
+        self.revision += 1
         if aiding:
             self._t_last_aid = epoch
             if self.mode != ALIGNING:

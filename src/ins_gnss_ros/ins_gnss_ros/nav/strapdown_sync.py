@@ -214,7 +214,7 @@ class StrapdownSync:
         self.states: deque[tuple[int, int, object]] = deque()  # (stamp ns, sequence, item)
         self.last_sync_t = -np.inf
         self.last_match_t = -np.inf
-        self.synced_updates = 0
+        self.synced_revision = 0
 
     def add_state(self, t_ns: int, sequence: int, item) -> None:
         """Keep a strapdown state (stamp ns, the correction sequence it carries, the caller's
@@ -235,15 +235,12 @@ class StrapdownSync:
         correction."""
         self.sequence += 1
 
-    def forget_updates(self, update_count: int) -> None:
-        """A delayed measurement re-ran the filter from an earlier epoch: its update count went
-        back."""
-        self.synced_updates = min(self.synced_updates, update_count)
-
-    def due(self, t: float, update_count: int) -> bool:
-        """The filter (at time t, s) has updated since the last correction and the minimum
-        interval has passed."""
-        return update_count > self.synced_updates and t - self.last_sync_t >= self.min_interval
+    def due(self, t: float, revision: int) -> bool:
+        """The filter (at time t, s) has corrected its solution since the last correction (its
+        ``revision`` counts every correction, pseudo-measurements included: during a GNSS
+        outage the non-holonomic constraint still corrects it) and the minimum interval has
+        passed."""
+        return revision > self.synced_revision and t - self.last_sync_t >= self.min_interval
 
     def _match(self, t_ns: int):
         """The newest kept item within 1 ms of t_ns carrying the current sequence, or None.
@@ -257,7 +254,7 @@ class StrapdownSync:
         return next((states[i] for i in range(hi - 1, lo - 1, -1)
                      if states[i][1] == self.sequence), None)
 
-    def correction(self, t: float, state_at, estimates: dict, update_count: int):
+    def correction(self, t: float, state_at, estimates: dict, revision: int):
         """The correction that puts the strapdown on the filter's solution, or None (nothing to
         compare with yet).
 
@@ -269,8 +266,8 @@ class StrapdownSync:
             ``state_at(t) -> NavState | None``: the filter's solution moved to time t.
         estimates : dict of str to ndarray
             The filter's running sensor-error estimates by block name (SENSOR_BLOCKS).
-        update_count : int
-            The filter's update count (marks the updates this correction covers).
+        revision : int
+            The filter's revision (marks the corrections of the solution this one covers).
 
         Returns
         -------
@@ -301,6 +298,6 @@ class StrapdownSync:
             # zero where the layout has none of the blocks
             sensor[name] = estimate - getattr(applied, name) if np.ndim(estimate) else np.zeros(3)
         self.sequence += 1
-        self.synced_updates = update_count
+        self.synced_revision = revision
         self.last_sync_t = t
         return Correction(match[0], self.sequence, dp, dv, phi, SensorErrors(**sensor)), resent

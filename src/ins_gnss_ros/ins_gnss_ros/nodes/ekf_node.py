@@ -216,9 +216,9 @@ class EkfNode(NavNode):
     def after_filter(self) -> None:
         nav = self.navigator
         self.report_updates()
-        if nav.nav is None or nav.ekf is None or not self.sync.due(nav.nav.t, nav.update_count):
+        if nav.nav is None or nav.ekf is None or not self.sync.due(nav.nav.t, nav.revision):
             return
-        result = self.sync.correction(nav.nav.t, nav.state_at, nav.estimates, nav.update_count)
+        result = self.sync.correction(nav.nav.t, nav.state_at, nav.estimates, nav.revision)
         if result is None:
             return
         c, resent = result
@@ -243,7 +243,6 @@ class EkfNode(NavNode):
         # A delayed measurement re-runs the filter from an earlier epoch: its re-done updates
         # are reported again.
         self.reported_updates = min(self.reported_updates, nav.update_count)
-        self.sync.forget_updates(nav.update_count)
         updates = nav.updates_since(self.reported_updates)
         if updates:
             self.reported_updates = nav.update_count
