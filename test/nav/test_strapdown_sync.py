@@ -50,6 +50,7 @@ def test_sync_corrects_against_the_matching_state_and_falls_back_when_out_of_ste
         return states[key], SensorErrors()
 
     sync = StrapdownSync(3.0, 0.1, 1.0, state_of)
+    assert not sync.current(0)  # an uncorrected strapdown is not the filter's solution
     for k in range(10):
         t = 1.0 + 0.01 * k
         states[k] = NavState(1.0, 0.5, 0.0, np.zeros(3), LEVEL, t)

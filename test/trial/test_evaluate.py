@@ -188,3 +188,34 @@ def test_euler_error_jacobian():
     numeric = np.column_stack([roll2 - roll, pitch2 - pitch, -(yaw2 - yaw)])
     linear = np.einsum("nij,nj->ni", euler_error_jacobian(q), phi)
     assert np.allclose(numeric, linear, atol=1e-11)
+
+
+def test_nees_leaves_out_epochs_without_a_covariance():
+    t = np.arange(0.0, 100.0, 0.5)
+    truth = _circle(t)
+    est = _shift(truth, east=1.0)
+    pos_cov = np.broadcast_to(np.eye(3), (len(t), 3, 3)).copy()
+    pos_cov[:10] = np.nan  # e.g. the strapdown's start-up states, before the filter published
+    est = Trajectory(**{**vars(est), "pos_cov_enu": pos_cov})
+    assert evaluate(est, truth).nees["position"] == pytest.approx(1.0)
+
+
+def test_odometry_covariance_is_attached_only_near_published_messages():
+    from nav_msgs.msg import Odometry
+
+    from ins_gnss_ros.io import BagMessage, sec_to_stamp
+    from ins_gnss_ros.trial.report import attach_odometry_covariance
+
+    t = np.arange(0.0, 10.0, 0.1)
+    estimate = _circle(t)
+    messages = []
+    for ts in np.arange(2.0, 6.0, 0.1):  # published from 2 s to 6 s only
+        odom = Odometry()
+        odom.header.stamp = sec_to_stamp(ts)
+        odom.pose.covariance = (np.eye(6) * 4.0).flatten().tolist()
+        odom.twist.covariance = np.eye(6).flatten().tolist()
+        messages.append(BagMessage("/nav/odom", int(round(ts * 1e9)), odom))
+    out = attach_odometry_covariance(estimate, messages, 0)
+    known = np.isfinite(out.pos_cov_enu[:, 0, 0])
+    assert np.array_equal(known, (t >= 2.0 - 1e-9) & (t <= 5.9 + 1e-9))
+    assert np.allclose(out.pos_cov_enu[known], 4.0 * np.eye(3))

@@ -226,8 +226,10 @@ class StrapdownSync:
             self.states.popleft()
 
     def current(self, sequence: int) -> bool:
-        """A state carrying ``sequence`` has every correction sent so far applied."""
-        return sequence == self.sequence
+        """A state carrying ``sequence`` has every correction sent so far applied, and at least
+        one (a strapdown that has not been corrected yet carries sequence 0: its state is its
+        start-up parameters, not the filter's solution)."""
+        return sequence == self.sequence > 0
 
     def invalidate(self) -> None:
         """The strapdown's states are no longer the filter's solution (it bridged or lost a gap

@@ -273,7 +273,9 @@ def evaluate(estimate, truth, windows=None, max_gap=DEFAULT_MAX_GAP_S):
         "pitch_deg": _maybe(errors.euler, lambda e: np.degrees(e[:, 1])),
         "heading_deg": _maybe(errors.euler, lambda e: np.degrees(e[:, 2])),
     }
-    nees = {name: float(np.mean(values)) if values is not None else np.nan
+    # over the epochs with a known covariance
+    nees = {name: float(np.nanmean(values)) if values is not None and np.isfinite(values).any()
+            else np.nan
             for name, values in (("position", errors.nees_pos), ("velocity", errors.nees_vel),
                                  ("attitude", errors.nees_att))}
     return Evaluation(errors=errors, stats=stats, nees=nees,
@@ -396,9 +398,14 @@ def _sigma(cov):
 
 
 def _nees(error, cov):
+    """Per-epoch NEES; NaN where the covariance is unknown (not finite)."""
     if cov is None:
         return None
-    return np.einsum("ni,ni->n", error, np.linalg.solve(cov, error[..., None])[..., 0])
+    nees = np.full(len(error), np.nan)
+    known = np.isfinite(cov).all(axis=(1, 2))
+    nees[known] = np.einsum("ni,ni->n", error[known],
+                            np.linalg.solve(cov[known], error[known][..., None])[..., 0])
+    return nees
 
 
 def _bracketed(t_est, t_truth, max_gap):

@@ -48,9 +48,17 @@ def trajectory_from_states(messages, t0_ns: int) -> Trajectory | None:
                       vel_enu=vel, q_nb=q)
 
 
+#: Farthest an estimate epoch may lie from a nav/odom message and still be given its
+#: covariance, s (five periods of the ekf's default 10 Hz output).
+MAX_COVARIANCE_GAP_S = 0.5
+
+
 def attach_odometry_covariance(estimate: Trajectory, messages, t0_ns: int) -> Trajectory:
     """``estimate`` with position, velocity and attitude covariances from nav/Odometry messages,
-    interpolated linearly to its epochs (held constant beyond the first and last)."""
+    interpolated linearly to its epochs. Epochs farther than MAX_COVARIANCE_GAP_S from every
+    message (before the filter published any, across a gap in its output) get NaN: their
+    covariance is unknown, and holding the nearest one would judge a state no filter vouched
+    for (the strapdown's start-up state before the first correction) against it."""
     if not messages or estimate.q_nb is None:
         return estimate
     t = np.array([(bagio.msg_stamp_ns(m.msg) - t0_ns) * 1e-9 for m in messages])
@@ -58,10 +66,16 @@ def attach_odometry_covariance(estimate: Trajectory, messages, t0_ns: int) -> Tr
     twist = np.array([np.reshape(m.msg.twist.covariance, (6, 6)) for m in messages])
     order = np.argsort(t, kind="stable")
     t, pose, twist = t[order], pose[order], twist[order]
+    right = np.clip(np.searchsorted(t, estimate.time), 0, len(t) - 1)
+    left = np.clip(right - 1, 0, len(t) - 1)
+    nearest = np.minimum(np.abs(t[right] - estimate.time), np.abs(estimate.time - t[left]))
+    unknown = (nearest > MAX_COVARIANCE_GAP_S) | (estimate.time < t[0]) | (estimate.time > t[-1])
 
     def at_estimate(cov):
         flat = cov.reshape(len(t), -1)
-        return np.column_stack([np.interp(estimate.time, t, c) for c in flat.T]).reshape(-1, 3, 3)
+        out = np.column_stack([np.interp(estimate.time, t, c) for c in flat.T])
+        out[unknown] = np.nan
+        return out.reshape(-1, 3, 3)
 
     c_nb = quat_to_dcm(estimate.q_nb)
     vel_body = at_estimate(twist[:, :3, :3])
