@@ -219,3 +219,22 @@ def test_odometry_covariance_is_attached_only_near_published_messages():
     known = np.isfinite(out.pos_cov_enu[:, 0, 0])
     assert np.array_equal(known, (t >= 2.0 - 1e-9) & (t <= 5.9 + 1e-9))
     assert np.allclose(out.pos_cov_enu[known], 4.0 * np.eye(3))
+
+
+def test_truth_at_the_antenna_and_lagging_velocities_are_referred_to_the_estimate():
+    from ins_gnss_ros.nav.lever_arm import lever_arm_position
+    from ins_gnss_ros.trial.report import referred_to_truth
+
+    t = np.arange(0.0, 60.0, 0.25)
+    base = _circle(t)  # the vehicle's base_link: the estimate, exact
+    antenna = np.array([0.5, -0.3, 1.2])
+    lat, lon, h = lever_arm_position(base.lat, base.lon, base.height, base.q_nb, antenna)
+    delay = 0.25  # the truth's velocity stamped t is the velocity of t - 0.25 s
+    late = np.column_stack([np.interp(t - delay, t, v) for v in base.vel_enu.T])
+    truth = Trajectory(time=t, lat=lat, lon=lon, height=h, vel_enu=late)
+    raw = evaluate(base, truth)
+    assert raw.stats["horizontal_m"].rms > 0.4  # the lever arm, seen as error
+    est, ref = referred_to_truth(base, truth, antenna, delay)
+    result = evaluate(est, ref)
+    assert result.stats["horizontal_m"].max < 1e-6
+    assert result.stats["velocity_horizontal_mps"].max < 1e-3

@@ -4,7 +4,8 @@
     trial import {rtklib-drive,ubx,vessel-parquet} SRC --out bags/NAME
     trial replay bags/NAME --config config/PROFILE.yaml --out OUT [--outages LEN:PERIOD[:FIRST]]
                  [--init-from-truth] [--rate R --processes | --offline] [--faults FILE]
-    trial evaluate OUT [--truth bags/NAME] [--json] [--skip S]
+    trial evaluate OUT [--truth bags/NAME] [--json] [--skip S] [--truth-point X Y Z]
+                   [--truth-velocity-delay S]
     trial compare OUT_A OUT_B [--with-diagnostics]
     trial batch --config PROFILE --out DIR (--scenario S --seeds N | --bags B ...) [--scheduler A]
     trial run --config config/PROFILE.yaml
@@ -88,6 +89,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--skip", type=float, default=0.0,
                    help="leave the first S s (alignment, convergence) out of the statistics")
+    p.add_argument("--truth-point", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                   help="the body point the truth positions refer to (base_link FLU, m), e.g. "
+                        "the GNSS antenna of an RTK truth")
+    p.add_argument("--truth-velocity-delay", type=float, default=0.0, metavar="S",
+                   help="latency of the truth velocities, s")
 
     p = sub.add_parser("compare", help="are two replays' outputs identical, message by message")
     p.add_argument("a", help="replay output folder (or bag folder)")
@@ -195,7 +201,8 @@ def cmd_evaluate(args) -> int:
     from ins_gnss_ros.trial.report import evaluate_run
 
     evaluation, metrics = evaluate_run(args.out, args.truth, plots=not args.no_plots,
-                                       skip_s=args.skip)
+                                       skip_s=args.skip, truth_point=args.truth_point,
+                                       truth_velocity_delay=args.truth_velocity_delay)
     if args.json:
         print(json.dumps(metrics, sort_keys=True))
     else:

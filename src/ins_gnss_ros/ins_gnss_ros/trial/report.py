@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ins_gnss_ros import io as bagio
+from ins_gnss_ros.nav.lever_arm import lever_arm_position
 from ins_gnss_ros.nav.rotations import quat_normalize, quat_to_dcm
 from ins_gnss_ros.trial.evaluate import Trajectory, _subset, evaluate, markdown_table
 
@@ -118,7 +119,11 @@ def load_run(out, truth_bag=None):
     t0_ns = truth_msgs[0].t_ns
     truth = trajectory_from_states(truth_msgs, t0_ns)
     outputs = bagio.read_bag(output_bag, [STATE_TOPIC, ODOM_TOPIC])
-    estimate = trajectory_from_states([m for m in outputs if m.topic == STATE_TOPIC], t0_ns)
+    states = [m for m in outputs if m.topic == STATE_TOPIC]
+    # A strapdown state no filter has corrected yet (sequence 0) is its start-up parameters,
+    # not a solution: left out when a filter ran (a strapdown-only run keeps them all).
+    corrected = [m for m in states if m.msg.correction_sequence > 0]
+    estimate = trajectory_from_states(corrected or states, t0_ns)
     if estimate is None or truth is None:
         raise ValueError(f"{output_bag}: no {STATE_TOPIC} with finite positions to evaluate")
     estimate = attach_odometry_covariance(
@@ -127,7 +132,35 @@ def load_run(out, truth_bag=None):
     return estimate, truth, (windows_ns - t0_ns) * 1e-9, summary
 
 
-def evaluate_run(out, truth_bag=None, plots=True, skip_s=0.0):
+def referred_to_truth(estimate: Trajectory, truth: Trajectory, truth_point=None,
+                      truth_velocity_delay: float = 0.0) -> tuple[Trajectory, Trajectory]:
+    """The estimate and the truth referred to the same point and time.
+
+    Parameters
+    ----------
+    truth_point : (3,) array_like, optional
+        The point of the body the truth positions refer to, base_link FLU, m (e.g. the GNSS
+        antenna of an RTK truth): the estimate (base_link) is moved there with its own attitude.
+    truth_velocity_delay : float
+        Latency of the truth velocities, s: a truth velocity stamped t is the velocity of
+        t - delay (RTKLIB's velocities of the car drive lag its positions by 0.125 s), so the
+        truth velocities are taken at t + delay.
+    """
+    if truth_point is not None:
+        if estimate.q_nb is None:
+            raise ValueError("a truth point needs the estimate's attitude")
+        lat, lon, h = lever_arm_position(estimate.lat, estimate.lon, estimate.height,
+                                         estimate.q_nb, np.asarray(truth_point, float))
+        estimate = Trajectory(**{**vars(estimate), "lat": lat, "lon": lon, "height": h})
+    if truth_velocity_delay and truth.vel_enu is not None:
+        vel = np.column_stack([np.interp(truth.time + truth_velocity_delay, truth.time, v,
+                                         left=np.nan, right=np.nan) for v in truth.vel_enu.T])
+        truth = Trajectory(**{**vars(truth), "vel_enu": vel})
+    return estimate, truth
+
+
+def evaluate_run(out, truth_bag=None, plots=True, skip_s=0.0, truth_point=None,
+                 truth_velocity_delay=0.0):
     """Evaluate a replay output folder; write ``report.md`` (and PNG plots) into it.
 
     Parameters
@@ -141,6 +174,8 @@ def evaluate_run(out, truth_bag=None, plots=True, skip_s=0.0):
     skip_s : float
         Leave the first ``skip_s`` seconds of the estimate (initial alignment and convergence)
         out of the statistics; the report says so.
+    truth_point, truth_velocity_delay
+        Where and when the truth refers to (:func:`referred_to_truth`); the report says so.
 
     Returns
     -------
@@ -154,6 +189,7 @@ def evaluate_run(out, truth_bag=None, plots=True, skip_s=0.0):
     if not skip_s >= 0.0:
         raise ValueError(f"--skip must be >= 0 s, got {skip_s}")
     estimate, truth, windows, summary = load_run(out, truth_bag)
+    estimate, truth = referred_to_truth(estimate, truth, truth_point, truth_velocity_delay)
     keep = truth.time >= estimate.time[0] + skip_s
     if not keep.any():
         raise ValueError(f"no truth epoch after the first {skip_s:g} s of the estimate")
@@ -162,13 +198,17 @@ def evaluate_run(out, truth_bag=None, plots=True, skip_s=0.0):
     images = write_plots(evaluation, estimate, truth, out / "plots",
                          windows if len(windows) else None) if plots else []
     report = out / "report.md"
-    report.write_text(markdown_report(evaluation, summary, truth_bag, images, out, skip_s))
+    referred = {"truth point (FLU, m)": None if truth_point is None else list(truth_point),
+                "truth velocity delay (s)": truth_velocity_delay or None}
+    report.write_text(markdown_report(evaluation, summary, truth_bag, images, out, skip_s,
+                                      referred))
     metrics = evaluation.to_json()
     metrics["report"] = str(report)
     return evaluation, metrics
 
 
-def markdown_report(evaluation, summary, truth_bag, images, out, skip_s=0.0) -> str:
+def markdown_report(evaluation, summary, truth_bag, images, out, skip_s=0.0,
+                    referred=None) -> str:
     """The report: what ran on what, the error tables, the plots."""
     lines = ["# Trial evaluation", ""]
     facts = [("input bag", summary.get("input_bag")), ("truth", truth_bag or
@@ -176,6 +216,7 @@ def markdown_report(evaluation, summary, truth_bag, images, out, skip_s=0.0) -> 
              ("profile", summary.get("profile")), ("graph", ", ".join(summary.get("graph", []))),
              ("replay", summary.get("mode")), ("outages", summary.get("outages")),
              ("not evaluated (alignment, convergence)", f"first {skip_s:g} s" if skip_s else None)]
+    facts += list((referred or {}).items())
     lines += [f"- {name}: `{value}`" for name, value in facts if value]
     lines += ["", markdown_table(evaluation), ""]
     lines += [f"![{p.stem}]({p.relative_to(out)})" for p in images]
