@@ -131,3 +131,26 @@ def test_bad_arguments():
         simulate("car", -1.0, 0, "/nonexistent/x")
     with pytest.raises(ValueError, match="grade"):
         simulate("car", 1.0, 0, "/nonexistent/x", SimOptions(imu_grade="potato"))
+
+
+def test_any_sensor_rates_jittered_imu_stamps_and_fix_only_receivers(tmp_path):
+    from sensor_msgs.msg import NavSatFix
+
+    from ins_gnss_ros.trial.simulate import trajectory_rate
+
+    options = SimOptions(imu_rate=30.0, gnss_rate=2.5, imu_stamp_jitter=0.003,
+                         gnss_velocity=False, gnss_covariance=False)
+    assert trajectory_rate(options, "car") == 300.0  # lcm of 30, 2.5, 50 (mag), 20 (truth)
+    path = simulate("car", 20.0, 1, tmp_path / "bag", options)
+    imu = bagio.read_bag(path, ["/imu/data_raw"])
+    t = np.array([bagio.msg_stamp_ns(m.msg) for m in imu]) * 1e-9
+    assert len(imu) == 600
+    steps = np.diff(t)
+    assert steps.min() > 0.0 and 0.027 < steps.min() < 0.0334 and steps.max() < 0.0394
+    assert np.std(steps) > 1e-3  # jittered
+    # the jitter is in the stamps only: a uniform grid fits them within the jitter
+    grid = t[0] + (t[-1] - t[0]) * np.arange(len(t)) / (len(t) - 1)
+    assert np.abs(t - grid).max() < 0.0061
+    fixes = bagio.read_bag(path, ["/gnss/fix"])
+    assert len(fixes) == 51 and "/gnss/vel" not in bagio.bag_topics(path)  # 0 s to 20 s
+    assert {m.msg.position_covariance_type for m in fixes} == {NavSatFix.COVARIANCE_TYPE_UNKNOWN}

@@ -22,7 +22,7 @@ and Babich's reduced model ("rw": one random-walk bias state, the GM process app
 the integral of white noise of intensity 2σ²/T, Babich §5).
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.signal import lfilter
@@ -106,6 +106,30 @@ MEMS_ADIS16405 = ImuGrade(
                       scale_sigma=1000 * PPM, misalign_sigma=3 * ARCMIN),
     g_sensitivity_sigma=0.05 * DEG / 9.80665)
 
+#: The ADIS16405 at its data-sheet turn-on biases (Analog Devices ADIS16405 data sheet, rev. B:
+#: gyro initial bias error ±3 °/s, accelerometer ±50 mg, taken as 1σ): what an uncalibrated unit
+#: starts with. In-run stability, noise and scale factors as :data:`MEMS_ADIS16405`.
+MEMS_ADIS16405_DATASHEET = ImuGrade(
+    "mems_adis16405_datasheet",
+    gyro=replace(MEMS_ADIS16405.gyro, bias_sigma=3.0 * DEG),
+    accel=replace(MEMS_ADIS16405.accel, bias_sigma=50 * MILLI_G),
+    g_sensitivity_sigma=MEMS_ADIS16405.g_sensitivity_sigma)
+
+#: Consumer MEMS (MPU-6050 / ICM-20948 class; TDK InvenSense ICM-20948 data sheet DS-000189
+#: rev. 1.3): gyro initial zero-rate output ±5 °/s, rate noise 0.015 °/s/√Hz, sensitivity
+#: tolerance ±1.5 %, cross-axis ±2 %; accelerometer initial zero-g output ±50 mg, noise
+#: 230 µg/√Hz, sensitivity ±0.5 %. The data sheets give no in-run stability: 0.01 °/s and 1 mg
+#: over 100 s, the Allan bias-instability floor such parts show, is assumed.
+CONSUMER_MEMS = ImuGrade(
+    "consumer_mems",
+    gyro=TriadErrors(white_density=0.015 * DEG, bias_sigma=5.0 * DEG,
+                     gm_sigma=0.01 * DEG, gm_tau=100.0, rw_density=0.0,
+                     scale_sigma=15000 * PPM, misalign_sigma=0.02),
+    accel=TriadErrors(white_density=230 * MICRO_G, bias_sigma=50 * MILLI_G,
+                      gm_sigma=1.0 * MILLI_G, gm_tau=100.0, rw_density=0.0,
+                      scale_sigma=5000 * PPM, misalign_sigma=0.02),
+    g_sensitivity_sigma=0.1 * DEG / 9.80665)
+
 #: Tactical grade (ring-laser / good FOG, ~1 °/h class).
 TACTICAL = ImuGrade(
     "tactical",
@@ -126,7 +150,8 @@ NAVIGATION = ImuGrade(
                       gm_sigma=10 * MICRO_G, gm_tau=3600.0, rw_density=0.0,
                       scale_sigma=50 * PPM, misalign_sigma=10e-6))
 
-GRADES = {g.name: g for g in (MEMS_ADIS16405, TACTICAL, NAVIGATION)}
+GRADES = {g.name: g for g in (MEMS_ADIS16405, MEMS_ADIS16405_DATASHEET, CONSUMER_MEMS, TACTICAL,
+                              NAVIGATION)}
 
 
 def error_matrix(scale, misalign):

@@ -47,10 +47,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--imu", choices=("data_raw", "delta"), default="data_raw",
                    help="IMU topic: raw rates (imu/data_raw) or increments (imu/delta)")
-    p.add_argument("--imu-grade", default=None, help="mems_adis16405, tactical or navigation")
+    p.add_argument("--imu-grade", default=None, help="a key of nav.sensor_errors.GRADES")
     p.add_argument("--imu-rate", type=float, default=SimOptions.imu_rate, help="Hz")
-    p.add_argument("--gnss-rate", type=float, default=SimOptions.gnss_rate,
-                   help="Hz, a divisor of the IMU rate")
+    p.add_argument("--imu-stamp-jitter", type=float, default=0.0, metavar="S",
+                   help="half-width of the uniform error of the IMU stamps (driver stamping), s")
+    p.add_argument("--gnss-rate", type=float, default=SimOptions.gnss_rate, help="Hz")
+    p.add_argument("--no-gnss-vel", action="store_true", help="fixes only, no gnss/vel")
+    p.add_argument("--no-gnss-cov", action="store_true", help="fixes without covariance")
     p.add_argument("--gnss-sigma-h", type=float, default=SimOptions.gnss_sigma_h,
                    help="horizontal position noise per axis, m")
     p.add_argument("--gnss-sigma-v", type=float, default=SimOptions.gnss_sigma_v,
@@ -154,7 +157,9 @@ def cmd_simulate(args) -> int:
 
     path = simulate(args.scenario, args.duration, args.seed, args.out,
                     SimOptions(imu_grade=args.imu_grade, imu_topic=args.imu,
-                               imu_rate=args.imu_rate, gnss_rate=args.gnss_rate,
+                               imu_rate=args.imu_rate, imu_stamp_jitter=args.imu_stamp_jitter,
+                               gnss_rate=args.gnss_rate, gnss_velocity=not args.no_gnss_vel,
+                               gnss_covariance=not args.no_gnss_cov,
                                gnss_sigma_h=args.gnss_sigma_h, gnss_sigma_v=args.gnss_sigma_v))
     print(path)
     return 0

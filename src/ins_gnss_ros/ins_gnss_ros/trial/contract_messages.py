@@ -38,12 +38,15 @@ def delta_msg(t_ns, dtheta, dv, dt, frame_id="base_link"):
 
 def fix_msg(t_ns, lat, lon, h, cov_enu_diag, frame_id="gnss"):
     """sensor_msgs/NavSatFix (degrees on the wire, as REP/NavSatFix define) with diagonal ENU
-    covariance, m^2."""
+    covariance, m^2 (None: COVARIANCE_TYPE_UNKNOWN, as receivers without accuracy output)."""
     msg = NavSatFix(header=_header(t_ns, frame_id), latitude=math.degrees(lat),
                     longitude=math.degrees(lon), altitude=float(h))
     msg.status.status, msg.status.service = NavSatStatus.STATUS_FIX, NavSatStatus.SERVICE_GPS
-    msg.position_covariance[0::4] = [float(c) for c in cov_enu_diag]
-    msg.position_covariance_type = NavSatFix.COVARIANCE_TYPE_DIAGONAL_KNOWN
+    if cov_enu_diag is None:
+        msg.position_covariance_type = NavSatFix.COVARIANCE_TYPE_UNKNOWN
+    else:
+        msg.position_covariance[0::4] = [float(c) for c in cov_enu_diag]
+        msg.position_covariance_type = NavSatFix.COVARIANCE_TYPE_DIAGONAL_KNOWN
     return msg
 
 

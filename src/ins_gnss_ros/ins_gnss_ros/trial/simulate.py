@@ -20,7 +20,9 @@ options give the identical (decoded) bag.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 
@@ -52,11 +54,19 @@ class SimOptions:
     imu_grade : str or None
         Key of :data:`ins_gnss_ros.nav.sensor_errors.GRADES`; None: :data:`DEFAULT_GRADE`.
     imu_rate : float
-        IMU and trajectory rate, Hz.
+        IMU rate, Hz (10 to 1000 or more; the trajectory runs at the least common multiple of
+        every sensor rate, so any combination of rates works).
+    imu_stamp_jitter : float
+        Half-width of the uniform error of the IMU message stamps, s: a USB/driver stamping the
+        samples on arrival while the sensor samples on its own clock (the data stay uniform).
     imu_topic : {"data_raw", "delta"}
         Write raw rates on ``imu/data_raw`` or increments on ``imu/delta``.
     gnss_rate : float
-        Rate of ``gnss/fix`` and ``gnss/vel``, Hz (a divisor of `imu_rate`).
+        Rate of ``gnss/fix`` and ``gnss/vel``, Hz.
+    gnss_velocity : bool
+        Write ``gnss/vel`` (False: fixes only, as an SBAS/NMEA GGA receiver gives).
+    gnss_covariance : bool
+        Give ``gnss/fix`` its covariance (False: COVARIANCE_TYPE_UNKNOWN).
     gnss_sigma_h, gnss_sigma_v : float
         White position noise per horizontal axis and vertical, m.
     gnss_sigma_vel : float
@@ -77,8 +87,11 @@ class SimOptions:
 
     imu_grade: str | None = None
     imu_rate: float = 200.0
+    imu_stamp_jitter: float = 0.0
     imu_topic: str = "data_raw"
     gnss_rate: float = 5.0
+    gnss_velocity: bool = True
+    gnss_covariance: bool = True
     gnss_sigma_h: float = 0.5
     gnss_sigma_v: float = 1.0
     gnss_sigma_vel: float = 0.05
@@ -121,7 +134,8 @@ def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions
     grade = GRADES[grade_name]
     writer = bag.BagWriter(out)  # an existing output is refused before the work
     seeds = np.random.SeedSequence(seed).generate_state(4)
-    sc = scenarios.SCENARIOS[scenario](duration=duration, seed=seed, rate=options.imu_rate)
+    sc = scenarios.SCENARIOS[scenario](duration=duration, seed=seed,
+                                       rate=trajectory_rate(options, scenario))
     traj = sc.trajectory
     imu = _write_imu(writer, traj, ImuSpec(grade, rate=options.imu_rate), int(seeds[0]), options)
     _write_gnss(writer, traj, options, np.random.default_rng(seeds[1]))
@@ -132,17 +146,33 @@ def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions
     return writer.close()
 
 
+def trajectory_rate(options: SimOptions, scenario: str) -> float:
+    """The least common multiple of the scenario's sensor rates, Hz: every sensor then samples
+    the trajectory exactly (rates as fractions of up to three decimals, e.g. 2.5 Hz)."""
+    rates = [options.imu_rate, options.gnss_rate, options.mag_rate, options.truth_rate]
+    if scenario == "sea":
+        rates.append(options.log_rate)
+    fractions = [Fraction(r).limit_denominator(1000) for r in rates]
+    if min(fractions) <= 0:
+        raise ValueError(f"sensor rates must be > 0 Hz, got {rates}")
+    numerator = math.lcm(*(f.numerator for f in fractions))
+    denominator = math.gcd(*(f.denominator for f in fractions))
+    return numerator / denominator
+
+
 def _every(traj, rate):
-    """Indices of trajectory samples at ``rate`` Hz (rate must divide the trajectory rate)."""
-    factor = int(round(1.0 / (traj.dt * rate)))
-    if factor < 1 or abs(factor * traj.dt * rate - 1.0) > 1e-9:
-        raise ValueError(f"{rate} Hz does not divide the trajectory rate {1.0 / traj.dt:g} Hz")
-    return np.arange(0, len(traj), factor)
+    """Indices of trajectory samples at ``rate`` Hz."""
+    return np.arange(0, len(traj), traj.decimation(rate))
 
 
 def _write_imu(writer, traj, spec, seed, options):
     imu = simulate_imu(traj, spec, seed)
-    t_ns = bag.sec_to_ns(imu.t, SIM_EPOCH_NS)
+    t = imu.t
+    if options.imu_stamp_jitter > 0.0:
+        # Stamped on arrival: each stamp off by up to the jitter, never out of order.
+        rng = np.random.default_rng(seed + 1)
+        t = t + rng.uniform(-1.0, 1.0, len(t)) * min(options.imu_stamp_jitter, 0.45 * imu.dt)
+    t_ns = bag.sec_to_ns(t, SIM_EPOCH_NS)
     if options.imu_topic == "delta":
         writer.write_all("imu/delta", (msgs.delta_msg(t, a, v, imu.dt)
                                        for t, a, v in zip(t_ns, imu.dtheta, imu.dv)))
@@ -167,8 +197,10 @@ def _write_gnss(writer, traj, options, rng):
     t_ns = bag.sec_to_ns(traj.t[k], SIM_EPOCH_NS)
     var, var_v = sigma ** 2, [options.gnss_sigma_vel ** 2] * 3
     for i, t in enumerate(t_ns):
-        writer.write("gnss/fix", msgs.fix_msg(t, lat[i], lon[i], h[i], var))
-        writer.write("gnss/vel", msgs.twist_msg(t, vel[i], var_v, "gnss"))
+        writer.write("gnss/fix", msgs.fix_msg(t, lat[i], lon[i], h[i],
+                                               var if options.gnss_covariance else None))
+        if options.gnss_velocity:
+            writer.write("gnss/vel", msgs.twist_msg(t, vel[i], var_v, "gnss"))
 
 
 def _write_mag(writer, traj, options, seed):
