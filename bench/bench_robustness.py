@@ -1,0 +1,164 @@
+"""Robustness matrix: simulated trials replayed with config/default.yaml alone, on the product path.
+
+Each cell simulates a drive (``trial simulate``: IMU rate and grade, stamp jitter, GNSS rate,
+with or without velocity and covariance), replays it through the node graph of
+config/default.yaml (``trial replay``, in-process, the sensor-source nodes left out as for any
+recorded bag) and judges the outputs against the simulation's truth:
+
+* alignment: time from the start until ``nav/status`` first says NAVIGATING, s;
+* horizontal RMS of the corrected ``ins/state`` after alignment, and its ratio to the RMS of the
+  raw ``gnss/fix`` about the truth (the issue's targets: <= 0.5, <= 0.8 with fixes only);
+* ``nav/fix`` flagged valid (STATUS_FIX) before alignment, or beyond 5 sigma of its own
+  horizontal covariance: must be zero.
+
+Usage::
+
+    .venv/bin/python bench/bench_robustness.py            # the full matrix (~15 min)
+    .venv/bin/python bench/bench_robustness.py --short    # three cells (the CI's test runs them)
+"""
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+TRIAL = [sys.executable, "-m", "ins_gnss_ros.trial.cli"]
+#: Nodes that produce sensor data: a replay's sensors are the bag.
+SOURCES = ("gnss_driver", "gnss_simulator")
+
+
+@dataclass(frozen=True)
+class Cell:
+    name: str
+    simulate: tuple  # extra `trial simulate` arguments
+
+
+CELLS = [Cell(f"imu {rate:g} Hz, 2 ms jitter", ("--imu-rate", str(rate), "--imu-stamp-jitter",
+                                               "0.002")) for rate in (30, 50, 100, 200, 400, 1000)]
+CELLS += [Cell(f"grade {grade}", ("--imu-grade", grade)) for grade in
+          ("consumer_mems", "mems_adis16405_datasheet", "tactical")]
+CELLS += [Cell("fix only 1 Hz", ("--gnss-rate", "1", "--no-gnss-vel")),
+          Cell("fix only 5 Hz", ("--no-gnss-vel",)),
+          Cell("fix only 5 Hz, no covariance", ("--no-gnss-vel", "--no-gnss-cov")),
+          Cell("fix + velocity, no covariance", ("--no-gnss-cov",)),
+          Cell("RTK 2 cm", ("--gnss-sigma-h", "0.02", "--gnss-sigma-v", "0.04"))]
+SHORT = [CELLS[0], CELLS[3], CELLS[10]]
+
+
+def graph_profile(tmp: Path) -> Path:
+    """config/default.yaml without the sensor-source nodes."""
+    data = yaml.safe_load((REPO / "config" / "default.yaml").read_text())
+    for name in SOURCES:
+        data.pop(name, None)
+    path = tmp / "graph.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def judge(bag: Path, out: Path) -> dict:
+    """The cell's figures from the replay's output bag and the simulated bag's truth."""
+    from ins_gnss_ros import io
+    from ins_gnss_ros.nav.earth import ecef_to_enu, geodetic_to_ecef
+    from ins_gnss_ros.nav.lever_arm import lever_arm_position
+    from ins_gnss_ros.trial.simulate import SimOptions
+
+    def stamps(msgs):
+        return np.array([io.msg_stamp_ns(m.msg) for m in msgs]) * 1e-9
+
+    truth = io.read_bag(bag, ["/truth/state"])
+    t_truth = stamps(truth)
+    lat0, lon0, h0 = truth[0].msg.latitude, truth[0].msg.longitude, truth[0].msg.altitude
+
+    def enu(lat, lon, h):
+        return ecef_to_enu(geodetic_to_ecef(np.asarray(lat), np.asarray(lon), np.asarray(h)),
+                           lat0, lon0, h0)
+
+    true_enu = enu([m.msg.latitude for m in truth], [m.msg.longitude for m in truth],
+                   [m.msg.altitude for m in truth])
+
+    def truth_at(t):
+        return np.column_stack([np.interp(t, t_truth, true_enu[:, i]) for i in range(3)])
+
+    # raw fixes about the truth at the antenna
+    lever = np.asarray(SimOptions.antenna_lever_arm, float)
+    q = np.array([[m.msg.orientation.w, m.msg.orientation.x, m.msg.orientation.y,
+                   m.msg.orientation.z] for m in truth])
+    fixes = io.read_bag(bag, ["/gnss/fix"])
+    t_fix = stamps(fixes)
+    lat_a, lon_a, h_a = lever_arm_position(
+        np.array([m.msg.latitude for m in truth]), np.array([m.msg.longitude for m in truth]),
+        np.array([m.msg.altitude for m in truth]), q, lever)
+    ant = enu(lat_a, lon_a, h_a)
+    fix_enu = enu(np.radians([m.msg.latitude for m in fixes]),
+                  np.radians([m.msg.longitude for m in fixes]), [m.msg.altitude for m in fixes])
+    ant_at = np.column_stack([np.interp(t_fix, t_truth, ant[:, i]) for i in range(2)])
+    raw_rms = float(np.sqrt(np.mean(np.sum((fix_enu[:, :2] - ant_at) ** 2, axis=1))))
+
+    outputs = io.read_bag(out / "bag", ["/nav/status", "/ins/state", "/nav/fix"])
+    status = [m for m in outputs if m.topic == "/nav/status"]
+    navigating = [io.msg_stamp_ns(m.msg) * 1e-9 for m in status if m.msg.mode == 1]
+    t_start = t_truth[0]
+    t_align = navigating[0] if navigating else np.inf
+    states = [m for m in outputs if m.topic == "/ins/state" and m.msg.correction_sequence > 0]
+    t_state = stamps(states)
+    after = t_state >= t_align
+    rms = np.nan
+    if after.any():
+        est = enu([m.msg.latitude for m in states], [m.msg.longitude for m in states],
+                  [m.msg.altitude for m in states])[after]
+        err = est[:, :2] - truth_at(t_state[after])[:, :2]
+        rms = float(np.sqrt(np.mean(np.sum(err ** 2, axis=1))))
+    valid = [m for m in outputs if m.topic == "/nav/fix" and m.msg.status.status >= 0]
+    early = sum(io.msg_stamp_ns(m.msg) * 1e-9 < t_align for m in valid)
+    beyond = 0
+    for m in valid:
+        t = io.msg_stamp_ns(m.msg) * 1e-9
+        e = enu(np.radians(m.msg.latitude), np.radians(m.msg.longitude), m.msg.altitude)[:2] \
+            - truth_at(np.array([t]))[0, :2]
+        cov = np.reshape(m.msg.position_covariance, (3, 3))[:2, :2]
+        beyond += float(e @ np.linalg.solve(cov, e)) > 25.0  # Mahalanobis distance > 5
+    return {"align_s": t_align - t_start, "rms_m": rms, "raw_m": raw_rms,
+            "ratio": rms / raw_rms, "valid_early": early, "valid_beyond_5_sigma": beyond,
+            "valid_fixes": len(valid)}
+
+
+def run_cell(cell: Cell, tmp: Path, profile: Path, duration: float, seed: int) -> dict:
+    tag = "".join(c if c.isalnum() else "_" for c in cell.name)
+    bag, out = tmp / f"{tag}_bag", tmp / f"{tag}_out"
+    subprocess.run(TRIAL + ["simulate", "--scenario", "car", "--duration", str(duration),
+                            "--seed", str(seed), *cell.simulate, "--out", str(bag)],
+                   check=True, cwd=REPO, capture_output=True)
+    subprocess.run(TRIAL + ["replay", str(bag), "--config", str(profile), "--out", str(out)],
+                   check=True, cwd=REPO, capture_output=True)
+    return judge(bag, out)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--short", action="store_true", help="three cells only")
+    parser.add_argument("--duration", type=float, default=120.0, help="s per trial")
+    parser.add_argument("--seed", type=int, default=3)
+    args = parser.parse_args(argv)
+    print("| cell | aligned after (s) | horizontal RMS after (m) | raw fixes (m) | ratio | "
+          "valid before alignment | valid beyond 5 sigma |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        profile = graph_profile(tmp)
+        for cell in SHORT if args.short else CELLS:
+            r = run_cell(cell, tmp, profile, args.duration, args.seed)
+            print(f"| {cell.name} | {r['align_s']:.1f} | {r['rms_m']:.2f} | {r['raw_m']:.2f} | "
+                  f"{r['ratio']:.2f} | {r['valid_early']} | {r['valid_beyond_5_sigma']} of "
+                  f"{r['valid_fixes']} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
