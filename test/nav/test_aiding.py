@@ -73,3 +73,30 @@ def test_a_profile_section_configures_the_filter_the_node_would():
         resolve(PARAMS, {"lever_arms": [0.0, 0.0, 0.0]})
     with pytest.raises(ParameterError, match="gate_probability"):
         resolve(PARAMS, {"gate_probability": 2.0})
+
+
+def test_successive_fixes_give_a_course_velocity_until_the_heading_is_known():
+    from ins_gnss_ros.nav.earth import radii
+
+    front, nav, _ = aiding()
+    nav.heading_known = False
+    lat0, lon0 = np.radians(59.9), np.radians(30.3)
+    _, rn = radii(lat0)
+    cov = np.diag([0.25, 0.25, 1.0])  # 0.5 m fixes
+    for k in range(11):  # 10 m/s east, fixes at 5 Hz
+        lon = lon0 + 10.0 * 0.2 * k / (rn * np.cos(lat0))
+        front.fix(0.2 * k, 59.9, np.degrees(lon), 10.0, cov, 0, True)
+    courses = [m for m in nav.measurements if isinstance(m, GnssVelocity)]
+    assert courses, "no course velocity from 20 m of travel with 0.5 m fixes"
+    assert np.allclose(courses[0].v_enu, [10.0, 0.0, 0.0], atol=1e-3)
+    nav.heading_known = True
+    front.fix(2.4, 59.9, np.degrees(lon0 + 24.0 / (rn * np.cos(lat0))), 10.0, cov, 0, True)
+    assert len([m for m in nav.measurements if isinstance(m, GnssVelocity)]) == len(courses)
+    # a receiver that gives velocities: no course velocity at all
+    front, nav, _ = aiding()
+    nav.heading_known = False
+    front.velocity(0.0, np.array([10.0, 0.0, 0.0]), np.eye(3) * 0.01)
+    for k in range(11):
+        lon = lon0 + 10.0 * 0.2 * k / (rn * np.cos(lat0))
+        front.fix(0.2 * k, 59.9, np.degrees(lon), 10.0, cov, 0, True)
+    assert len([m for m in nav.measurements if isinstance(m, GnssVelocity)]) == 1

@@ -3,7 +3,9 @@
 What the filter is told about each aiding input is decided here, once: which readings are
 refused (no fix, non-finite, beyond any vehicle), what variance a reading without one gets, the
 variance floors, the receiver's velocity latency, how a magnetic heading is referred to true
-north, and when GNSS ranges replace fix and velocity (tight coupling, seed 004 section 2.1).
+north, when GNSS ranges replace fix and velocity (tight coupling, seed 004 section 2.1), and,
+for a receiver without velocity output, the course over ground from successive fixes that
+aligns the heading.
 The ``ekf`` node feeds it the topics' messages as plain values; the offline replay feeds it the
 same values from a bag (the configuration both build from the ``ekf`` parameters:
 :mod:`ins_gnss_ros.nav.filter_config`).
@@ -16,6 +18,7 @@ from typing import Callable
 
 import numpy as np
 
+from .earth import ecef_to_enu_matrix, geodetic_to_ecef
 from .navigator import (ALIGNING, NAVIGATING, GnssFix, GnssVelocity, HeadingFix, Navigator,
                         SpeedLog)
 
@@ -65,6 +68,15 @@ class AidingPolicy:
         return cls(p["gnss.position_sigma_floor_m"], p["gnss.velocity_sigma_floor_mps"],
                    p["gnss.velocity_delay_s"], p["coupling"], p["auto.min_satellites"])
 
+
+#: Course from successive fixes (a receiver without velocity output, e.g. NMEA GGA only): two
+#: fixes at most COURSE_WINDOW_S apart whose horizontal displacement exceeds COURSE_MIN_SIGMAS
+#: times its own standard deviation give a velocity for the motion alignment (within the
+#: navigator's 3 s history, where it is applied at the mid-epoch).
+COURSE_WINDOW_S = 2.0
+COURSE_MIN_SIGMAS = 10.0
+#: Horizontal acceleration assumed between two fixes for the course velocity's variance, m/s^2.
+COURSE_ACCELERATION = 2.0
 
 #: What the filter waits for while it has fixes but no heading (ALIGNING).
 NO_HEADING = ("no heading source yet: needs gnss/vel, movement well beyond the fixes' noise, "
@@ -120,6 +132,7 @@ class Aiding:
         self.inputs: dict[str, InputStats] = {}
         self.last_accepted_t = -math.inf  # newest accepted update, s
         self.forced: set[str] = set()  # kinds forced in since the last accepted one of each
+        self._recent_fixes: list[tuple[float, np.ndarray, np.ndarray]] = []  # t, ECEF, cov ENU
 
     def _seen(self, name: str, t: float, used: bool) -> bool:
         stats = self.inputs.setdefault(name, InputStats(first_t=t))
@@ -182,7 +195,30 @@ class Aiding:
         if self.datum is None:
             self.datum = (lat, lon, h)
         self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov))
+        self._course(t, lat, lon, h, cov)
         return self._seen("gnss/fix", t, True)
+
+    def _course(self, t: float, lat: float, lon: float, h: float, cov: np.ndarray) -> None:
+        """Without any gnss/vel and before the heading is known, turn successive fixes into a
+        velocity (the course over ground aligns the heading, as the receiver's velocity
+        would). Its variance: both fixes' over the interval squared plus a manoeuvre term."""
+        if "gnss/vel" in self.inputs or self.navigator.heading_known:
+            self._recent_fixes.clear()
+            return
+        r = geodetic_to_ecef(lat, lon, h)
+        self._recent_fixes = [f for f in self._recent_fixes if t - f[0] <= COURSE_WINDOW_S]
+        self._recent_fixes.append((t, r, cov))
+        t0, r0, cov0 = self._recent_fixes[0]
+        dt = t - t0
+        if dt <= 0.0:
+            return
+        d = ecef_to_enu_matrix(lat, lon) @ (r - r0)
+        cov_d = cov + cov0
+        if np.hypot(d[0], d[1]) < COURSE_MIN_SIGMAS * np.sqrt(cov_d[0, 0] + cov_d[1, 1]):
+            return
+        cov_v = cov_d / dt ** 2 + np.diag([1.0, 1.0, 0.0]) * (0.5 * COURSE_ACCELERATION * dt) ** 2
+        self.navigator.add_measurement(GnssVelocity(0.5 * (t0 + t), d / dt, cov_v))
+        self._recent_fixes = [self._recent_fixes[-1]]
 
     def velocity(self, t: float, v_enu: np.ndarray, cov: np.ndarray) -> bool:
         """A GNSS velocity (m/s, ENU) stamped t (s) with its covariance (m^2/s^2)."""
