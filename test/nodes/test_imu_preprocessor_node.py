@@ -250,7 +250,7 @@ def test_short_gap_is_bridged_long_gap_restarts(graph):
         g.imu(t, GOOD_W, G_UP)
     t += 3 * DT_NS                                  # 2 samples lost: bridged
     g.imu(t, GOOD_W, G_UP)
-    assert g.node.diag.counts["imu gap bridged"] == 1 and g.node.synthesised == 2
+    assert g.node.diag.counts["imu gap bridged"] == 1 and g.node.preprocessor.synthesised == 2
     assert len(g.out["/imu/delta"]) == 6            # 12 samples of 2
     t += 50 * DT_NS                                 # 49 lost: reported, integration restarts
     for k in range(4):

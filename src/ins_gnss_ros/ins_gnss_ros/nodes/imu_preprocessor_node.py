@@ -1,29 +1,10 @@
 """``imu_preprocessor`` node: raw IMU and magnetometer samples to calibrated, checked streams.
 
-Per raw ``imu/data_raw`` sample (sensor frame, any mounting, any rate that is an integer
-multiple of the navigation rate, e.g. 1200 Hz for seed 004's ISON-1):
-
-0. :class:`~ins_gnss_ros.imu.sample_checks.ClockJumps` takes jumps of the sensor clock out of the
-   stamps: a stamp step unlike the step of the arrival times (node clock: ``/clock`` in a
-   replay) while the samples arrive at their regular period (``clock_jump.*``);
-1. :class:`~ins_gnss_ros.imu.sample_checks.SampleChecker` rejects NaN/inf, saturated readings,
-   duplicated or backwards stamps and a frozen sensor (``max_identical_samples`` bit-identical
-   readings in a row) (counted on /diagnostics, never passed on), bridges gaps of up to
-   ``max_bridge_samples`` and reports longer ones, after which integration restarts (the
-   ``strapdown`` and ``ekf`` then see the gap in ``imu/delta`` and bridge or restart);
-2. :class:`~ins_gnss_ros.imu.calibration.ImuCalibration` removes bias, scale factor,
-   non-orthogonality and g-sensitivity (with the temperature from ``imu/temperature`` if
-   enabled) and rotates into ``base_link`` (seed 004 §2.3); optionally the filter's residual
-   estimates from ``ins/correction`` too;
-3. the calibrated sample goes out on ``imu/data``, and every ``rate_hz / nav_rate_hz`` samples the
-   :class:`~ins_gnss_ros.nav.coning.Integrator` emits coning/sculling-compensated increments on
-   ``imu/delta``, stamped at the end of the interval.
-
-A sensor_msgs/Imu sample is the mean rate over the interval ending at its stamp (the convention
-of :mod:`ins_gnss_ros.sim.imu_sim`), so its increment is rate x (stamp - previous stamp); the
-stamp differences are taken in integer nanoseconds because a float POSIX time resolves only
-~0.2 µs. Bridged samples feed the integrator (so ``imu/delta`` keeps its regular step) but are
-not published on ``imu/data``: they are not measurements.
+Every raw ``imu/data_raw`` sample goes through :class:`~ins_gnss_ros.imu.preprocessor.ImuPreprocessor`
+(time offset, clock jumps, sample checks and bridging, calibration and mounting, the filter's
+sensor-error feedback, coning/sculling increments; see there). The node maps the parameters onto
+it, counts what it reports on /diagnostics, and publishes the calibrated sample on ``imu/data``
+and every completed increment on ``imu/delta``, stamped at the end of its interval.
 
 Magnetometer samples (``imu/mag_raw``) are rotated into ``base_link`` with the same mounting and
 published on ``imu/mag``; hard/soft iron belongs to the vehicle and is removed by ``mag_compass``.
@@ -38,10 +19,11 @@ import numpy as np
 from ins_gnss_msgs.msg import ImuDelta, InsCorrection
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
-from ..imu.calibration import ImuCalibration, ResidualErrors
-from ..imu.sample_checks import ClockJumps, SampleChecker
+from ..imu.calibration import ImuCalibration
+from ..imu.preprocessor import ImuPreprocessor, SettingError
 from ..io import NS, new, set_stamp_ns, stamp_to_ns
-from ..nav.coning import METHODS, Integrator
+from ..nav.coning import METHODS
+from ..nav.increments import SensorErrors
 from ..params_io import ParamsFileError, load_yaml_file
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import set_vector3, vec
@@ -129,40 +111,20 @@ class ImuPreprocessorNode(NavNode):
         super().__init__("imu_preprocessor", **kwargs)
         p = self.p
         self.cal = self._calibration()
-        n_sub = p["rate_hz"] / p["nav_rate_hz"]
-        if abs(n_sub - round(n_sub)) > 1e-9 * n_sub:
-            raise ParameterError(f"parameter 'rate_hz' = {p['rate_hz']} is not an integer multiple"
-                                 f" of nav_rate_hz = {p['nav_rate_hz']}")
         try:
-            self.integrator = Integrator(int(round(n_sub)), p["coning_method"])
-        except ValueError as err:
-            raise ParameterError(f"parameter 'coning_method': {err} (rate_hz / nav_rate_hz = "
-                                 f"{int(round(n_sub))}; use one_sample)") from None
-        try:
-            self.checker = SampleChecker(p["rate_hz"], np.radians(p["gyro_range_dps"]),
-                                         p["accel_range_mps2"], p["max_bridge_samples"],
-                                         p["bridge"], max_identical=p["max_identical_samples"])
-        except ValueError as err:
-            raise ParameterError(f"parameter 'max_identical_samples': {err}") from None
-        self.clock = None
-        if p["clock_jump.min_s"] > 0.0:
-            try:
-                self.clock = ClockJumps(p["rate_hz"], p["clock_jump.min_s"], p["clock_jump.max_s"])
-            except ValueError as err:
-                raise ParameterError(f"parameter 'clock_jump.max_s': {err}") from None
-        # None until the filter sends a correction: removing zero errors changes no bit but
-        # costs work on every sample.
-        self.residual: ResidualErrors | None = None
-        self.offset_ns = int(round(p["time_offset_s"] * NS))
-        self.temperature: float | None = None
-        self.synthesised = 0
-        self._origin_ns: int | None = None   # stamps go to the checker relative to the first one
-        self._last_ns: int | None = None     # end of the last integrated sample
-        self._last_rates = None              # its rates (trapezoid of instant samples)
-        self._last_mag_ns: int | None = None
-        # Read per sample: attributes, not parameter-dict lookups and string comparisons.
-        self._period = 1.0 / p["rate_hz"]
-        self._instant = p["sample_model"] == "instant"
+            self.preprocessor = ImuPreprocessor(
+                self.cal, p["rate_hz"], p["nav_rate_hz"], p["coning_method"],
+                gyro_range=np.radians(p["gyro_range_dps"]), accel_range=p["accel_range_mps2"],
+                max_bridge=p["max_bridge_samples"], bridge=p["bridge"],
+                max_identical_samples=p["max_identical_samples"],
+                instant=p["sample_model"] == "instant",
+                clock_jump=((p["clock_jump.min_s"], p["clock_jump.max_s"])
+                            if p["clock_jump.min_s"] > 0.0 else None),
+                time_offset_ns=int(round(p["time_offset_s"] * NS)))
+        except SettingError as err:
+            name = {"clock_jump": "clock_jump.max_s"}.get(err.name, err.name)
+            raise ParameterError(f"parameter '{name}': {err}") from None
+        # Read per sample: an attribute, not a parameter-dict lookup.
         self._frame_id = p["frame_id"]
         self._rotated_cache: dict[bytes, np.ndarray] = {}
         self.pub_data = self.publisher(Imu, "imu/data", SENSOR_QOS)
@@ -231,58 +193,30 @@ class ImuPreprocessorNode(NavNode):
 
     # -- IMU samples ---------------------------------------------------------------------------
     def on_imu(self, msg: Imu) -> None:
-        t_ns = stamp_to_ns(msg.header.stamp) + self.offset_ns
-        if self.clock is not None:
-            jumps = self.clock.jumps
-            t_ns = self.clock.correct(t_ns, self.now_ns())
-            if self.clock.jumps != jumps:
-                self.diag.count("imu clock jump: stamps corrected by the arrival clock")
-                self.diag.set_value("imu clock correction, s", -self.clock.offset_ns / NS)
-        if self._origin_ns is None:
-            self._origin_ns = t_ns
         w, f = msg.angular_velocity, msg.linear_acceleration
-        gyro, accel = (w.x, w.y, w.z), (f.x, f.y, f.z)
-        result = self.checker.check((t_ns - self._origin_ns) / NS, gyro, accel)
-        if not result.ok:
-            self.diag.count(f"imu sample rejected: {result.reason}")
+        pre = self.preprocessor
+        out = pre.add(stamp_to_ns(msg.header.stamp), self.now_ns(), (w.x, w.y, w.z),
+                      (f.x, f.y, f.z))
+        if out.clock_jump:
+            self.diag.count("imu clock jump: stamps corrected by the arrival clock")
+            self.diag.set_value("imu clock correction, s", -pre.clock.offset_ns / NS)
+        if out.rates is None:
+            self.diag.count(f"imu sample rejected: {out.reason}")
             return
-        if result.reason == "gap":
+        if out.reason == "gap":
             self.diag.count("imu gap longer than max_bridge_samples: integration restarted")
-            self.integrator.reset()
-            self._last_ns = self._last_rates = None
-        elif result.reason == "gap_bridged":
+        elif out.reason == "gap_bridged":
             self.diag.count("imu gap bridged")
-            self.synthesised += len(result.fill_stamps)
-            self.diag.set_value("imu samples synthesised", self.synthesised)
-        correct = self.cal.correct_sample
-        for t, g, a in zip(result.fill_stamps.tolist(), result.fill_gyro.tolist(),
-                           result.fill_accel.tolist()):
-            self._integrate(self._origin_ns + int(round(t * NS)),
-                            *correct(g, a, self.temperature, self.residual))
-        w_b, f_b = correct(gyro, accel, self.temperature, self.residual)
-        self._integrate(t_ns, w_b, f_b)
-        self._publish_data(msg, t_ns, w_b, f_b)
-
-    def _integrate(self, t_ns: int, w_b: tuple, f_b: tuple) -> None:
-        dt = self._period if self._last_ns is None else (t_ns - self._last_ns) / NS
-        self._last_ns = t_ns
-        if self._instant and self._last_rates is not None:
-            w_mean = [0.5 * (a + b) for a, b in zip(self._last_rates[0], w_b)]
-            f_mean = [0.5 * (a + b) for a, b in zip(self._last_rates[1], f_b)]
-        else:
-            w_mean, f_mean = w_b, f_b
-        self._last_rates = (w_b, f_b)
-        out = self.integrator.add_rates(w_mean, f_mean, dt)
-        if out is None:
-            return
-        phi, dv, dt_nav = out
-        delta = new(ImuDelta)
-        delta.dt = dt_nav
-        set_vector3(delta.delta_angle, phi)
-        set_vector3(delta.delta_velocity, dv)
-        set_stamp_ns(delta.header.stamp, t_ns)
-        delta.header.frame_id = self._frame_id
-        self.pub_delta.publish(delta)
+            self.diag.set_value("imu samples synthesised", pre.synthesised)
+        for inc in out.increments:
+            delta = new(ImuDelta)
+            delta.dt = inc.dt
+            set_vector3(delta.delta_angle, inc.dtheta)
+            set_vector3(delta.delta_velocity, inc.dv)
+            set_stamp_ns(delta.header.stamp, inc.t_ns)
+            delta.header.frame_id = self._frame_id
+            self.pub_delta.publish(delta)
+        self._publish_data(msg, out.t_ns, *out.rates)
 
     def _publish_data(self, raw: Imu, t_ns: int, w_b: tuple, f_b: tuple) -> None:
         out = new(Imu)
@@ -313,37 +247,27 @@ class ImuPreprocessorNode(NavNode):
         if not np.isfinite(msg.temperature):
             self.diag.count("non-finite temperature ignored")
             return
-        self.temperature = float(msg.temperature)
+        self.preprocessor.temperature = float(msg.temperature)
 
     def on_correction(self, msg: InsCorrection) -> None:
-        incr = [vec(msg.gyro_bias), vec(msg.gyro_scale_factor), vec(msg.accel_bias),
-                vec(msg.accel_scale_factor)]
-        if not all(np.all(np.isfinite(x)) for x in incr):
+        increment = SensorErrors(vec(msg.gyro_bias), vec(msg.accel_bias),
+                                 vec(msg.gyro_scale_factor), vec(msg.accel_scale_factor))
+        if not self.preprocessor.add_sensor_errors(increment):
             self.diag.count("non-finite sensor correction rejected")
-            return
-        r = self.residual or ResidualErrors()
-        # Increments to the applied estimates, from this sample on (the past is not redone here).
-        self.residual = ResidualErrors(r.gyro_bias + incr[0], r.gyro_scale + incr[1],
-                                       r.accel_bias + incr[2], r.accel_scale + incr[3])
 
     # -- magnetometer --------------------------------------------------------------------------
     def on_mag(self, msg: MagneticField) -> None:
-        m = vec(msg.magnetic_field)
-        t_ns = stamp_to_ns(msg.header.stamp) + self.offset_ns
-        if not np.all(np.isfinite(m)):
-            self.diag.count("magnetometer sample rejected: non_finite")
+        out = self.preprocessor.add_magnetic(stamp_to_ns(msg.header.stamp),
+                                             vec(msg.magnetic_field))
+        if isinstance(out, str):
+            self.diag.count(f"magnetometer sample rejected: {out}")
             return
-        if self._last_mag_ns is not None and t_ns <= self._last_mag_ns:
-            self.diag.count("magnetometer sample rejected: stamp not after the previous one")
-            return
-        self._last_mag_ns = t_ns
-        c = self.cal.c_bs
-        out = new(MagneticField)
-        set_vector3(out.magnetic_field, c @ m)
-        set_stamp_ns(out.header.stamp, t_ns)
-        out.header.frame_id = self._frame_id
-        out.magnetic_field_covariance[:] = self._rotated(msg.magnetic_field_covariance)
-        self.pub_mag.publish(out)
+        mag = new(MagneticField)
+        set_vector3(mag.magnetic_field, out[1])
+        set_stamp_ns(mag.header.stamp, out[0])
+        mag.header.frame_id = self._frame_id
+        mag.magnetic_field_covariance[:] = self._rotated(msg.magnetic_field_covariance)
+        self.pub_mag.publish(mag)
 
 
 def main(args=None) -> int:
