@@ -23,7 +23,7 @@ from ..imu.calibration import ImuCalibration
 from ..imu.preprocessor import ImuPreprocessor, SettingError
 from ..io import NS, new, set_stamp_ns, stamp_to_ns
 from ..nav.coning import METHODS
-from ..nav.increments import SensorErrors
+from ..nav.increments import MAX_RATE, MAX_SPECIFIC_FORCE, SensorErrors
 from ..params_io import ParamsFileError, load_yaml_file
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import set_vector3, vec
@@ -73,10 +73,14 @@ class ImuPreprocessorNode(NavNode):
         Param("coning_method", "two_sample",
               "coning/sculling algorithm (two_sample needs an even rate_hz / nav_rate_hz)",
               choices=METHODS),
+        # At most the bounds every consumer of imu/delta holds an increment to: a reading
+        # passed here must not be dropped as implausible downstream.
         Param("gyro_range_dps", 2000.0,
-              "gyro measurement range; |reading| >= range is saturated, deg/s", 1.0, 100000.0),
+              "gyro measurement range; |reading| >= range is saturated, deg/s", 1.0,
+              float(np.degrees(MAX_RATE))),
         Param("accel_range_mps2", 160.0,
-              "accelerometer range; |reading| >= range is saturated, m/s^2", 1.0, 100000.0),
+              "accelerometer range; |reading| >= range is saturated, m/s^2", 1.0,
+              MAX_SPECIFIC_FORCE),
         Param("max_bridge_samples", 5,
               "longest run of missing/rejected samples bridged; longer gaps restart the "
               "integration, samples", 0, 10000),
