@@ -23,7 +23,8 @@ def _pre(rate=200.0, nav=100.0, method="two_sample", cal=None, **kw):
 
 
 def _feed(pre, stamps_ns, gyro, accel):
-    out = [pre.add(int(t), int(t), tuple(g), tuple(a)) for t, g, a in zip(stamps_ns, gyro, accel)]
+    out = [o for t, g, a in zip(stamps_ns, gyro, accel)
+           for o in pre.add(int(t), int(t), tuple(g), tuple(a))]
     return out, [inc for o in out for inc in o.increments]
 
 
@@ -55,7 +56,7 @@ def test_sensor_errors_of_the_filter_add_up_and_non_finite_ones_are_refused():
     assert pre.add_sensor_errors(step) and pre.add_sensor_errors(step)
     bad = SensorErrors(gyro_bias=np.array([np.nan, 0, 0]))
     assert not pre.add_sensor_errors(bad)
-    w, f = pre.add(T0, T0, (0.0, 0.0, 0.05), G_UP).rates
+    w, f = pre.add(T0, T0, (0.0, 0.0, 0.05), G_UP)[0].rates
     # measured = (1 + s) true + b with the two increments summed: b = 0.02, s = 0.02.
     assert w[2] == pytest.approx(0.05 - 0.02, abs=1e-16)
     assert f[2] == pytest.approx(9.81 / 1.02, abs=1e-14)
@@ -76,8 +77,9 @@ def test_short_gap_bridged_long_gap_restarts_the_integration():
 
 def test_rejected_sample_gives_no_rates():
     pre = _pre()
-    assert pre.add(T0, T0, (np.nan, 0.0, 0.0), G_UP) == (T0, "non_finite", None, (), False)
-    assert pre.add(T0, T0, (0.0, 0.0, 40.0), G_UP).reason == "saturated"
+    assert pre.add(T0, T0, (np.nan, 0.0, 0.0), G_UP, "msg") == (
+        (T0, "non_finite", None, (), (), "msg"),)
+    assert pre.add(T0, T0, (0.0, 0.0, 40.0), G_UP)[0].reason == "saturated"
 
 
 def test_time_offset_and_clock_jump_move_the_stamps():
@@ -85,9 +87,10 @@ def test_time_offset_and_clock_jump_move_the_stamps():
     step = NS // 200
     jumped = []
     for k in range(1, 40):
-        o = pre.add(T0 + k * step + (NS // 2 if k >= 20 else 0), T0 + k * step, (0.0,) * 3, G_UP)
+        (o,) = pre.add(T0 + k * step + (NS // 2 if k >= 20 else 0), T0 + k * step, (0.0,) * 3,
+                       G_UP)
         assert o.t_ns == T0 + k * step - 125_000_000
-        jumped.append(o.clock_jump)
+        jumped.append("clock_jump" in o.events)
     assert jumped.index(True) == 19 and sum(jumped) == 1
 
 
@@ -102,8 +105,19 @@ def test_magnetometer_rotated_offset_and_bad_samples_refused():
     assert pre.add_magnetic(T0, [0, 0, 1e-5]) == "stamp not after the previous one"
 
 
+@pytest.mark.parametrize("rate, nav, method, expected", [
+    (200.0, 100.0, "auto", (2, "two_sample")),
+    (300.0, 100.0, "auto", (3, "one_sample")),
+    (100.0, 100.0, "auto", (1, "one_sample")),
+    (30.0, 100.0, "auto", (1, "one_sample")),      # an increment per sample: 30 Hz
+    (1000.0, 300.0, "auto", (3, "one_sample")),    # 333.3 Hz, the nearest to 300
+    (400.0, 150.0, "one_sample", (3, "one_sample")),
+])
+def test_navigation_interval_is_the_nearest_whole_number_of_samples(rate, nav, method, expected):
+    assert navigation_interval(rate, nav, method) == expected
+
+
 @pytest.mark.parametrize("rate, nav, method, name", [
-    (250.0, 100.0, "one_sample", "rate_hz"),
     (300.0, 100.0, "two_sample", "coning_method"),
     (200.0, 100.0, "three_sample", "coning_method"),
 ])
@@ -114,3 +128,34 @@ def test_settings_that_cannot_work_name_themselves(rate, nav, method, name):
     with pytest.raises(SettingError, match="expected 0 .off. or >= 2") as err:
         _pre(max_identical_samples=1)
     assert err.value.name == "max_identical_samples"
+    with pytest.raises(SettingError) as err:
+        _pre(rate=0.0, method="three_sample")
+    assert err.value.name == "coning_method"
+
+
+def test_measured_rate_holds_the_first_samples_then_processes_them_all():
+    """rate_hz 0: a 30 Hz IMU (the case that restarted the integration on every sample at the
+    200 Hz default) with a lost sample in the window is measured, its held samples come out in
+    order, and with nav_rate 100 Hz every sample is an increment (one_sample coning)."""
+    pre = _pre(rate=0.0, nav=100.0, method="auto")
+    period = NS / 30
+    ks = [k for k in range(1, 61) if k != 7]
+    outs = [pre.add(T0 + round(k * period), 0, (0.0, 0.0, 0.1), G_UP, k) for k in ks]
+    first = next(k for k, o in enumerate(outs) if o)
+    assert all(o == () for o in outs[:first]) and len(outs[first]) == first + 1
+    flat = [p for o in outs for p in o]
+    assert [p.tag for p in flat] == ks
+    assert flat[0].events == ("rate_measured",)
+    assert pre.rate_hz == pytest.approx(30.0, rel=1e-6) and pre.nav_rate_hz == pre.rate_hz
+    assert pre.coning_method == "one_sample"
+    assert [p.reason for p in flat].count("gap_bridged") == 1
+    incs = [i for p in flat for i in p.increments]
+    assert len(incs) == len(ks) + 1                      # the lost sample bridged
+    np.testing.assert_allclose([i.dt for i in incs[1:]], 1 / 30, rtol=1e-6)
+
+
+def test_measured_rate_falls_back_to_one_sample_when_two_sample_cannot_work():
+    pre = _pre(rate=0.0, nav=100.0, method="two_sample")
+    outs = [p for k in range(1, 200) for p in pre.add(T0 + k * NS // 300, 0, (0.0,) * 3, G_UP)]
+    assert outs[0].events == ("rate_measured", "coning_fallback")
+    assert (pre.rate_hz, pre.coning_method) == (pytest.approx(300.0), "one_sample")

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ins_gnss_ros.nav.increments import SensorErrors
+from ins_gnss_ros.params_io import load_yaml_file
 from ins_gnss_ros.nav.rotations import dcm_from_euler
 
 
@@ -274,3 +275,21 @@ class ImuCalibration:
                    mounting_rpy=d.get("mounting_rpy", np.zeros(3)),
                    temperature_ref=d.get("temperature_ref", 20.0))
 
+
+
+def read_calibration_file(path) -> dict:
+    """The calibration dict of a YAML file: ``imu_calibrate``'s output (key ``imu_calibration``)
+    or the bare :meth:`ImuCalibration.to_dict` dict (for :meth:`ImuCalibration.from_dict`).
+
+    Raises
+    ------
+    ValueError
+        The file cannot be read, is not safe YAML (:mod:`ins_gnss_ros.params_io`) or holds no
+        dict.
+    """
+    d = load_yaml_file(path)
+    if isinstance(d, dict) and "imu_calibration" in d:
+        d = d["imu_calibration"]
+    if not isinstance(d, dict):
+        raise ValueError(f"{path} holds no calibration dict")
+    return d

@@ -1,7 +1,7 @@
 """``imu_preprocessor`` node: raw IMU and magnetometer samples to calibrated, checked streams.
 
-Every raw ``imu/data_raw`` sample goes through :class:`~ins_gnss_ros.imu.preprocessor.ImuPreprocessor`
-(time offset, clock jumps, sample checks and bridging, calibration and mounting, the filter's
+Every raw ``imu/data_raw`` sample goes through
+:class:`~ins_gnss_ros.imu.preprocessor.ImuPreprocessor` (sample rate, sensor clock, time offset, clock jumps, sample checks and bridging, calibration and mounting, the filter's
 sensor-error feedback, coning/sculling increments; see there). The node maps the parameters onto
 it, counts what it reports on /diagnostics, and publishes the calibrated sample on ``imu/data``
 and every completed increment on ``imu/delta``, stamped at the end of its interval.
@@ -13,29 +13,25 @@ published on ``imu/mag``; hard/soft iron belongs to the vehicle and is removed b
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 import numpy as np
 from ins_gnss_msgs.msg import ImuDelta, InsCorrection
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
-from ..imu.calibration import ImuCalibration
+from ..imu.calibration import ImuCalibration, read_calibration_file
 from ..imu.preprocessor import ImuPreprocessor, SettingError
 from ..io import NS, new, set_stamp_ns, stamp_to_ns
 from ..nav.coning import METHODS
 from ..nav.increments import MAX_RATE, MAX_SPECIFIC_FORCE, SensorErrors
-from ..params_io import ParamsFileError, load_yaml_file
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import set_vector3, vec
 
 
-def rotate_covariance(cov, c) -> list:
-    """Row-major 3x3 covariance of a vector rotated by ``c``; unknown (-1 first) stays unknown."""
-    if cov[0] == -1.0:
-        return list(cov)
-    return (c @ np.reshape(np.asarray(cov, float), (3, 3)) @ c.T).ravel().tolist()
-
-
+#: ImuPreprocessor events -> diagnostics.
+_EVENTS = {"clock_jump": "imu clock jump: stamps corrected by the arrival clock",
+           "sensor_clock_restart": "imu sensor clock fit restarted (driver clock step, long gap)",
+           "coning_fallback": "coning_method two_sample impossible at the measured rate: "
+                              "one_sample used"}
 _TRIAD_PARAMS = ("bias", "scale", "nonorthogonality")
 
 
@@ -67,12 +63,21 @@ class ImuPreprocessorNode(NavNode):
         Param("mounting_rpy_deg", [0.0, 0.0, 0.0],
               "roll, pitch, yaw (ROS) of the rotation taking sensor-frame vectors to base_link, "
               "deg (or mounting_rpy in the calibration file, not both)", -360.0, 360.0, length=3),
-        Param("rate_hz", 200.0, "nominal sensor sample rate, Hz (an integer multiple of "
-              "nav_rate_hz)", 1.0, 10000.0),
-        Param("nav_rate_hz", 100.0, "rate of imu/delta, Hz", 1.0, 10000.0),
-        Param("coning_method", "two_sample",
-              "coning/sculling algorithm (two_sample needs an even rate_hz / nav_rate_hz)",
-              choices=METHODS),
+        Param("rate_hz", 0.0, "nominal sensor sample rate, Hz; 0: measured from the first "
+              "stamps (their samples are held until then, about 0.5 s)", 0.0, 10000.0),
+        Param("nav_rate_hz", 100.0, "wanted rate of imu/delta, Hz: an increment spans the whole "
+              "number of samples nearest to 1 / nav_rate_hz (the effective rate is on "
+              "/diagnostics)", 1.0, 10000.0),
+        Param("coning_method", "auto",
+              "coning/sculling algorithm: two_sample needs an even number of samples per "
+              "increment; auto takes it then, one_sample otherwise", choices=("auto", *METHODS)),
+        Param("sensor_clock.enabled", True,
+              "give each sample its instant on the sensor's own clock, fitted causally to the "
+              "driver's jittered stamps (imu/sensor_clock.py); false: the stamps as they come"),
+        Param("sensor_clock.jitter_s", 0.001, "standard deviation of the driver's stamps about "
+              "the sampling instants, s", 1e-6, 0.1),
+        Param("sensor_clock.time_constant_s", 30.0, "memory of the sensor-clock fit, s",
+              1.0, 3600.0),
         # At most the bounds every consumer of imu/delta holds an increment to: a reading
         # passed here must not be dropped as implausible downstream.
         Param("gyro_range_dps", 2000.0,
@@ -124,13 +129,17 @@ class ImuPreprocessorNode(NavNode):
                 instant=p["sample_model"] == "instant",
                 clock_jump=((p["clock_jump.min_s"], p["clock_jump.max_s"])
                             if p["clock_jump.min_s"] > 0.0 else None),
+                sensor_clock=((p["sensor_clock.jitter_s"], p["sensor_clock.time_constant_s"])
+                              if p["sensor_clock.enabled"] else None),
                 time_offset_ns=int(round(p["time_offset_s"] * NS)))
         except SettingError as err:
-            name = {"clock_jump": "clock_jump.max_s"}.get(err.name, err.name)
+            name = {"clock_jump": "clock_jump.max_s",
+                    "sensor_clock": "sensor_clock.jitter_s"}.get(err.name, err.name)
             raise ParameterError(f"parameter '{name}': {err}") from None
+        if self.preprocessor.rate_hz is not None:
+            self._report_rates()
         # Read per sample: an attribute, not a parameter-dict lookup.
         self._frame_id = p["frame_id"]
-        self._rotated_cache: dict[bytes, np.ndarray] = {}
         self.pub_data = self.publisher(Imu, "imu/data", SENSOR_QOS)
         self.pub_delta = self.publisher(ImuDelta, "imu/delta", SENSOR_QOS)
         self.pub_mag = self.publisher(MagneticField, "imu/mag", SENSOR_QOS)
@@ -151,7 +160,10 @@ class ImuPreprocessorNode(NavNode):
             if any(p[k] != v for k, v in defaults.items()):
                 raise ParameterError("parameter 'calibration_file': give the calibration either as "
                                      "a file or as calibration.* parameters, not both")
-            d = self._read_calibration_file(Path(p["calibration_file"]))
+            try:
+                d = read_calibration_file(p["calibration_file"])
+            except ValueError as err:
+                raise ParameterError(f"parameter 'calibration_file': {err}") from None
             source = f"calibration_file {p['calibration_file']}"
         else:
             d = self._inline_calibration()
@@ -183,44 +195,47 @@ class ImuPreprocessorNode(NavNode):
         d["temperature_ref"] = self.p["calibration.temperature_ref"]
         return d
 
-    @staticmethod
-    def _read_calibration_file(path: Path) -> dict:
-        try:
-            d = load_yaml_file(path)
-        except ParamsFileError as err:
-            raise ParameterError(f"parameter 'calibration_file': {err}") from None
-        if isinstance(d, dict) and "imu_calibration" in d:
-            d = d["imu_calibration"]
-        if not isinstance(d, dict):
-            raise ParameterError(f"parameter 'calibration_file': {path} holds no calibration dict")
-        return d
-
     # -- IMU samples ---------------------------------------------------------------------------
     def on_imu(self, msg: Imu) -> None:
         w, f = msg.angular_velocity, msg.linear_acceleration
+        for out in self.preprocessor.add(stamp_to_ns(msg.header.stamp), self.now_ns(),
+                                         (w.x, w.y, w.z), (f.x, f.y, f.z), msg):
+            if out.events:
+                self._report(out.events)
+            if out.rates is None:
+                self.diag.count(f"imu sample rejected: {out.reason}")
+                continue
+            if out.reason == "gap":
+                self.diag.count("imu gap longer than max_bridge_samples: integration restarted")
+            elif out.reason == "gap_bridged":
+                self.diag.count("imu gap bridged")
+                self.diag.set_value("imu samples synthesised", self.preprocessor.synthesised)
+            for inc in out.increments:
+                delta = new(ImuDelta)
+                delta.dt = inc.dt
+                set_vector3(delta.delta_angle, inc.dtheta)
+                set_vector3(delta.delta_velocity, inc.dv)
+                set_stamp_ns(delta.header.stamp, inc.t_ns)
+                delta.header.frame_id = self._frame_id
+                self.pub_delta.publish(delta)
+            self._publish_data(out.tag, out.t_ns, *out.rates)
+
+    def _report(self, events: tuple) -> None:
+        for event in events:
+            if event == "rate_measured":
+                self._report_rates()
+                continue
+            self.diag.count(_EVENTS[event])
+            if event == "clock_jump":
+                self.diag.set_value("imu clock correction, s",
+                                    -self.preprocessor.clock.offset_ns / NS)
+
+    def _report_rates(self) -> None:
         pre = self.preprocessor
-        out = pre.add(stamp_to_ns(msg.header.stamp), self.now_ns(), (w.x, w.y, w.z),
-                      (f.x, f.y, f.z))
-        if out.clock_jump:
-            self.diag.count("imu clock jump: stamps corrected by the arrival clock")
-            self.diag.set_value("imu clock correction, s", -pre.clock.offset_ns / NS)
-        if out.rates is None:
-            self.diag.count(f"imu sample rejected: {out.reason}")
-            return
-        if out.reason == "gap":
-            self.diag.count("imu gap longer than max_bridge_samples: integration restarted")
-        elif out.reason == "gap_bridged":
-            self.diag.count("imu gap bridged")
-            self.diag.set_value("imu samples synthesised", pre.synthesised)
-        for inc in out.increments:
-            delta = new(ImuDelta)
-            delta.dt = inc.dt
-            set_vector3(delta.delta_angle, inc.dtheta)
-            set_vector3(delta.delta_velocity, inc.dv)
-            set_stamp_ns(delta.header.stamp, inc.t_ns)
-            delta.header.frame_id = self._frame_id
-            self.pub_delta.publish(delta)
-        self._publish_data(msg, out.t_ns, *out.rates)
+        rates = (f"imu {pre.rate_hz:.4f} Hz, imu/delta {pre.nav_rate_hz:.4f} Hz "
+                 f"({pre.coning_method})")
+        self.diag.set_value("rates", rates)
+        self.get_logger().info(rates)
 
     def _publish_data(self, raw: Imu, t_ns: int, w_b: tuple, f_b: tuple) -> None:
         out = new(Imu)
@@ -229,23 +244,11 @@ class ImuPreprocessorNode(NavNode):
         set_stamp_ns(out.header.stamp, t_ns)
         out.header.frame_id = self._frame_id
         out.orientation_covariance[0] = -1.0  # REP-145: no orientation estimate
-        # Written into the message's own arrays: assigning a list runs the generated setter's
+        # Copied into the message's own arrays: assigning a list runs the generated setter's
         # per-element type and range checks.
-        out.angular_velocity_covariance[:] = self._rotated(raw.angular_velocity_covariance)
-        out.linear_acceleration_covariance[:] = self._rotated(raw.linear_acceleration_covariance)
+        out.angular_velocity_covariance[:] = self.preprocessor.covariance_in_base(raw.angular_velocity_covariance)
+        out.linear_acceleration_covariance[:] = self.preprocessor.covariance_in_base(raw.linear_acceleration_covariance)
         self.pub_data.publish(out)
-
-    def _rotated(self, cov) -> np.ndarray:
-        """:func:`rotate_covariance` by the mounting, memoised: a driver repeats the same few
-        covariances on every sample, and the matrix products cost more than the lookup. The
-        array is the memo's own: callers copy it into their message."""
-        key = np.asarray(cov, float).tobytes()
-        out = self._rotated_cache.get(key)
-        if out is None:
-            if len(self._rotated_cache) > 64:  # a driver with varying covariances
-                self._rotated_cache.clear()
-            out = self._rotated_cache[key] = np.array(rotate_covariance(cov, self.cal.c_bs))
-        return out
 
     def on_temperature(self, msg: Temperature) -> None:
         if not np.isfinite(msg.temperature):
@@ -270,7 +273,7 @@ class ImuPreprocessorNode(NavNode):
         set_vector3(mag.magnetic_field, out[1])
         set_stamp_ns(mag.header.stamp, out[0])
         mag.header.frame_id = self._frame_id
-        mag.magnetic_field_covariance[:] = self._rotated(msg.magnetic_field_covariance)
+        mag.magnetic_field_covariance[:] = self.preprocessor.covariance_in_base(msg.magnetic_field_covariance)
         self.pub_mag.publish(mag)
 
 
