@@ -58,7 +58,7 @@ def main() -> None:
         bus = InProcessBus()
         node = ImuPreprocessorNode(context=context, bus=bus, parameter_overrides=params)
         if args.cal:
-            node.temperature = 40.0
+            node.preprocessor.temperature = 40.0
         cpu = time.process_time()
         for m in msgs:
             bus.now_ns = m.t_ns   # the arrival clock of the clock-jump check

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 import yaml
 
-from ins_gnss_ros.imu.calibration import ImuCalibration, ResidualErrors, TriadCalibration
+from ins_gnss_ros.imu.calibration import ImuCalibration, TriadCalibration
+from ins_gnss_ros.nav.increments import SensorErrors
 
 DEG = np.pi / 180
 
@@ -21,6 +22,13 @@ def _example(rng):
         gyro_g_sensitivity=rng.normal(0, 1e-4, (3, 3)),
         mounting_rpy=[180 * DEG, -6.79 * DEG, 5.35 * DEG],  # car_drive_0708-like mounting
         temperature_ref=25.0)
+
+
+#: Running sensor-error estimates of a navigation filter, removed after the calibration.
+_FILTER_ESTIMATES = SensorErrors(gyro_bias=np.array([1e-4, -2e-4, 3e-4]),
+                                 accel_bias=np.array([0.01, 0, -0.02]),
+                                 gyro_scale=np.array([1e-3, 0, -1e-3]),
+                                 accel_scale=np.array([0, 2e-3, 0]))
 
 
 def test_single_axis_by_hand():
@@ -54,13 +62,11 @@ def test_round_trip_within_noise():
     w_true = rng.normal(0, 60 * DEG, (n, 3))
     f_true = rng.normal(0, 8.0, (n, 3))
     temp = rng.uniform(-20, 60, n)
-    residual = ResidualErrors(gyro_bias=[1e-4, -2e-4, 3e-4], gyro_scale=[1e-3, 0, -1e-3],
-                              accel_bias=[0.01, 0, -0.02], accel_scale=[0, 2e-3, 0])
-    g_raw, a_raw = cal.simulate_raw(w_true, f_true, temp, residual)
+    g_raw, a_raw = cal.simulate_raw(w_true, f_true, temp, _FILTER_ESTIMATES)
     sg, sa = 0.01 * DEG, 0.005  # white noise per sample, rad/s and m/s²
     g_raw = g_raw + rng.normal(0, sg, g_raw.shape)
     a_raw = a_raw + rng.normal(0, sa, a_raw.shape)
-    w, f = cal.correct(g_raw, a_raw, temp, residual)
+    w, f = cal.correct(g_raw, a_raw, temp, _FILTER_ESTIMATES)
     # The errors sit far above the noise before correction...
     assert np.sqrt(np.mean((g_raw - w_true) ** 2)) > 50 * sg
     # ...and the corrected values match the truth within the noise (scale/coupling grow it <2 %).
@@ -71,15 +77,13 @@ def test_round_trip_within_noise():
 def test_correct_sample_is_correct_in_python_floats():
     """The per-sample path gives correct()'s values up to the rounding of the 3x3 sums (numpy's
     kernels may fuse multiply-adds), keeps M(T) and b(T) only while the temperature is unchanged,
-    and applies the residual errors."""
+    and removes the filter's sensor-error estimates."""
     rng = np.random.default_rng(3)
     cal = _example(rng)
-    residual = ResidualErrors(gyro_bias=[1e-4, -2e-4, 3e-4], gyro_scale=[1e-3, 0, -1e-3],
-                              accel_bias=[0.01, 0, -0.02], accel_scale=[0, 2e-3, 0])
     gyro, accel = rng.normal(0, 1.0, (8, 3)), rng.normal(0, 10.0, (8, 3))
     temperatures = [None, 40.0, 40.0, -5.0, None, None, 40.0, 25.0]
     for k, temp in enumerate(temperatures):
-        res = residual if k % 2 else None
+        res = _FILTER_ESTIMATES if k % 2 else None
         w, f = cal.correct_sample(tuple(gyro[k].tolist()), accel[k].tolist(), temp, res)
         assert all(type(x) is float for x in w + f)
         w_ref, f_ref = cal.correct(gyro[k], accel[k], temp, res)

@@ -91,8 +91,10 @@ def graph(ros_context):
     graphs = []
 
     def make(*params):
-        if not any(p.name == "max_identical_samples" for p in params):
-            params = (Parameter("max_identical_samples", value=0), *params)
+        # The tests' streams are 200 Hz unless they say otherwise.
+        for name, value in (("max_identical_samples", 0), ("rate_hz", 200.0)):
+            if not any(p.name == name for p in params):
+                params = (Parameter(name, value=value), *params)
         g = _Graph(ros_context, list(params))
         graphs.append(g)
         return g
@@ -250,7 +252,7 @@ def test_short_gap_is_bridged_long_gap_restarts(graph):
         g.imu(t, GOOD_W, G_UP)
     t += 3 * DT_NS                                  # 2 samples lost: bridged
     g.imu(t, GOOD_W, G_UP)
-    assert g.node.diag.counts["imu gap bridged"] == 1 and g.node.synthesised == 2
+    assert g.node.diag.counts["imu gap bridged"] == 1 and g.node.preprocessor.synthesised == 2
     assert len(g.out["/imu/delta"]) == 6            # 12 samples of 2
     t += 50 * DT_NS                                 # 49 lost: reported, integration restarts
     for k in range(4):
@@ -383,8 +385,8 @@ def test_calibration_file_and_temperature(graph, tmp_path):
 
 
 @pytest.mark.parametrize("params, match", [
-    ({"rate_hz": 250.0, "nav_rate_hz": 100.0}, "integer multiple"),
-    ({"rate_hz": 300.0, "nav_rate_hz": 100.0}, "coning_method.*one_sample"),
+    ({"rate_hz": 300.0, "nav_rate_hz": 100.0, "coning_method": "two_sample"},
+     "coning_method.*one_sample"),
     ({"calibration.gyro.bias": [0.1, 0.2]}, "calibration.gyro.bias.*multiple of 3"),
     ({"calibration.accel.nonorthogonality": [0.1] * 9}, "accel.nonorthogonality.*diagonal"),
     ({"calibration_file": "/nonexistent/cal.yaml"}, "calibration_file.*cannot read"),
@@ -423,7 +425,8 @@ def test_publishes_over_ros(executor, ros_context, probe):
     from ins_gnss_ros.nodes.imu_preprocessor_node import ImuPreprocessorNode
     from rosutil import spin_until
 
-    node = ImuPreprocessorNode(context=ros_context)
+    node = ImuPreprocessorNode(context=ros_context,
+                               parameter_overrides=[Parameter("rate_hz", value=200.0)])
     executor.add_node(node)
     data, deltas = [], []
     probe.create_subscription(Imu, "imu/data", data.append, SENSOR_QOS)
@@ -507,3 +510,43 @@ def test_gaps_and_unpaced_streams_are_not_clock_jumps(graph, paced, lost):
     assert g.node.diag.counts["imu clock jump: stamps corrected by the arrival clock"] == 0
     assert g.node.diag.counts[
         "imu gap longer than max_bridge_samples: integration restarted"] == 1
+
+
+def test_a_30_hz_imu_with_the_default_rates_is_measured_and_integrated(graph):
+    """rate_hz 0 (the default): a 30 Hz IMU with nav_rate_hz 100 (before: "imu gap longer than
+    max_bridge_samples" on every sample at the 200 Hz default, no imu/delta) is measured from
+    its first stamps; every sample is then an increment, and /diagnostics says so."""
+    g = graph(Parameter("rate_hz", value=0.0))
+    period = NS / 30
+    for k in range(1, 91):
+        g.imu(T0_NS + round(k * period), GOOD_W, G_UP)
+    assert len(g.out["/imu/data"]) == 90 and len(g.out["/imu/delta"]) == 90
+    np.testing.assert_allclose([d.dt for d in g.out["/imu/delta"][1:]], 1 / 30, rtol=1e-6)
+    assert not any(k.startswith("imu gap") for k in g.node.diag.counts)
+    assert g.node.diag._values["rates"] == "imu 30.0000 Hz, imu/delta 30.0000 Hz (one_sample)"
+
+
+@pytest.mark.parametrize("enabled", [True, False])
+def test_jittered_driver_stamps_are_replaced_by_the_sensor_clock(graph, enabled):
+    """A 100 Hz IMU stamped by its driver with 2 ms uniform jitter: with the sensor clock the
+    increments are stamped within 0.1 ms of the sampling instants after a few seconds and
+    have their 20 ms step; without it they carry the jitter."""
+    from ins_gnss_ros.io import stamp_to_ns
+
+    g = graph(Parameter("rate_hz", value=0.0), Parameter("nav_rate_hz", value=50.0),
+              Parameter("sensor_clock.enabled", value=enabled))
+    rng = np.random.default_rng(5)
+    truth = T0_NS + np.arange(1, 1001) * 10_000_000
+    stamps = truth + np.round(rng.uniform(-1e6, 1e6, len(truth))).astype(np.int64)
+    for t in stamps:
+        g.imu(int(t), GOOD_W, G_UP)
+    deltas = g.out["/imu/delta"]
+    assert len(deltas) == 500
+    ends = np.array([stamp_to_ns(d.header.stamp) for d in deltas])
+    err = (ends - truth[1::2])[250:] / 1e9
+    dt = np.array([d.dt for d in deltas])
+    if enabled:
+        assert abs(err).max() < 1e-4
+        np.testing.assert_allclose(dt[250:], 0.02, atol=2e-5)   # raw: ±2 ms
+    else:
+        assert abs(err).max() > 5e-4 and dt.std() > 5e-4

@@ -14,7 +14,8 @@ Per triad (Groves, "Principles of GNSS, Inertial and Multisensor Integrated Navi
 with b(T) and s(T) polynomials in (T - T_ref), N the non-orthogonality (zero diagonal) and x_s the
 calibrated reading in the orthogonalised sensor frame. The gyro also sees the specific force:
 ω_raw contains G f_s (g-sensitivity, rad/s per m/s²). The mounting rotation C_bs takes sensor-frame
-vectors to base_link (FLU). The filter's residual errors, resolved in base_link, are modelled as
+vectors to base_link (FLU). The filter's running estimates of the errors left after that
+(:class:`~ins_gnss_ros.nav.increments.SensorErrors`, resolved in base_link) are modelled as
 x_cal = (1 + δs) x + δb (element-wise), so the output is x = (x_cal - δb) / (1 + δs).
 
 Temperatures are in °C (sensor_msgs/Temperature); angular rate rad/s, specific force m/s².
@@ -25,6 +26,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ins_gnss_ros.nav.increments import SensorErrors
+from ins_gnss_ros.params_io import load_yaml_file
 from ins_gnss_ros.nav.rotations import dcm_from_euler
 
 
@@ -129,25 +132,6 @@ class TriadCalibration:
 
 
 @dataclass
-class ResidualErrors:
-    """Sensor errors still present after calibration, as estimated by the navigation filter.
-
-    All in base_link (FLU): gyro bias rad/s, accelerometer bias m/s², scale factors
-    dimensionless. Model: x_cal = (1 + scale) x + bias, element-wise (seed 004 §2.5, states
-    10-21 fed back to the sensor outputs).
-    """
-
-    gyro_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    gyro_scale: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    accel_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    accel_scale: np.ndarray = field(default_factory=lambda: np.zeros(3))
-
-    def __post_init__(self):
-        for name in ("gyro_bias", "gyro_scale", "accel_bias", "accel_scale"):
-            setattr(self, name, _array(getattr(self, name), f"residual.{name}", (3,)))
-
-
-@dataclass
 class ImuCalibration:
     """Complete calibration of a six-axis IMU, from raw sensor readings to base_link.
 
@@ -187,7 +171,7 @@ class ImuCalibration:
     def _dtemp(self, temperature):
         return 0.0 if temperature is None else np.asarray(temperature, float) - self.temperature_ref
 
-    def correct(self, gyro_raw, accel_raw, temperature=None, residual: ResidualErrors | None = None):
+    def correct(self, gyro_raw, accel_raw, temperature=None, errors: SensorErrors | None = None):
         """Raw readings to calibrated angular rate and specific force in base_link.
 
         Parameters
@@ -196,8 +180,8 @@ class ImuCalibration:
             Raw sensor-frame readings, rad/s and m/s².
         temperature : float or array_like (N,), optional
             Sensor temperature, °C.
-        residual : ResidualErrors, optional
-            Filter-estimated residual errors to remove as well.
+        errors : SensorErrors, optional
+            The filter's estimates of the errors left after calibration, removed as well.
 
         Returns
         -------
@@ -211,13 +195,14 @@ class ImuCalibration:
         w_raw = np.asarray(gyro_raw, float) - f_s @ self.gyro_g_sensitivity.T
         w_s = self.gyro.correct(w_raw, dt)
         w_b, f_b = w_s @ self.c_bs.T, f_s @ self.c_bs.T
-        if residual is not None:
-            w_b = (w_b - residual.gyro_bias) / (1.0 + residual.gyro_scale)
-            f_b = (f_b - residual.accel_bias) / (1.0 + residual.accel_scale)
+        if errors is not None:
+            # Rates are the increments over 1 s: (x - b 1.0) / (1 + s) is (x - b) / (1 + s)
+            # bit for bit.
+            w_b, f_b = errors.compensate(w_b, f_b, 1.0)
         return w_b, f_b
 
     def correct_sample(self, gyro_raw, accel_raw, temperature: float | None = None,
-                       residual: ResidualErrors | None = None) -> tuple[tuple, tuple]:
+                       errors: SensorErrors | None = None) -> tuple[tuple, tuple]:
         """:meth:`correct` for one sample in Python floats: (ωx, ωy, ωz), (fx, fy, fz) tuples.
 
         The per-sample path of the imu_preprocessor, where numpy's per-call overhead on 3-vectors
@@ -238,23 +223,20 @@ class ImuCalibration:
         w_raw = _minus(gyro_raw, _matvec(self._g_rows, f_s))
         w_s = _matvec(m_gyro, _minus(w_raw, b_gyro))
         w_b, f_b = _matvec(self._c_bs_rows, w_s), _matvec(self._c_bs_rows, f_s)
-        if residual is not None:
-            w_b = tuple((w - b) / (1.0 + s) for w, b, s in
-                        zip(w_b, residual.gyro_bias.tolist(), residual.gyro_scale.tolist()))
-            f_b = tuple((f - b) / (1.0 + s) for f, b, s in
-                        zip(f_b, residual.accel_bias.tolist(), residual.accel_scale.tolist()))
+        if errors is not None:
+            return errors.compensate_rates(w_b, f_b)
         return w_b, f_b
 
-    def simulate_raw(self, omega_b, f_b, temperature=None, residual: ResidualErrors | None = None):
+    def simulate_raw(self, omega_b, f_b, temperature=None, errors: SensorErrors | None = None):
         """Forward model: true base_link rate and specific force to raw readings.
 
         The exact inverse of :meth:`correct` (same arguments and shapes, reversed roles).
         """
         dt = self._dtemp(temperature)
         w_b, f_b = np.asarray(omega_b, float), np.asarray(f_b, float)
-        if residual is not None:
-            w_b = (1.0 + residual.gyro_scale) * w_b + residual.gyro_bias
-            f_b = (1.0 + residual.accel_scale) * f_b + residual.accel_bias
+        if errors is not None:  # the SensorErrors model forwards: (1 + s) x + b
+            w_b = (1.0 + errors.gyro_scale) * w_b + errors.gyro_bias
+            f_b = (1.0 + errors.accel_scale) * f_b + errors.accel_bias
         w_s, f_s = w_b @ self.c_bs, f_b @ self.c_bs
         accel_raw = self.accel.distort(f_s, dt)
         gyro_raw = self.gyro.distort(w_s, dt) + f_s @ self.gyro_g_sensitivity.T
@@ -293,3 +275,21 @@ class ImuCalibration:
                    mounting_rpy=d.get("mounting_rpy", np.zeros(3)),
                    temperature_ref=d.get("temperature_ref", 20.0))
 
+
+
+def read_calibration_file(path) -> dict:
+    """The calibration dict of a YAML file: ``imu_calibrate``'s output (key ``imu_calibration``)
+    or the bare :meth:`ImuCalibration.to_dict` dict (for :meth:`ImuCalibration.from_dict`).
+
+    Raises
+    ------
+    ValueError
+        The file cannot be read, is not safe YAML (:mod:`ins_gnss_ros.params_io`) or holds no
+        dict.
+    """
+    d = load_yaml_file(path)
+    if isinstance(d, dict) and "imu_calibration" in d:
+        d = d["imu_calibration"]
+    if not isinstance(d, dict):
+        raise ValueError(f"{path} holds no calibration dict")
+    return d

@@ -1,29 +1,10 @@
 """``imu_preprocessor`` node: raw IMU and magnetometer samples to calibrated, checked streams.
 
-Per raw ``imu/data_raw`` sample (sensor frame, any mounting, any rate that is an integer
-multiple of the navigation rate, e.g. 1200 Hz for seed 004's ISON-1):
-
-0. :class:`~ins_gnss_ros.imu.sample_checks.ClockJumps` takes jumps of the sensor clock out of the
-   stamps: a stamp step unlike the step of the arrival times (node clock: ``/clock`` in a
-   replay) while the samples arrive at their regular period (``clock_jump.*``);
-1. :class:`~ins_gnss_ros.imu.sample_checks.SampleChecker` rejects NaN/inf, saturated readings,
-   duplicated or backwards stamps and a frozen sensor (``max_identical_samples`` bit-identical
-   readings in a row) (counted on /diagnostics, never passed on), bridges gaps of up to
-   ``max_bridge_samples`` and reports longer ones, after which integration restarts (the
-   ``strapdown`` and ``ekf`` then see the gap in ``imu/delta`` and bridge or restart);
-2. :class:`~ins_gnss_ros.imu.calibration.ImuCalibration` removes bias, scale factor,
-   non-orthogonality and g-sensitivity (with the temperature from ``imu/temperature`` if
-   enabled) and rotates into ``base_link`` (seed 004 §2.3); optionally the filter's residual
-   estimates from ``ins/correction`` too;
-3. the calibrated sample goes out on ``imu/data``, and every ``rate_hz / nav_rate_hz`` samples the
-   :class:`~ins_gnss_ros.nav.coning.Integrator` emits coning/sculling-compensated increments on
-   ``imu/delta``, stamped at the end of the interval.
-
-A sensor_msgs/Imu sample is the mean rate over the interval ending at its stamp (the convention
-of :mod:`ins_gnss_ros.sim.imu_sim`), so its increment is rate x (stamp - previous stamp); the
-stamp differences are taken in integer nanoseconds because a float POSIX time resolves only
-~0.2 µs. Bridged samples feed the integrator (so ``imu/delta`` keeps its regular step) but are
-not published on ``imu/data``: they are not measurements.
+Every raw ``imu/data_raw`` sample goes through
+:class:`~ins_gnss_ros.imu.preprocessor.ImuPreprocessor` (sample rate, sensor clock, time offset, clock jumps, sample checks and bridging, calibration and mounting, the filter's
+sensor-error feedback, coning/sculling increments; see there). The node maps the parameters onto
+it, counts what it reports on /diagnostics, and publishes the calibrated sample on ``imu/data``
+and every completed increment on ``imu/delta``, stamped at the end of its interval.
 
 Magnetometer samples (``imu/mag_raw``) are rotated into ``base_link`` with the same mounting and
 published on ``imu/mag``; hard/soft iron belongs to the vehicle and is removed by ``mag_compass``.
@@ -32,28 +13,25 @@ published on ``imu/mag``; hard/soft iron belongs to the vehicle and is removed b
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 import numpy as np
 from ins_gnss_msgs.msg import ImuDelta, InsCorrection
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
-from ..imu.calibration import ImuCalibration, ResidualErrors
-from ..imu.sample_checks import ClockJumps, SampleChecker
+from ..imu.calibration import ImuCalibration, read_calibration_file
+from ..imu.preprocessor import ImuPreprocessor, SettingError
 from ..io import NS, new, set_stamp_ns, stamp_to_ns
-from ..nav.coning import METHODS, Integrator
-from ..params_io import ParamsFileError, load_yaml_file
+from ..nav.coning import METHODS
+from ..nav.increments import MAX_RATE, MAX_SPECIFIC_FORCE, SensorErrors
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import set_vector3, vec
 
 
-def rotate_covariance(cov, c) -> list:
-    """Row-major 3x3 covariance of a vector rotated by ``c``; unknown (-1 first) stays unknown."""
-    if cov[0] == -1.0:
-        return list(cov)
-    return (c @ np.reshape(np.asarray(cov, float), (3, 3)) @ c.T).ravel().tolist()
-
-
+#: ImuPreprocessor events -> diagnostics.
+_EVENTS = {"clock_jump": "imu clock jump: stamps corrected by the arrival clock",
+           "sensor_clock_restart": "imu sensor clock fit restarted (driver clock step, long gap)",
+           "coning_fallback": "coning_method two_sample impossible at the measured rate: "
+                              "one_sample used"}
 _TRIAD_PARAMS = ("bias", "scale", "nonorthogonality")
 
 
@@ -85,16 +63,29 @@ class ImuPreprocessorNode(NavNode):
         Param("mounting_rpy_deg", [0.0, 0.0, 0.0],
               "roll, pitch, yaw (ROS) of the rotation taking sensor-frame vectors to base_link, "
               "deg (or mounting_rpy in the calibration file, not both)", -360.0, 360.0, length=3),
-        Param("rate_hz", 200.0, "nominal sensor sample rate, Hz (an integer multiple of "
-              "nav_rate_hz)", 1.0, 10000.0),
-        Param("nav_rate_hz", 100.0, "rate of imu/delta, Hz", 1.0, 10000.0),
-        Param("coning_method", "two_sample",
-              "coning/sculling algorithm (two_sample needs an even rate_hz / nav_rate_hz)",
-              choices=METHODS),
+        Param("rate_hz", 0.0, "nominal sensor sample rate, Hz; 0: measured from the first "
+              "stamps (their samples are held until then, about 0.5 s)", 0.0, 10000.0),
+        Param("nav_rate_hz", 100.0, "wanted rate of imu/delta, Hz: an increment spans the whole "
+              "number of samples nearest to 1 / nav_rate_hz (the effective rate is on "
+              "/diagnostics)", 1.0, 10000.0),
+        Param("coning_method", "auto",
+              "coning/sculling algorithm: two_sample needs an even number of samples per "
+              "increment; auto takes it then, one_sample otherwise", choices=("auto", *METHODS)),
+        Param("sensor_clock.enabled", True,
+              "give each sample its instant on the sensor's own clock, fitted causally to the "
+              "driver's jittered stamps (imu/sensor_clock.py); false: the stamps as they come"),
+        Param("sensor_clock.jitter_s", 0.001, "standard deviation of the driver's stamps about "
+              "the sampling instants, s", 1e-6, 0.1),
+        Param("sensor_clock.time_constant_s", 30.0, "memory of the sensor-clock fit, s",
+              1.0, 3600.0),
+        # At most the bounds every consumer of imu/delta holds an increment to: a reading
+        # passed here must not be dropped as implausible downstream.
         Param("gyro_range_dps", 2000.0,
-              "gyro measurement range; |reading| >= range is saturated, deg/s", 1.0, 100000.0),
+              "gyro measurement range; |reading| >= range is saturated, deg/s", 1.0,
+              float(np.degrees(MAX_RATE))),
         Param("accel_range_mps2", 160.0,
-              "accelerometer range; |reading| >= range is saturated, m/s^2", 1.0, 100000.0),
+              "accelerometer range; |reading| >= range is saturated, m/s^2", 1.0,
+              MAX_SPECIFIC_FORCE),
         Param("max_bridge_samples", 5,
               "longest run of missing/rejected samples bridged; longer gaps restart the "
               "integration, samples", 0, 10000),
@@ -129,42 +120,26 @@ class ImuPreprocessorNode(NavNode):
         super().__init__("imu_preprocessor", **kwargs)
         p = self.p
         self.cal = self._calibration()
-        n_sub = p["rate_hz"] / p["nav_rate_hz"]
-        if abs(n_sub - round(n_sub)) > 1e-9 * n_sub:
-            raise ParameterError(f"parameter 'rate_hz' = {p['rate_hz']} is not an integer multiple"
-                                 f" of nav_rate_hz = {p['nav_rate_hz']}")
         try:
-            self.integrator = Integrator(int(round(n_sub)), p["coning_method"])
-        except ValueError as err:
-            raise ParameterError(f"parameter 'coning_method': {err} (rate_hz / nav_rate_hz = "
-                                 f"{int(round(n_sub))}; use one_sample)") from None
-        try:
-            self.checker = SampleChecker(p["rate_hz"], np.radians(p["gyro_range_dps"]),
-                                         p["accel_range_mps2"], p["max_bridge_samples"],
-                                         p["bridge"], max_identical=p["max_identical_samples"])
-        except ValueError as err:
-            raise ParameterError(f"parameter 'max_identical_samples': {err}") from None
-        self.clock = None
-        if p["clock_jump.min_s"] > 0.0:
-            try:
-                self.clock = ClockJumps(p["rate_hz"], p["clock_jump.min_s"], p["clock_jump.max_s"])
-            except ValueError as err:
-                raise ParameterError(f"parameter 'clock_jump.max_s': {err}") from None
-        # None until the filter sends a correction: removing zero errors changes no bit but
-        # costs work on every sample.
-        self.residual: ResidualErrors | None = None
-        self.offset_ns = int(round(p["time_offset_s"] * NS))
-        self.temperature: float | None = None
-        self.synthesised = 0
-        self._origin_ns: int | None = None   # stamps go to the checker relative to the first one
-        self._last_ns: int | None = None     # end of the last integrated sample
-        self._last_rates = None              # its rates (trapezoid of instant samples)
-        self._last_mag_ns: int | None = None
-        # Read per sample: attributes, not parameter-dict lookups and string comparisons.
-        self._period = 1.0 / p["rate_hz"]
-        self._instant = p["sample_model"] == "instant"
+            self.preprocessor = ImuPreprocessor(
+                self.cal, p["rate_hz"], p["nav_rate_hz"], p["coning_method"],
+                gyro_range=np.radians(p["gyro_range_dps"]), accel_range=p["accel_range_mps2"],
+                max_bridge=p["max_bridge_samples"], bridge=p["bridge"],
+                max_identical_samples=p["max_identical_samples"],
+                instant=p["sample_model"] == "instant",
+                clock_jump=((p["clock_jump.min_s"], p["clock_jump.max_s"])
+                            if p["clock_jump.min_s"] > 0.0 else None),
+                sensor_clock=((p["sensor_clock.jitter_s"], p["sensor_clock.time_constant_s"])
+                              if p["sensor_clock.enabled"] else None),
+                time_offset_ns=int(round(p["time_offset_s"] * NS)))
+        except SettingError as err:
+            name = {"clock_jump": "clock_jump.max_s",
+                    "sensor_clock": "sensor_clock.jitter_s"}.get(err.name, err.name)
+            raise ParameterError(f"parameter '{name}': {err}") from None
+        if self.preprocessor.rate_hz is not None:
+            self._report_rates()
+        # Read per sample: an attribute, not a parameter-dict lookup.
         self._frame_id = p["frame_id"]
-        self._rotated_cache: dict[bytes, np.ndarray] = {}
         self.pub_data = self.publisher(Imu, "imu/data", SENSOR_QOS)
         self.pub_delta = self.publisher(ImuDelta, "imu/delta", SENSOR_QOS)
         self.pub_mag = self.publisher(MagneticField, "imu/mag", SENSOR_QOS)
@@ -185,7 +160,10 @@ class ImuPreprocessorNode(NavNode):
             if any(p[k] != v for k, v in defaults.items()):
                 raise ParameterError("parameter 'calibration_file': give the calibration either as "
                                      "a file or as calibration.* parameters, not both")
-            d = self._read_calibration_file(Path(p["calibration_file"]))
+            try:
+                d = read_calibration_file(p["calibration_file"])
+            except ValueError as err:
+                raise ParameterError(f"parameter 'calibration_file': {err}") from None
             source = f"calibration_file {p['calibration_file']}"
         else:
             d = self._inline_calibration()
@@ -217,72 +195,47 @@ class ImuPreprocessorNode(NavNode):
         d["temperature_ref"] = self.p["calibration.temperature_ref"]
         return d
 
-    @staticmethod
-    def _read_calibration_file(path: Path) -> dict:
-        try:
-            d = load_yaml_file(path)
-        except ParamsFileError as err:
-            raise ParameterError(f"parameter 'calibration_file': {err}") from None
-        if isinstance(d, dict) and "imu_calibration" in d:
-            d = d["imu_calibration"]
-        if not isinstance(d, dict):
-            raise ParameterError(f"parameter 'calibration_file': {path} holds no calibration dict")
-        return d
-
     # -- IMU samples ---------------------------------------------------------------------------
     def on_imu(self, msg: Imu) -> None:
-        t_ns = stamp_to_ns(msg.header.stamp) + self.offset_ns
-        if self.clock is not None:
-            jumps = self.clock.jumps
-            t_ns = self.clock.correct(t_ns, self.now_ns())
-            if self.clock.jumps != jumps:
-                self.diag.count("imu clock jump: stamps corrected by the arrival clock")
-                self.diag.set_value("imu clock correction, s", -self.clock.offset_ns / NS)
-        if self._origin_ns is None:
-            self._origin_ns = t_ns
         w, f = msg.angular_velocity, msg.linear_acceleration
-        gyro, accel = (w.x, w.y, w.z), (f.x, f.y, f.z)
-        result = self.checker.check((t_ns - self._origin_ns) / NS, gyro, accel)
-        if not result.ok:
-            self.diag.count(f"imu sample rejected: {result.reason}")
-            return
-        if result.reason == "gap":
-            self.diag.count("imu gap longer than max_bridge_samples: integration restarted")
-            self.integrator.reset()
-            self._last_ns = self._last_rates = None
-        elif result.reason == "gap_bridged":
-            self.diag.count("imu gap bridged")
-            self.synthesised += len(result.fill_stamps)
-            self.diag.set_value("imu samples synthesised", self.synthesised)
-        correct = self.cal.correct_sample
-        for t, g, a in zip(result.fill_stamps.tolist(), result.fill_gyro.tolist(),
-                           result.fill_accel.tolist()):
-            self._integrate(self._origin_ns + int(round(t * NS)),
-                            *correct(g, a, self.temperature, self.residual))
-        w_b, f_b = correct(gyro, accel, self.temperature, self.residual)
-        self._integrate(t_ns, w_b, f_b)
-        self._publish_data(msg, t_ns, w_b, f_b)
+        for out in self.preprocessor.add(stamp_to_ns(msg.header.stamp), self.now_ns(),
+                                         (w.x, w.y, w.z), (f.x, f.y, f.z), msg):
+            if out.events:
+                self._report(out.events)
+            if out.rates is None:
+                self.diag.count(f"imu sample rejected: {out.reason}")
+                continue
+            if out.reason == "gap":
+                self.diag.count("imu gap longer than max_bridge_samples: integration restarted")
+            elif out.reason == "gap_bridged":
+                self.diag.count("imu gap bridged")
+                self.diag.set_value("imu samples synthesised", self.preprocessor.synthesised)
+            for inc in out.increments:
+                delta = new(ImuDelta)
+                delta.dt = inc.dt
+                set_vector3(delta.delta_angle, inc.dtheta)
+                set_vector3(delta.delta_velocity, inc.dv)
+                set_stamp_ns(delta.header.stamp, inc.t_ns)
+                delta.header.frame_id = self._frame_id
+                self.pub_delta.publish(delta)
+            self._publish_data(out.tag, out.t_ns, *out.rates)
 
-    def _integrate(self, t_ns: int, w_b: tuple, f_b: tuple) -> None:
-        dt = self._period if self._last_ns is None else (t_ns - self._last_ns) / NS
-        self._last_ns = t_ns
-        if self._instant and self._last_rates is not None:
-            w_mean = [0.5 * (a + b) for a, b in zip(self._last_rates[0], w_b)]
-            f_mean = [0.5 * (a + b) for a, b in zip(self._last_rates[1], f_b)]
-        else:
-            w_mean, f_mean = w_b, f_b
-        self._last_rates = (w_b, f_b)
-        out = self.integrator.add_rates(w_mean, f_mean, dt)
-        if out is None:
-            return
-        phi, dv, dt_nav = out
-        delta = new(ImuDelta)
-        delta.dt = dt_nav
-        set_vector3(delta.delta_angle, phi)
-        set_vector3(delta.delta_velocity, dv)
-        set_stamp_ns(delta.header.stamp, t_ns)
-        delta.header.frame_id = self._frame_id
-        self.pub_delta.publish(delta)
+    def _report(self, events: tuple) -> None:
+        for event in events:
+            if event == "rate_measured":
+                self._report_rates()
+                continue
+            self.diag.count(_EVENTS[event])
+            if event == "clock_jump":
+                self.diag.set_value("imu clock correction, s",
+                                    -self.preprocessor.clock.offset_ns / NS)
+
+    def _report_rates(self) -> None:
+        pre = self.preprocessor
+        rates = (f"imu {pre.rate_hz:.4f} Hz, imu/delta {pre.nav_rate_hz:.4f} Hz "
+                 f"({pre.coning_method})")
+        self.diag.set_value("rates", rates)
+        self.get_logger().info(rates)
 
     def _publish_data(self, raw: Imu, t_ns: int, w_b: tuple, f_b: tuple) -> None:
         out = new(Imu)
@@ -291,59 +244,37 @@ class ImuPreprocessorNode(NavNode):
         set_stamp_ns(out.header.stamp, t_ns)
         out.header.frame_id = self._frame_id
         out.orientation_covariance[0] = -1.0  # REP-145: no orientation estimate
-        # Written into the message's own arrays: assigning a list runs the generated setter's
+        # Copied into the message's own arrays: assigning a list runs the generated setter's
         # per-element type and range checks.
-        out.angular_velocity_covariance[:] = self._rotated(raw.angular_velocity_covariance)
-        out.linear_acceleration_covariance[:] = self._rotated(raw.linear_acceleration_covariance)
+        out.angular_velocity_covariance[:] = self.preprocessor.covariance_in_base(raw.angular_velocity_covariance)
+        out.linear_acceleration_covariance[:] = self.preprocessor.covariance_in_base(raw.linear_acceleration_covariance)
         self.pub_data.publish(out)
-
-    def _rotated(self, cov) -> np.ndarray:
-        """:func:`rotate_covariance` by the mounting, memoised: a driver repeats the same few
-        covariances on every sample, and the matrix products cost more than the lookup. The
-        array is the memo's own: callers copy it into their message."""
-        key = np.asarray(cov, float).tobytes()
-        out = self._rotated_cache.get(key)
-        if out is None:
-            if len(self._rotated_cache) > 64:  # a driver with varying covariances
-                self._rotated_cache.clear()
-            out = self._rotated_cache[key] = np.array(rotate_covariance(cov, self.cal.c_bs))
-        return out
 
     def on_temperature(self, msg: Temperature) -> None:
         if not np.isfinite(msg.temperature):
             self.diag.count("non-finite temperature ignored")
             return
-        self.temperature = float(msg.temperature)
+        self.preprocessor.temperature = float(msg.temperature)
 
     def on_correction(self, msg: InsCorrection) -> None:
-        incr = [vec(msg.gyro_bias), vec(msg.gyro_scale_factor), vec(msg.accel_bias),
-                vec(msg.accel_scale_factor)]
-        if not all(np.all(np.isfinite(x)) for x in incr):
+        increment = SensorErrors(vec(msg.gyro_bias), vec(msg.accel_bias),
+                                 vec(msg.gyro_scale_factor), vec(msg.accel_scale_factor))
+        if not self.preprocessor.add_sensor_errors(increment):
             self.diag.count("non-finite sensor correction rejected")
-            return
-        r = self.residual or ResidualErrors()
-        # Increments to the applied estimates, from this sample on (the past is not redone here).
-        self.residual = ResidualErrors(r.gyro_bias + incr[0], r.gyro_scale + incr[1],
-                                       r.accel_bias + incr[2], r.accel_scale + incr[3])
 
     # -- magnetometer --------------------------------------------------------------------------
     def on_mag(self, msg: MagneticField) -> None:
-        m = vec(msg.magnetic_field)
-        t_ns = stamp_to_ns(msg.header.stamp) + self.offset_ns
-        if not np.all(np.isfinite(m)):
-            self.diag.count("magnetometer sample rejected: non_finite")
+        out = self.preprocessor.add_magnetic(stamp_to_ns(msg.header.stamp),
+                                             vec(msg.magnetic_field))
+        if isinstance(out, str):
+            self.diag.count(f"magnetometer sample rejected: {out}")
             return
-        if self._last_mag_ns is not None and t_ns <= self._last_mag_ns:
-            self.diag.count("magnetometer sample rejected: stamp not after the previous one")
-            return
-        self._last_mag_ns = t_ns
-        c = self.cal.c_bs
-        out = new(MagneticField)
-        set_vector3(out.magnetic_field, c @ m)
-        set_stamp_ns(out.header.stamp, t_ns)
-        out.header.frame_id = self._frame_id
-        out.magnetic_field_covariance[:] = self._rotated(msg.magnetic_field_covariance)
-        self.pub_mag.publish(out)
+        mag = new(MagneticField)
+        set_vector3(mag.magnetic_field, out[1])
+        set_stamp_ns(mag.header.stamp, out[0])
+        mag.header.frame_id = self._frame_id
+        mag.magnetic_field_covariance[:] = self.preprocessor.covariance_in_base(msg.magnetic_field_covariance)
+        self.pub_mag.publish(mag)
 
 
 def main(args=None) -> int:
