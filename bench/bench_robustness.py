@@ -14,11 +14,13 @@ recorded bag) and judges the outputs against the simulation's truth:
 Usage::
 
     .venv/bin/python bench/bench_robustness.py            # the full matrix (~15 min)
-    .venv/bin/python bench/bench_robustness.py --short    # three cells (the CI's test runs them)
+    .venv/bin/python bench/bench_robustness.py --short    # three cells
+    (test/trial/test_robustness.py runs two cells, 60 s each, in CI)
 """
 from __future__ import annotations
 
 import argparse
+import json
 import subprocess
 import sys
 import tempfile
@@ -145,14 +147,27 @@ def main(argv=None) -> int:
     parser.add_argument("--short", action="store_true", help="three cells only")
     parser.add_argument("--duration", type=float, default=120.0, help="s per trial")
     parser.add_argument("--seed", type=int, default=3)
+    parser.add_argument("--cells", type=int, nargs="*", default=None,
+                        help="indices into CELLS (default: all, or the short set)")
+    parser.add_argument("--json", action="store_true", help="one JSON object per cell")
     args = parser.parse_args(argv)
+    cells = [CELLS[i] for i in args.cells] if args.cells else SHORT if args.short else CELLS
+    if args.json:
+        with tempfile.TemporaryDirectory() as tmp:
+            tmp = Path(tmp)
+            profile = graph_profile(tmp)
+            for cell in cells:
+                result = run_cell(cell, tmp, profile, args.duration, args.seed)
+                print(json.dumps({"cell": cell.name, **{k: float(v) for k, v in result.items()}}),
+                      flush=True)
+        return 0
     print("| cell | aligned after (s) | horizontal RMS after (m) | raw fixes (m) | ratio | "
           "valid before alignment | valid beyond 5 sigma |")
     print("|---|---:|---:|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         profile = graph_profile(tmp)
-        for cell in SHORT if args.short else CELLS:
+        for cell in cells:
             r = run_cell(cell, tmp, profile, args.duration, args.seed)
             print(f"| {cell.name} | {r['align_s']:.1f} | {r['rms_m']:.2f} | {r['raw_m']:.2f} | "
                   f"{r['ratio']:.2f} | {r['valid_early']} | {r['valid_beyond_5_sigma']} of "
