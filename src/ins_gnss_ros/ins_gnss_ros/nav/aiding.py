@@ -1,6 +1,7 @@
 """The aiding front end: sensor readings -> navigator measurements, one policy for every path.
 
-What the filter is told about each aiding input is decided here, once: which readings are
+What the filter is told about each input is decided here, once: how an IMU increment after a
+gap is bridged or loses the IMU; which readings are
 refused (no fix, non-finite, beyond any vehicle), what variance a reading without one gets, the
 variance floors, the receiver's velocity latency, how a magnetic heading is referred to true
 north, when GNSS ranges replace fix and velocity (tight coupling, seed 004 section 2.1), and,
@@ -19,6 +20,7 @@ from typing import Callable
 import numpy as np
 
 from .earth import ecef_to_enu_matrix, geodetic_to_ecef
+from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
 from .navigator import (ALIGNING, NAVIGATING, GnssFix, GnssVelocity, HeadingFix, Navigator,
                         SpeedLog)
 
@@ -54,6 +56,9 @@ class AidingPolicy:
         "loose" (fix + velocity), "tight" (ranges) or "auto" (ranges below ``min_satellites``).
     min_satellites : int
         Auto coupling: fewer usable satellites than this in an epoch switch to ranges.
+    max_imu_gap : float
+        Longest gap in the increments bridged by holding the rates of the increment after it; a
+        longer one loses the IMU and the filter aligns again, s.
     """
 
     position_sigma_floor: float = 0.02
@@ -61,12 +66,14 @@ class AidingPolicy:
     velocity_delay: float = 0.0
     coupling: str = "loose"
     min_satellites: int = 5
+    max_imu_gap: float = 2.5
 
     @classmethod
     def from_params(cls, p: dict) -> "AidingPolicy":
         """The policy of the ``ekf`` node's parameters."""
         return cls(p["gnss.position_sigma_floor_m"], p["gnss.velocity_sigma_floor_mps"],
-                   p["gnss.velocity_delay_s"], p["coupling"], p["auto.min_satellites"])
+                   p["gnss.velocity_delay_s"], p["coupling"], p["auto.min_satellites"],
+                   p["max_imu_gap_s"])
 
 
 #: Course from successive fixes (a receiver without velocity output, e.g. NMEA GGA only): two
@@ -133,6 +140,7 @@ class Aiding:
         self.last_accepted_t = -math.inf  # newest accepted update, s
         self.forced: set[str] = set()  # kinds forced in since the last accepted one of each
         self._recent_fixes: list[tuple[float, np.ndarray, np.ndarray]] = []  # t, ECEF, cov ENU
+        self.last_increment_t = math.inf  # end of the last increment, s
 
     def _seen(self, name: str, t: float, used: bool) -> bool:
         stats = self.inputs.setdefault(name, InputStats(first_t=t))
@@ -168,6 +176,26 @@ class Aiding:
             return ("dead reckoning (degraded): forced in and not yet confirmed: "
                     + ", ".join(sorted(self.forced)))
         return f"dead reckoning: no aiding accepted for {t - self.last_accepted_t:.1f} s"
+
+    def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray, dt: float) -> str | None:
+        """An IMU increment over dt (s) ending at t (s), already judged plausible
+        (:func:`~ins_gnss_ros.nav.increments.increment_problem`). After a gap its rates are held
+        over the gap in increments of its length, with the process noise of what holding them
+        may miss (free fall otherwise: it covers only its dt); after more than ``max_imu_gap``
+        the IMU was lost and the filter aligns again. Returns None, "bridged" or "lost"."""
+        interval = t - self.last_increment_t
+        self.last_increment_t = t
+        gap = classify_gap(interval, dt, self.policy.max_imu_gap)
+        if gap == LOST:
+            self.report("imu lost: gap in increments beyond max_imu_gap_s, aligning again")
+            self.navigator.reset()
+        elif gap == BRIDGED:
+            self.report("gap in increments: bridged by holding the rates")
+            self.navigator.add_bridged_gap(t - interval, t)
+            self.navigator.add_imu(*held_increments(t, dtheta, dv, dt, interval))
+            return gap
+        self.navigator.add_imu(t, dtheta, dv)
+        return None if gap == CONTIGUOUS else gap
 
     def fix(self, t: float, lat_deg: float, lon_deg: float, h: float, cov: np.ndarray,
             status: int, covariance_known: bool) -> bool:

@@ -51,7 +51,7 @@ from ..io import new, ns_to_stamp, stamp_to_ns, stamp_to_sec
 from ..nav.aiding import Aiding, AidingPolicy
 from ..nav.error_model import LAYOUTS
 from ..nav.filter_config import PARAMS, navigator_config
-from ..nav.increments import CONTIGUOUS, LOST, SensorErrors, classify_gap, held_increments
+from ..nav.increments import SensorErrors
 from ..nav.navigator import ALIGNING, DEAD_RECKONING, NAVIGATING, Navigator
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import StrapdownSync
@@ -97,7 +97,6 @@ class EkfNode(NavNode):
         self.sync = StrapdownSync(p["history_s"], p["sync.min_interval_s"],
                                   p["sync.resend_after_s"],
                                   lambda msg: (nav_state_from_msg(msg), applied_sensor_errors(msg)))
-        self.last_delta_t = np.inf  # stamp of the last imu/delta, s
         self.reported_updates = 0
         self.accepted = 0
         self.rejected = 0
@@ -128,26 +127,10 @@ class EkfNode(NavNode):
         if problem is not None:
             self.diag.count(problem)
             return
-        t = stamp_to_sec(msg.header.stamp)
-        interval = t - self.last_delta_t
-        self.last_delta_t = t
-        gap = classify_gap(interval, msg.dt, self.p["max_imu_gap_s"])
-        if gap != CONTIGUOUS:
+        if self.aiding.increment(stamp_to_sec(msg.header.stamp), dtheta, dv, msg.dt) is not None:
             # The strapdown publishes its state after the gap before this filter has applied
             # the measurements of the gap: nav/fix waits for the next synchronisation.
             self.sync.invalidate()
-            if gap == LOST:
-                self.diag.count("imu lost: gap in increments beyond max_imu_gap_s, aligning again")
-                self.navigator.reset()
-            else:
-                # The increment covers only its dt: hold its rates over the whole gap (free
-                # fall otherwise), with the process noise of what holding them may miss.
-                self.diag.count("gap in increments: bridged by holding the rates")
-                self.navigator.add_bridged_gap(t - interval, t)
-                self.navigator.add_imu(*held_increments(t, dtheta, dv, msg.dt, interval))
-                self.after_filter()
-                return
-        self.navigator.add_imu(t, dtheta, dv)
         self.after_filter()
 
     def on_fix(self, msg: NavSatFix) -> None:
@@ -263,7 +246,7 @@ class EkfNode(NavNode):
                 self.diag.count(f"{u.name} forced in: degraded until confirmed")
         self.aiding.note_updates(updates)
         self.diag.set_state(DiagnosticStatus.OK if nav.mode == NAVIGATING else DiagnosticStatus.WARN,
-                            self.aiding.explain(t, imu_running=np.isfinite(self.last_delta_t)))
+                            self.aiding.explain(t, imu_running=np.isfinite(self.aiding.last_increment_t)))
         for name, stats in self.aiding.inputs.items():
             self.diag.set_value(name, stats.summary(t))
         self.pub_status.publish(status_msg(
