@@ -126,7 +126,7 @@ def test_covariance_matches_monte_carlo_spread():
 
 def test_in_motion_heading_sources():
     yaw, sig = al.yaw_from_velocity([10.0, 10.0, 0.2], 0.1)
-    assert yaw == pytest.approx(45 * DEG) and sig == pytest.approx(0.1 / np.sqrt(200))
+    assert yaw == pytest.approx(45 * DEG) and sig == pytest.approx(2 * 0.1 / np.sqrt(200))
     # Azimuth 30° (clockwise from North) is yaw 60°; a baseline pointing left (+90° in
     # body axes) means the body points 90° clockwise of it.
     yaw, sig = al.yaw_from_heading(30 * DEG, 0.01)

@@ -50,8 +50,8 @@ from ..io import new, sec_to_stamp, stamp_to_ns, stamp_to_sec
 from ..nav.earth import ecef_to_enu, geodetic_to_ecef
 from ..nav.ekf import ExtraState
 from ..nav.error_model import LAYOUTS, nav_error
-from ..nav.navigator import (ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, GnssVelocity,
-                             HeadingFix, Navigator, NavigatorConfig, SpeedLog)
+from ..nav import (ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, GnssVelocity, HeadingFix,
+                   Navigator, NavigatorConfig, SpeedLog)
 from ..nav.rotations import quat_to_dcm
 from ..nav.strapdown import NavState
 from ..nav.sensor_errors import GRADES, BlockNoise, FilterNoise, filter_noise
@@ -342,7 +342,7 @@ class EkfNode(NavNode):
         if not self.use_ranges:
             return
         t = stamp_to_sec(msg.header.stamp)
-        ranges = satellite_ranges(raw, ephemerides, t, nav.state_at(t), nav.lever, self.ranges)
+        ranges = satellite_ranges(raw, ephemerides, t, nav.state_at(t), nav.lever_arm_b, self.ranges)
         if ranges is None:
             self.diag.count("observation epoch without a usable satellite", log=False)
             return
@@ -380,7 +380,7 @@ class EkfNode(NavNode):
             self.ins_states.popleft()
         self.after_filter()
         t = stamp * 1e-9
-        if self.navigator.ekf is not None and msg.correction_sequence == self.sequence \
+        if self.navigator.started and msg.correction_sequence == self.sequence \
                 and t - self.last_output_t >= 1.0 / self.p["output_rate_hz"]:
             self.last_output_t = t
             self.publish_solution(nav_state_from_msg(msg), msg)
@@ -391,10 +391,10 @@ class EkfNode(NavNode):
     def after_filter(self) -> None:
         nav = self.navigator
         self.report_updates()
-        if nav.nav is None or nav.ekf is None:
+        if not nav.started:
             return
         updated = nav.update_count > self.synced_updates
-        due = nav.nav.t - self.last_sync_t >= self.p["sync.min_interval_s"]
+        due = nav.solution.t - self.last_sync_t >= self.p["sync.min_interval_s"]
         if updated and due:
             self.synchronise()
 
@@ -413,15 +413,15 @@ class EkfNode(NavNode):
     def synchronise(self) -> None:
         """Send the difference between the strapdown and the filter at a common epoch."""
         nav = self.navigator
-        match = self.ins_state_at(int(round(nav.nav.t * 1e9)))
+        match = self.ins_state_at(int(round(nav.solution.t * 1e9)))
         if match is not None:
-            self.last_match_t = nav.nav.t
-        elif self.ins_states and nav.nav.t - self.last_match_t > self.p["sync.resend_after_s"]:
+            self.last_match_t = nav.solution.t
+        elif self.ins_states and nav.solution.t - self.last_match_t > self.p["sync.resend_after_s"]:
             # Nothing comparable for a while (lost correction, restarted strapdown): correct the
             # strapdown's newest state with the filter solution extrapolated to its epoch.
             match = self.ins_states[-1][1]
             self.diag.count("strapdown out of step: re-synchronised on its newest state")
-            self.last_match_t = nav.nav.t
+            self.last_match_t = nav.solution.t
         else:
             return
         strapdown = nav_state_from_msg(match)
@@ -440,7 +440,7 @@ class EkfNode(NavNode):
                 setattr(corr, field, to_vector3(estimate - vec(getattr(match, field))))
         self.sequence += 1
         self.synced_updates = nav.update_count
-        self.last_sync_t = nav.nav.t
+        self.last_sync_t = nav.solution.t
         self.pub_correction.publish(corr)
 
     def report_updates(self) -> None:
@@ -454,7 +454,7 @@ class EkfNode(NavNode):
             self.reported_updates = nav.update_count
             # Stamped with the filter's time: the mode is the current one, also when the last
             # update was a measurement refused as too old (a looped or restarted source).
-            t = updates[-1].t if nav.nav is None else max(updates[-1].t, nav.nav.t)
+            t = updates[-1].t if nav.solution is None else max(updates[-1].t, nav.solution.t)
             self.publish_status(t, updates)
 
     def publish_status(self, t: float, updates) -> None:
@@ -476,7 +476,7 @@ class EkfNode(NavNode):
                 innovation_variance=[float(x) for x in u.s_diag], nis=float(u.nis),
                 gate=float(u.gate), accepted=bool(u.accepted),
                 reason="" if u.accepted else u.reason))
-        if nav.ekf is not None:
+        if nav.started:
             status.state_names = [f"{name}[{i}]" for name in nav.space.blocks
                                   for i in range(nav.space[name].stop - nav.space[name].start)]
             status.state_std = np.sqrt(np.diag(nav.covariance())).tolist()
