@@ -48,6 +48,11 @@ from .rewind import Rewind, RunState
 from .strapdown import apply_correction
 
 
+def _view(part, name, doc):
+    """A read-only property showing attribute `name` of the navigator's attribute `part`."""
+    return property(lambda self: getattr(getattr(self, part), name), doc=doc)
+
+
 class Navigator:
     """Strapdown + closed-loop EKF over time-ordered IMU data and measurements.
 
@@ -139,25 +144,18 @@ class Navigator:
         """The filter runs: levelled at a first fix (or :meth:`start_from`)."""
         return self._state.ekf is not None
 
-    @property
-    def solution(self):
-        """The solution (NavState) at the last filter epoch; None before the first fix."""
-        return self._state.nav
-
-    @property
-    def mode(self):
-        """ALIGNING, NAVIGATING or DEAD_RECKONING (modes.py)."""
-        return self._state.mode
-
-    @property
-    def heading_known(self):
-        """The heading has been aligned (until then only roll and pitch are known)."""
-        return self._state.heading_known
-
-    @property
-    def estimates(self):
-        """Running sensor, clock and extra-block estimates by block name (not to be changed)."""
-        return self._state.estimates
+    solution = _view("_state", "nav", "The solution (NavState) at the last filter epoch; None "
+                     "before the first fix.")
+    mode = _view("_state", "mode", "ALIGNING, NAVIGATING or DEAD_RECKONING (modes.py).")
+    heading_known = _view("_state", "heading_known", "The heading has been aligned (until then "
+                          "only roll and pitch are known).")
+    estimates = _view("_state", "estimates", "Running sensor, clock and extra-block estimates "
+                      "by block name (not to be changed).")
+    updates = _view("_recorder", "updates", "UpdateResult of every measurement kept, in "
+                    "processing order (not to be changed).")
+    update_count = _view("_recorder", "update_count", "Number of update results produced so "
+                         "far, including forgotten ones. A delayed measurement that re-runs "
+                         "the filter can make it go back.")
 
     @property
     def space(self):
@@ -173,17 +171,6 @@ class Navigator:
         """The covariance to publish (n, n), once :attr:`started`: the filter's P plus the
         noise floors of forced measurement kinds (integrity.py)."""
         return self._integrity.covariance(self._state.ekf.P, self._space)
-
-    @property
-    def updates(self):
-        """UpdateResult of every measurement kept, in processing order (read-only view)."""
-        return self._recorder.updates
-
-    @property
-    def update_count(self):
-        """Number of update results produced so far, including forgotten ones. A delayed
-        measurement that re-runs the filter can make it go back."""
-        return self._recorder.update_count
 
     def updates_since(self, count):
         """The update results after the first `count` (as counted by :attr:`update_count`)."""
