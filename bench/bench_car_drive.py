@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ins_gnss_ros.nav.ekf import ExtraState
-from ins_gnss_ros.nav.navigator import GnssFix, GnssVelocity, Navigator, NavigatorConfig, \
+from ins_gnss_ros.nav import GnssFix, GnssVelocity, Navigator, NavigatorConfig, \
     point_track
 from ins_gnss_ros.nav.sensor_errors import DEG, MICRO_G, BlockNoise, FilterNoise
 from ins_gnss_ros.nav.smoother import rts_smooth

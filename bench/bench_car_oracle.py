@@ -31,8 +31,7 @@ import numpy as np
 
 from bench_car_drive import DATA, NHC_SIGMA, VEL_DELAY_S, car_config, drifts, run_drive, \
     uniform_imu_times
-from ins_gnss_ros.nav.ekf import ErrorStateEKF
-from ins_gnss_ros.nav.navigator import NAVIGATING, Navigator
+from ins_gnss_ros.nav import Navigator
 from ins_gnss_ros.nav.smoother import rts_smooth
 from ins_gnss_ros.nav.strapdown import NavState
 from ins_gnss_ros.trial.car_drive import load_car_drive
@@ -48,20 +47,9 @@ class StartedNavigator(Navigator):
     estimates and covariance instead of levelling and aligning on the data."""
 
     def __init__(self, config, state, estimates, P0):
-        self._start = (state, estimates, P0)
         super().__init__(config)
-
-    def _initialise(self):
-        if self.nav is None and len(self._imu_t):
-            state, estimates, P0 = self._start
-            self.nav = state
-            self.estimates = {name: np.array(v, float) for name, v in estimates.items()}
-            self.ekf = ErrorStateEKF(self.space, self.config.noise, P0.copy())
-            self.mode, self.heading_known = NAVIGATING, True
-            # The start counts as aided: DEAD_RECKONING follows after dr_timeout, as it would.
-            self._t_epoch = self._t_last_aid = state.t
-            self._record(np.eye(self.space.size), P0)
-        return self.nav is not None
+        # The start counts as aided: DEAD_RECKONING follows after dr_timeout, as it would.
+        self.start_from(state, estimates, P0)
 
 
 def coast(drive, config, track, k, t_end):

@@ -29,7 +29,7 @@ import numpy as np
 from ins_gnss_ros.nav.earth import ecef_to_enu_matrix, geodetic_to_ecef, radii
 from ins_gnss_ros.nav.error_model import nav_error
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
-from ins_gnss_ros.nav.navigator import GnssFix, GnssVelocity, Navigator, NavigatorConfig, \
+from ins_gnss_ros.nav import GnssFix, GnssVelocity, Navigator, NavigatorConfig, \
     SatelliteRanges
 from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405, filter_noise
 from ins_gnss_ros.nav.strapdown import NavState

@@ -44,7 +44,7 @@ from rclpy.parameter import Parameter
 from ins_gnss_ros.io import stamp_to_sec
 from ins_gnss_ros.nav.conventions import seed_angles_from_quat, wrap_pi
 from ins_gnss_ros.nav.measurements import Innovation
-from ins_gnss_ros.nav.navigator import Navigator
+from ins_gnss_ros.nav import Navigator
 from ins_gnss_ros.nav.sensor_errors import GRADES, MEMS_ADIS16405
 from ins_gnss_ros.nav.strapdown import NavState
 from ins_gnss_ros.nodes.base import InProcessBus

@@ -26,7 +26,7 @@ import pandas as pd
 
 from ins_gnss_ros.nav.conventions import quat_ned_frd_to_enu_flu
 from ins_gnss_ros.nav.earth import earth_rate_enu, normal_gravity
-from ins_gnss_ros.nav.navigator import ALIGNING, GnssFix, HeadingFix, Navigator, NavigatorConfig
+from ins_gnss_ros.nav import ALIGNING, GnssFix, HeadingFix, Navigator, NavigatorConfig
 from ins_gnss_ros.nav.rotations import quat_to_dcm
 from ins_gnss_ros.nav.sensor_errors import BlockNoise, FilterNoise
 from ins_gnss_ros.trial.evaluate import Trajectory, evaluate

@@ -14,7 +14,7 @@ from ins_gnss_ros.gnss.differences import NoiseModel
 from ins_gnss_ros.gnss.ranges import RangeConfig, correct_observations, satellite_ranges
 from ins_gnss_ros.gnss.simulator import GnssSimulator, SimulatorConfig, solve_fix
 from ins_gnss_ros.nav.error_model import nav_error
-from ins_gnss_ros.nav.navigator import GnssFix, GnssVelocity, Navigator, NavigatorConfig
+from ins_gnss_ros.nav import GnssFix, GnssVelocity, Navigator, NavigatorConfig
 from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405, filter_noise
 from ins_gnss_ros.nav.strapdown import NavState
 from ins_gnss_ros.sim.imu_sim import ImuSpec, simulate_imu

@@ -7,7 +7,7 @@ import pytest
 
 from ins_gnss_ros.nav.aiding import Aiding, AidingPolicy
 from ins_gnss_ros.nav.filter_config import PARAMS, navigator_config
-from ins_gnss_ros.nav.navigator import GnssFix, GnssVelocity, HeadingFix
+from ins_gnss_ros.nav import GnssFix, GnssVelocity, HeadingFix
 from ins_gnss_ros.params import ParameterError, resolve
 
 

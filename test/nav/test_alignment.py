@@ -126,7 +126,7 @@ def test_covariance_matches_monte_carlo_spread():
 
 def test_in_motion_heading_sources():
     yaw, sig = al.yaw_from_velocity([10.0, 10.0, 0.2], 0.1)
-    assert yaw == pytest.approx(45 * DEG) and sig == pytest.approx(0.1 / np.sqrt(200))
+    assert yaw == pytest.approx(45 * DEG) and sig == pytest.approx(2 * 0.1 / np.sqrt(200))
     # Azimuth 30° (clockwise from North) is yaw 60°; a baseline pointing left (+90° in
     # body axes) means the body points 90° clockwise of it.
     yaw, sig = al.yaw_from_heading(30 * DEG, 0.01)
@@ -165,3 +165,37 @@ def test_steepest_descent_equals_coarse_with_sensor_errors():
     coarse = al.coarse_alignment(dth_m[0], dv_m[0], dt, LAT)
     it = al.steepest_descent_alignment(dth_m[0], dv_m[0], dt, (0.3, -0.3, 1.0), tol=1e-12)
     assert np.abs(phi_of(it.q_nb, coarse.q_nb)).max() < 1e-9
+
+
+def test_navigator_heading_alignment_from_motion_and_heading_fix():
+    q0 = np.array([1.0, 0.0, 0.0, 0.0])  # body x east, yaw 0
+    # INS velocity 30 deg clockwise of the GNSS course: turn the solution by +30 deg.
+    v_gnss = np.array([10.0 * np.cos(60 * DEG), 10.0 * np.sin(60 * DEG), 0.0])
+    v_ins = np.array([10.0 * np.cos(30 * DEG), 10.0 * np.sin(30 * DEG), 0.0])
+    delta, sigma = al.yaw_error_from_motion(v_gnss, v_ins, q0, 0.1)
+    assert delta == pytest.approx(30 * DEG) and sigma == pytest.approx(0.02)
+    # Too slow an INS (motion started before the filter): the body x axis is compared.
+    delta, _ = al.yaw_error_from_motion(v_gnss, 0.1 * v_ins, q0, 0.1)
+    assert delta == pytest.approx(60 * DEG)
+    delta, sigma = al.yaw_error_from_heading(0.0, 1e-4, q0)  # heading north
+    assert delta == pytest.approx(90 * DEG) and sigma == pytest.approx(0.01)
+
+
+def test_levelled_start_and_yaw_rotation():
+    from ins_gnss_ros.nav.ekf import StateSpace
+    from ins_gnss_ros.nav.error_model import make_layout
+
+    f_b = quat_to_dcm(quat_from_euler(0.02, -0.01, 0.0)).T @ [0.0, 0.0, 9.8]
+    levelling = al.Levelling().add(np.tile(f_b * 0.01, (100, 1)), 0.01)
+    assert levelling.time == pytest.approx(1.0)
+    lever = np.zeros(3)
+    st = al.levelled_state(levelling, 0.8, 0.1, 10.0, lever, 2.0, 0.1, 5.0)
+    np.testing.assert_allclose(quat_to_euler(st.q_nb), [0.02, -0.01, 0.0], atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(st.v_enu), 2.0)  # moving along body x
+    noise = se.filter_noise(se.MEMS_ADIS16405, "rw")
+    space = StateSpace(make_layout("15", noise))
+    P = al.initial_covariance(space, noise, 1.0, 0.1, 0.02)
+    assert P[space["att"], space["att"]][2, 2] == 0.0  # yaw out of the filter
+    st2, P2 = al.rotate_yaw(st, P, space, 90 * DEG, 0.001, 0.02)
+    np.testing.assert_allclose(quat_to_euler(st2.q_nb)[2], 90 * DEG, atol=1e-9)
+    assert P2[space["att"].stop - 1, space["att"].stop - 1] == pytest.approx(0.02 ** 2)

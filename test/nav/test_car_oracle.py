@@ -11,7 +11,7 @@ import sys
 import numpy as np
 
 from ins_gnss_ros.nav.error_model import nav_error
-from ins_gnss_ros.nav.navigator import NAVIGATING
+from ins_gnss_ros.nav import NAVIGATING
 from conftest import REPO
 
 sys.path.insert(0, str(REPO / "bench"))  # bench_car_oracle imports bench_car_drive

@@ -12,7 +12,7 @@ from ins_gnss_ros.nav.earth import radii
 from ins_gnss_ros.nav.ekf import ExtraState
 from ins_gnss_ros.nav.error_model import nav_error
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
-from ins_gnss_ros.nav.navigator import ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, \
+from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, \
     GnssVelocity, Navigator, NavigatorConfig, point_track
 from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405, filter_noise
 from ins_gnss_ros.nav.strapdown import NavState
@@ -188,7 +188,7 @@ def test_streaming_equals_batch(sim):
             nav.add_measurement(pending.pop(0))
     nav.flush()
     stream = nav.output()
-    assert len(nav._imu_t) < 2000 + 7 * 100
+    assert len(nav._imu) < 2000 + 7 * 100
     np.testing.assert_allclose(stream.lat, batch.lat, rtol=0, atol=1e-12)
     np.testing.assert_allclose(stream.P, batch.P, rtol=1e-9, atol=1e-15)
 
@@ -209,12 +209,12 @@ def test_imu_memory_stays_bounded_without_a_fix_and_the_first_fix_levels_on_rece
         C = C_end if start >= n - 1000 else C_before
         t = (np.arange(start, start + 500) + 1) * dt
         nav.add_imu(t, np.zeros((500, 3)), np.tile(C.T @ [0.0, 0.0, g] * dt, (500, 1)))
-        largest = max(largest, len(nav._imu_t))
+        largest = max(largest, len(nav._imu))
     assert largest < 2000 + 500 + 400
     nav.add_measurement(GnssFix(n * dt - 0.05, 0.8, 0.5, 10.0, np.eye(3)))
     nav.add_imu(n * dt + dt, np.zeros(3), C_end.T @ [0.0, 0.0, g] * dt)
-    assert nav.nav is not None
-    np.testing.assert_allclose(quat_to_dcm(nav.nav.q_nb)[2], C_end[2], atol=1e-9)
+    assert nav.solution is not None
+    np.testing.assert_allclose(quat_to_dcm(nav.solution.q_nb)[2], C_end[2], atol=1e-9)
 
 
 def test_dead_reckoning_mode_and_reset_on_time_jump(sim):
@@ -229,9 +229,9 @@ def test_dead_reckoning_mode_and_reset_on_time_jump(sim):
     for m in meas[:200]:
         nav.add_measurement(m)
     nav.add_imu(imu.t[:3000], imu.dtheta[:3000], imu.dv[:3000])
-    assert nav.nav is not None
+    assert nav.solution is not None
     nav.add_imu(imu.t[:10], imu.dtheta[:10], imu.dv[:10])  # time went backwards
-    assert nav.nav is None and nav.mode == ALIGNING and len(nav.output().t) == 0
+    assert nav.solution is None and nav.mode == ALIGNING and len(nav.output().t) == 0
 
 
 def test_time_offset_state_recovers_100_ms(sim):
@@ -295,11 +295,11 @@ def _stream(nav, imu, traj, t_min, chunk=25):
     rows = []
     for i in range(0, len(imu.t), chunk):
         nav.add_imu(imu.t[i:i + chunk], imu.dtheta[i:i + chunk], imu.dv[i:i + chunk])
-        if nav.nav is None or nav.nav.t <= t_min:
+        if nav.solution is None or nav.solution.t <= t_min:
             continue
-        err = nav_error(nav.nav, truth_state(traj, nav.nav.t))[0]
+        err = nav_error(nav.solution, truth_state(traj, nav.solution.t))[0]
         sigma = np.sqrt(np.diag(nav.covariance()[nav.space["pos"], nav.space["pos"]]))
-        rows.append((nav.nav.t, np.max(np.abs(err) / sigma), nav.mode))
+        rows.append((nav.solution.t, np.max(np.abs(err) / sigma), nav.mode))
     t, ratio, mode = zip(*rows)
     return np.array(t), np.array(ratio), np.array(mode)
 
@@ -329,7 +329,7 @@ def test_gnss_step_forced_in_keeps_an_honest_covariance(sim, end):
     assert np.all(mode[(t > 61.3) & (t < 100.0)] == DEAD_RECKONING)
     assert np.all(mode[t < 60.0] == NAVIGATING)
     if end == 70.0:  # the fixes came back: so did the solution
-        assert abs(nav_error(nav.nav, truth_state(traj, nav.nav.t))[0][1]) < 1.0
+        assert abs(nav_error(nav.solution, truth_state(traj, nav.solution.t))[0][1]) < 1.0
 
 
 def test_divergence_recovers_through_the_forced_update(sim):
@@ -343,8 +343,8 @@ def test_divergence_recovers_through_the_forced_update(sim):
         nav.add_measurement(m)
     k = int(np.searchsorted(imu.t, 60.0))
     nav.add_imu(imu.t[:k], imu.dtheta[:k], imu.dv[:k])
-    rm, _ = radii(nav.nav.lat)
-    nav.nav = replace(nav.nav, lat=nav.nav.lat + 30.0 / rm)
+    rm, _ = radii(nav.solution.lat)
+    nav._state.nav = replace(nav.solution, lat=nav.solution.lat + 30.0 / rm)  # a divergence
     rest = replace(imu, t=imu.t[k:], dtheta=imu.dtheta[k:], dv=imu.dv[k:])
     t, ratio, mode = _stream(nav, rest, traj, t_min=50.0)
     assert any(u.reason == "forced" for u in nav.updates)

@@ -20,7 +20,7 @@ from sensor_msgs.msg import NavSatFix, NavSatStatus
 from ins_gnss_ros.io import sec_to_stamp, stamp_to_sec
 from ins_gnss_ros.nav.error_model import nav_error
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
-from ins_gnss_ros.nav.navigator import GnssFix, GnssVelocity, Navigator
+from ins_gnss_ros.nav import GnssFix, GnssVelocity, Navigator
 from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405
 from ins_gnss_ros.nav.strapdown import NavState
 from ins_gnss_ros.nodes.base import InProcessBus
@@ -140,7 +140,7 @@ def test_closed_loop_follows_truth_and_equals_offline_navigator(trial, ros_conte
     assert np.degrees(np.abs(errors[:, 6:8]).max()) < 0.5  # roll/pitch (tilt) errors
     assert np.degrees(np.abs(errors[:, 8]).max()) < 2.0    # MEMS heading, 1-2 min after start
     # the node's filter and the offline navigator are the same code on the same data
-    node_final, off_final = ekf.navigator.nav, offline.nav
+    node_final, off_final = ekf.navigator.solution, offline.solution
     assert node_final.t == off_final.t
     dp, dv, phi = nav_error(node_final, off_final)
     assert np.abs(dp).max() == 0.0 and np.abs(dv).max() == 0.0 and np.abs(phi).max() == 0.0
@@ -275,21 +275,21 @@ def test_imu_gap_is_bridged_and_a_long_one_restarts_the_alignment(ros_context):
                 node.on_vel(_vel_msg(k / 100, np.zeros(3), np.zeros(3)))
 
     run(0.01, 5.0)
-    assert node.navigator.nav is not None
-    sigma_v = np.sqrt(np.diag(node.navigator.ekf.P)[S["vel"]])
+    assert node.navigator.solution is not None
+    sigma_v = np.sqrt(np.diag(node.navigator.covariance())[S["vel"]])
     node.on_delta(delta(5.5))                         # 0.49 s lost before 5.5 s
     node.on_delta(delta(5.51))                        # (the segment's end is known)
     assert node.diag.counts["gap in increments: bridged by holding the rates"] == 1
     # imu_gap.accel_sigma_mps2 (1 m/s^2) held over 0.49 s
-    assert np.all(np.sqrt(np.diag(node.navigator.ekf.P)[S["vel"]]) > sigma_v + 0.4)
+    assert np.all(np.sqrt(np.diag(node.navigator.covariance())[S["vel"]]) > sigma_v + 0.4)
     run(5.52, 8.0)
-    assert np.abs(node.navigator.nav.v_enu).max() < 0.1  # held gravity: no free fall
+    assert np.abs(node.navigator.solution.v_enu).max() < 0.1  # held gravity: no free fall
     sequence = node.sync.sequence
     run(12.0, 12.01)                                  # 4 s lost: the IMU was lost
     assert node.diag.counts["imu lost: gap in increments beyond max_imu_gap_s, aligning again"] == 1
-    assert node.navigator.nav is None and node.sync.sequence == sequence + 1
+    assert node.navigator.solution is None and node.sync.sequence == sequence + 1
     run(12.01, 15.0)
-    assert node.navigator.nav is not None  # aligned again on the new data
+    assert node.navigator.solution is not None  # aligned again on the new data
     node.destroy_node()
 
 
@@ -325,7 +325,7 @@ def test_gnss_inside_a_bridged_imu_gap_is_applied_at_its_epochs(trial, ros_conte
         delta.delta_angle, delta.delta_velocity = to_vector3(imu.dtheta[k]), to_vector3(imu.dv[k])
         bus.publish("imu/delta", delta)
         bus.drain()
-        nav = ekf.navigator.nav
+        nav = ekf.navigator.solution
         if gap[0] - 1.0 < t < gap[1] + 10.0:
             j = int(round((nav.t - T0 - traj.t[0]) / traj.dt))
             true = NavState(traj.lat[j], traj.lon[j], traj.h[j], traj.v_enu[j], traj.q_nb[j], nav.t)

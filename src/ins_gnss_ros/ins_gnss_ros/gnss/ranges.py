@@ -44,7 +44,8 @@ BeiDou can be selected through :attr:`RangeConfig.signals`, but mixed with GPS t
 time offset would enter the pseudoranges unmodelled: use them alone.
 
 Entry point for the ``ekf`` node: :func:`satellite_ranges` (RawEpoch + dict of ephemerides +
-the navigator's state at the epoch -> :class:`~ins_gnss_ros.nav.navigator.SatelliteRanges`).
+the navigator's state at the epoch ->
+:class:`~ins_gnss_ros.nav.measurement_types.SatelliteRanges`).
 """
 from __future__ import annotations
 
@@ -55,7 +56,7 @@ import numpy as np
 
 from ..nav.earth import ecef_to_enu_matrix, geodetic_to_ecef
 from ..nav.lever_arm import lever_arm_position
-from ..nav.navigator import SatelliteRanges
+from ..nav.measurement_types import SatelliteRanges
 from .atmosphere import klobuchar_delay, tropo_delay
 from .constants import C_LIGHT, FIT_HALF_WIDTH_S, GALILEO, GPS, OMEGA_E
 from .differences import elevation_sigma

@@ -21,8 +21,9 @@ import numpy as np
 
 from .earth import ecef_to_enu_matrix, geodetic_to_ecef
 from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
-from .navigator import (ALIGNING, NAVIGATING, GnssFix, GnssVelocity, HeadingFix, Navigator,
-                        SpeedLog)
+from .measurement_types import GnssFix, GnssVelocity, HeadingFix, SpeedLog
+from .modes import ALIGNING, NAVIGATING
+from .navigator import Navigator
 
 __all__ = ["Aiding", "AidingPolicy", "InputStats"]
 

@@ -18,15 +18,25 @@ Error theory (derived from C̃ f̃_b = g e_z and (C̃ ω̃_b)_E = 0 to first ord
 
 with b and ε the accelerometer and gyro errors resolved in ENU.  When ε ≳ Ω cos L (MEMS),
 heading is unobservable from the gyros: the covariance then reports a uniform heading.
+
+The navigator's alignment (navigator.py) levels on the IMU data before the first fix
+(:class:`Levelling`, :func:`levelled_state`) and starts the filter with the yaw out of it
+(:func:`initial_covariance`); the heading follows from the first motion
+(:func:`yaw_error_from_motion`) or heading fix (:func:`yaw_error_from_heading`), and
+:func:`rotate_yaw` turns the solution and its covariance onto it.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .conventions import wrap_pi, yaw_from_azimuth
+from .conventions import wrap_pi
 from .earth import WGS84, normal_gravity
-from .rotations import quat_from_euler, quat_to_dcm
+from .lever_arm import lever_arm_position
+from .measurements import position_residual_enu
+from .rotations import quat_from_euler, quat_from_rotvec, quat_mul, quat_normalize, \
+    quat_rotate, quat_to_dcm
+from .strapdown import NavState, apply_correction
 
 #: Variance of a heading uniformly distributed on [-π, π) [rad²].
 UNIFORM_HEADING_VAR = np.pi ** 2 / 3.0
@@ -170,10 +180,12 @@ def yaw_from_velocity(v_enu, sigma_v):
     Returns
     -------
     yaw, sigma_yaw : float [rad]
-        sigma_yaw = σ_v / |v_h| (the cross-track velocity error over the speed).
+        sigma_yaw = 2 σ_v / |v_h|: twice the cross-track velocity error over the speed, the
+        margin the navigator has aligned with since its first version (the course compared
+        with the INS carries the errors of both velocities, and a crab angle adds to them).
     """
     ve, vn = v_enu[0], v_enu[1]
-    return float(np.arctan2(vn, ve)), float(sigma_v / np.hypot(ve, vn))
+    return float(np.arctan2(vn, ve)), float(2.0 * sigma_v / np.hypot(ve, vn))
 
 
 def yaw_from_heading(azimuth, sigma_azimuth, baseline_yaw_b=0.0):
@@ -191,8 +203,10 @@ def yaw_from_heading(azimuth, sigma_azimuth, baseline_yaw_b=0.0):
     Returns
     -------
     yaw, sigma_yaw : float [rad]
+        yaw counter-clockwise from East, not wrapped (a rotation by the difference of two yaws
+        does not need it, and wrapping would change the last bits of the navigator's result).
     """
-    return float(wrap_pi(yaw_from_azimuth(azimuth) - baseline_yaw_b)), float(sigma_azimuth)
+    return float(0.5 * np.pi - azimuth - baseline_yaw_b), float(sigma_azimuth)
 
 
 def initial_attitude(roll, pitch, yaw, sigma_tilt, sigma_yaw):
@@ -206,6 +220,192 @@ def initial_attitude(roll, pitch, yaw, sigma_tilt, sigma_yaw):
     """
     return Alignment(quat_from_euler(roll, pitch, yaw),
                      np.diag([sigma_tilt ** 2, sigma_tilt ** 2, sigma_yaw ** 2]))
+
+
+@dataclass(frozen=True)
+class Levelling:
+    """Velocity increments summed over the IMU data before the first fix, for its levelling.
+
+    Attributes
+    ----------
+    dv_sum : (3,) ndarray
+        Sum of the raw velocity increments, body FLU [m/s].
+    time : float
+        Time they cover [s].
+    """
+
+    dv_sum: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    time: float = 0.0
+
+    def add(self, dv, dt):
+        """The levelling with increments dv (N, 3) [m/s] of dt [s] each added."""
+        return Levelling(self.dv_sum + dv.sum(axis=0), self.time + len(dv) * dt)
+
+    def attitude(self):
+        """Levelled attitude q_nb with yaw 0 (:func:`level` of the mean specific force)."""
+        roll, pitch = level(self.dv_sum / self.time)
+        return quat_from_euler(roll, pitch, 0.0)
+
+
+def levelled_state(levelling, lat, lon, h, lever_b, gnss_speed, static_speed, t):
+    """The first solution: levelled with yaw 0 at the IMU below an antenna fix.
+
+    Parameters
+    ----------
+    levelling : Levelling
+    lat, lon, h : float
+        Antenna position [rad, rad, m].
+    lever_b : (3,) ndarray
+        Antenna relative to the IMU, FLU [m].
+    gnss_speed : float
+        Last GNSS horizontal speed [m/s] (NaN if none yet).
+    static_speed : float
+        Speed below which the vehicle is at rest [m/s].
+    t : float
+        Time of the state [s].
+
+    Returns
+    -------
+    NavState
+        At rest, or moving at gnss_speed along the body x axis (started in motion: no
+        side-slip assumed in the yaw-free frame).
+    """
+    q = levelling.attitude()
+    lat, lon, h = lever_arm_position(lat, lon, h, q, -lever_b)
+    v = np.zeros(3)
+    if np.isfinite(gnss_speed) and gnss_speed > static_speed:
+        v = quat_rotate(q, [gnss_speed, 0.0, 0.0])
+    return NavState(lat, lon, h, v, q, t)
+
+
+def initial_covariance(space, noise, sigma_pos, sigma_vel, sigma_tilt):
+    """Covariance of the filter started on a levelled state.
+
+    The yaw is unknown until the first motion or heading fix: its variance is kept out of the
+    filter (set by :func:`rotate_yaw`) so that no update leans on it.
+
+    Parameters
+    ----------
+    space : StateSpace
+    noise : FilterNoise
+        Initial sigmas of the sensor-error blocks.
+    sigma_pos, sigma_vel, sigma_tilt : float
+        Position [m], velocity [m/s] and tilt [rad] standard deviations.
+
+    Returns
+    -------
+    (n, n) ndarray
+    """
+    sig = np.zeros(space.size)
+    sig[space["pos"]] = sigma_pos
+    sig[space["vel"]] = sigma_vel
+    sig[space["att"]] = [sigma_tilt, sigma_tilt, 0.0]
+    for name in space.blocks[3:]:
+        if name in space.extras:
+            sig[space[name]] = space.extras[name].sigma0
+        elif name == "clock":
+            sig[space[name]] = (3e5, 100.0, 0.1)
+        else:
+            sig[space[name]] = noise.blocks[name].sigma0
+    return np.diag(sig ** 2)
+
+
+def _yaw_of_x(q_nb):
+    """Yaw of the body x axis [rad, counter-clockwise from East]."""
+    x = quat_to_dcm(q_nb)[:, 0]
+    return np.arctan2(x[1], x[0])
+
+
+def yaw_error_from_motion(v_gnss, v_ins, q_nb, sigma_v):
+    """Yaw rotation onto the GNSS course of an INS levelled with an arbitrary yaw.
+
+    The INS has run levelled but with an arbitrary yaw since the first fix, so its horizontal
+    velocity is the true one rotated by minus the yaw error: the angle between the two velocity
+    vectors is that error (no side-slip assumption). If the INS velocity is too small to
+    compare (motion started before the filter), the course of the GNSS velocity is taken as the
+    heading of the body x axis instead.
+
+    Parameters
+    ----------
+    v_gnss, v_ins : (3,) array_like
+        GNSS and INS velocity, ENU [m/s].
+    q_nb : (4,) array_like
+        INS attitude.
+    sigma_v : float
+        1σ of the INS horizontal velocity [m/s].
+
+    Returns
+    -------
+    delta, sigma : float [rad]
+        Rotation about Up to apply, and the yaw standard deviation after it
+        (:func:`yaw_from_velocity`).
+    """
+    course, sigma = yaw_from_velocity(v_gnss, sigma_v)
+    if np.hypot(*v_ins[:2]) > 0.3 * np.hypot(*v_gnss[:2]):
+        return course - np.arctan2(v_ins[1], v_ins[0]), sigma
+    return course - _yaw_of_x(q_nb), sigma
+
+
+def yaw_error_from_heading(azimuth, variance, q_nb):
+    """Yaw rotation of an INS attitude q_nb onto a heading fix: azimuth of the body x axis
+    [rad, clockwise from North] of the given variance [rad²].
+
+    Returns
+    -------
+    delta, sigma : float [rad]
+        Rotation about Up to apply, and the yaw standard deviation after it.
+    """
+    yaw, sigma = yaw_from_heading(azimuth, np.sqrt(variance))
+    return yaw - _yaw_of_x(q_nb), sigma
+
+
+def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, rest_pos=None):
+    """Turn a solution and its covariance by delta about Up (the heading alignment).
+
+    Parameters
+    ----------
+    nav : NavState
+    P : (n, n) ndarray
+        Covariance with the yaw out of the filter (:func:`initial_covariance`).
+    space : StateSpace
+    delta : float
+        Rotation, counter-clockwise [rad].
+    sigma, sigma_floor : float
+        The yaw standard deviation becomes max(sigma, sigma_floor), uncorrelated [rad].
+    rest_pos : tuple of 3 float, optional
+        (lat, lon, h) where the vehicle left its rest: the distance run since went the wrong way
+        too and is turned about that point.
+
+    Returns
+    -------
+    nav : NavState
+    P : (n, n) ndarray
+    """
+    rz = quat_from_rotvec([0.0, 0.0, delta])
+    if rest_pos is not None:
+        d = position_residual_enu(nav.lat, nav.lon, nav.h, *rest_pos)
+        nav = apply_correction(nav, d - quat_rotate(rz, d), np.zeros(3), np.zeros(3))
+    nav = replace(nav, q_nb=quat_normalize(quat_mul(rz, nav.q_nb)),
+                  v_enu=quat_rotate(rz, nav.v_enu))
+    # The ENU-resolved errors turn with the solution (C' = Rz (I - [phi x]) C =
+    # (I - [(Rz phi) x]) Rz C): rotate their covariance, including the correlations of the
+    # tilt with the accelerometer biases that levelling built up.
+    T = np.eye(space.size)
+    R = quat_to_dcm(rz)
+    for name in ("pos", "vel", "att"):
+        T[space[name], space[name]] = R
+    P = T @ P @ T.T
+    k = space["att"].stop - 1
+    P[k, :] = 0.0
+    P[:, k] = 0.0
+    P[k, k] = max(sigma_floor, sigma) ** 2
+    if "bg" in space:
+        # While the yaw was unknown the mechanisation removed the horizontal Earth rate in the
+        # wrong direction and the filter took the difference for gyro bias: widen the bias
+        # uncertainty by that rate (up to Omega cos(lat) on any axis).
+        s = space["bg"]
+        P[s, s] += (WGS84.omega * np.cos(nav.lat)) ** 2 * np.eye(3)
+    return nav, P
 
 
 def _readings(angles, f_b, w_b):

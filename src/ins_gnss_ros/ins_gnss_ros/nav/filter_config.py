@@ -12,7 +12,7 @@ import numpy as np
 from ..params import Param
 from .ekf import ExtraState
 from .error_model import LAYOUTS
-from .navigator import NavigatorConfig
+from .navigator_config import NavigatorConfig
 from .sensor_errors import GRADES, BlockNoise, FilterNoise, filter_noise
 
 __all__ = ["PARAMS", "navigator_config", "noise_model"]

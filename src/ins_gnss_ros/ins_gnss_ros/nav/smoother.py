@@ -25,12 +25,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .navigator import ALIGNING
+from .modes import ALIGNING
 from .strapdown import apply_correction
+from .track import Track
 
 
 @dataclass
-class SmoothedOutput:
+class SmoothedOutput(Track):
     """Smoothed solution at the epochs of the forward pass.
 
     Attributes
@@ -44,12 +45,6 @@ class SmoothedOutput:
         Smoothed sensor / clock / extra estimates.
     """
 
-    t: np.ndarray
-    lat: np.ndarray
-    lon: np.ndarray
-    h: np.ndarray
-    v_enu: np.ndarray
-    q_nb: np.ndarray
     P: np.ndarray
     estimates: dict
 

@@ -52,7 +52,7 @@ from ..nav.aiding import Aiding, AidingPolicy
 from ..nav.error_model import LAYOUTS
 from ..nav.filter_config import PARAMS, navigator_config
 from ..nav.increments import SensorErrors
-from ..nav.navigator import ALIGNING, DEAD_RECKONING, NAVIGATING, Navigator
+from ..nav import ALIGNING, DEAD_RECKONING, NAVIGATING, Navigator
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import StrapdownSync
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, ParameterError, run
@@ -166,7 +166,7 @@ class EkfNode(NavNode):
         if not self.aiding.choose_ranges(len(ephemerides)):
             return
         nav, t = self.navigator, stamp_to_sec(msg.header.stamp)
-        if self.aiding.ranges(satellite_ranges(raw, ephemerides, t, nav.state_at(t), nav.lever,
+        if self.aiding.ranges(satellite_ranges(raw, ephemerides, t, nav.state_at(t), nav.lever_arm_b,
                                                self.ranges)):
             self.after_filter()
 
@@ -188,7 +188,7 @@ class EkfNode(NavNode):
         self.sync.add_state(stamp, msg.correction_sequence, msg)
         self.after_filter()
         t = stamp * 1e-9
-        if self.navigator.ekf is not None and self.sync.current(msg.correction_sequence) \
+        if self.navigator.started and self.sync.current(msg.correction_sequence) \
                 and t - self.last_output_t >= 1.0 / self.p["output_rate_hz"]:
             self.last_output_t = t
             self.publish_solution(nav_state_from_msg(msg), msg)
@@ -199,9 +199,9 @@ class EkfNode(NavNode):
     def after_filter(self) -> None:
         nav = self.navigator
         self.report_updates()
-        if nav.nav is None or nav.ekf is None or not self.sync.due(nav.nav.t, nav.revision):
+        if not nav.started or not self.sync.due(nav.solution.t, nav.revision):
             return
-        result = self.sync.correction(nav.nav.t, nav.state_at, nav.estimates, nav.revision)
+        result = self.sync.correction(nav.solution.t, nav.state_at, nav.estimates, nav.revision)
         if result is None:
             return
         c, resent = result
@@ -231,7 +231,7 @@ class EkfNode(NavNode):
             self.reported_updates = nav.update_count
             # Stamped with the filter's time: the mode is the current one, also when the last
             # update was a measurement refused as too old (a looped or restarted source).
-            t = updates[-1].t if nav.nav is None else max(updates[-1].t, nav.nav.t)
+            t = updates[-1].t if nav.solution is None else max(updates[-1].t, nav.solution.t)
             self.publish_status(t, updates)
 
     def publish_status(self, t: float, updates) -> None:
@@ -251,7 +251,7 @@ class EkfNode(NavNode):
             self.diag.set_value(name, stats.summary(t))
         self.pub_status.publish(status_msg(
             t, MODES[nav.mode], self.aiding.use_ranges, updates,
-            (nav.space, nav.covariance()) if nav.ekf is not None else None,
+            (nav.space, nav.covariance()) if nav.started else None,
             self.accepted, self.rejected))
 
     def publish_solution(self, st: NavState, ins: InsState) -> None:

@@ -31,6 +31,7 @@ from scipy.integrate import cumulative_trapezoid
 
 from ins_gnss_ros.nav import earth
 from ins_gnss_ros.nav.rotations import quat_from_euler, quat_to_dcm
+from ins_gnss_ros.nav.track import Track
 
 
 # ---------------------------------------------------------------------------------------------
@@ -335,7 +336,7 @@ class ShipMotion:
 # Truth record and IMU generation
 # ---------------------------------------------------------------------------------------------
 @dataclass
-class Trajectory:
+class Trajectory(Track):
     """Truth record at the IMU rate with ideal IMU outputs.
 
     Sample k is at time t[k]; increment k covers [t[k], t[k+1]].
@@ -360,12 +361,6 @@ class Trajectory:
         ROS roll, pitch, yaw of q_nb, rad (continuous, yaw not wrapped).
     """
 
-    t: np.ndarray
-    lat: np.ndarray
-    lon: np.ndarray
-    h: np.ndarray
-    v_enu: np.ndarray
-    q_nb: np.ndarray
     omega_ib_b: np.ndarray
     f_b: np.ndarray
     dtheta: np.ndarray

@@ -577,7 +577,7 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
     ``gnss/vel`` and ``gnss/heading``; ``gnss/*`` is withheld in the outage windows.
     Deterministic like :func:`replay`.
     """
-    from ins_gnss_ros.nav import navigator as navmod
+    from ins_gnss_ros import nav as navmod
     from ins_gnss_ros.nav.rotations import dcm_from_euler
     from ins_gnss_ros.nav.sensor_errors import GRADES, filter_noise
 
@@ -703,7 +703,7 @@ def _gnss_measurements(rows, at, t0, config) -> list:
 
 def _fixes(c, t, config):
     """GnssFix of NavSatFix columns: its ENU covariance diagonal, or ``gnss_sigma_m``."""
-    from ins_gnss_ros.nav.navigator import GnssFix
+    from ins_gnss_ros.nav import GnssFix
 
     position = np.stack([c["latitude"], c["longitude"], c["altitude"]], -1)
     valid = (c["status.status"] >= 0) & np.all(np.isfinite(position), axis=1)
@@ -718,7 +718,7 @@ def _fixes(c, t, config):
 
 def _velocities(c, t, config):
     """GnssVelocity of TwistWithCovarianceStamped columns (valid: finite, positive variances)."""
-    from ins_gnss_ros.nav.navigator import GnssVelocity
+    from ins_gnss_ros.nav import GnssVelocity
 
     v = np.stack([c[f"twist.twist.linear.{x}"] for x in "xyz"], -1)
     var = c["twist.covariance"][:, [0, 7, 14]]
@@ -729,7 +729,7 @@ def _velocities(c, t, config):
 
 def _headings(c, t, config):
     """HeadingFix of Heading columns (valid: finite azimuth, positive variance)."""
-    from ins_gnss_ros.nav.navigator import HeadingFix
+    from ins_gnss_ros.nav import HeadingFix
 
     valid = np.isfinite(c["azimuth"]) & (c["azimuth_variance"] > 0)
     azimuth, variance = c["azimuth"].tolist(), c["azimuth_variance"].tolist()

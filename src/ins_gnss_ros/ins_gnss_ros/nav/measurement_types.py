@@ -1,0 +1,88 @@
+"""Time-stamped measurements the navigator accepts (:meth:`Navigator.add_measurement
+<ins_gnss_ros.nav.navigator.Navigator.add_measurement>`).
+
+Values, not models: the innovations they give rise to are in :mod:`ins_gnss_ros.nav.measurements`.
+Times are on the navigation time scale (s); a GNSS measurement stamped t refers to the epoch
+t - td when the filter has a "td" time-offset state.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class GnssFix:
+    """Antenna position at GNSS time t (s): lat, lon (rad), h (m), covariance ENU (m^2)."""
+
+    t: float
+    lat: float
+    lon: float
+    h: float
+    cov_enu: np.ndarray
+
+
+@dataclass(frozen=True)
+class GnssVelocity:
+    """Antenna velocity ENU (m/s) at GNSS time t, covariance ((m/s)^2)."""
+
+    t: float
+    v_enu: np.ndarray
+    cov_enu: np.ndarray
+
+
+@dataclass(frozen=True)
+class HeadingFix:
+    """Azimuth of the body x axis (rad, clockwise from north) at time t; `magnetic` selects the
+    compass model (declination already applied) with its optional bias state."""
+
+    t: float
+    azimuth: float
+    variance: float
+    magnetic: bool = False
+
+
+@dataclass(frozen=True)
+class SpeedLog:
+    """Speed through the water along the body x axis (m/s) at time t, variance ((m/s)^2);
+    with a "log" extra block the current and the log scale error are estimated."""
+
+    t: float
+    speed: float
+    variance: float
+
+
+@dataclass(frozen=True)
+class ZeroVelocity:
+    """The vehicle is known to be at rest at time t: ZUPT (sigma_v m/s) and, if sigma_w is set,
+    ZARU (rad/s)."""
+
+    t: float
+    sigma_v: float = 0.01
+    sigma_w: float | None = None
+
+
+@dataclass(frozen=True)
+class SatelliteRanges:
+    """Tight coupling: per-satellite pseudoranges (and optionally range rates) at GNSS time t.
+
+    Arrays of k satellites: sat_pos, sat_vel (ECEF, m, m/s), sat_clock (m), sat_clock_drift
+    (m/s), pseudorange (m), pr_var (m^2), range_rate (m/s, or None), rr_var ((m/s)^2).
+    """
+
+    t: float
+    sat_pos: np.ndarray
+    sat_vel: np.ndarray
+    sat_clock: np.ndarray
+    sat_clock_drift: np.ndarray
+    pseudorange: np.ndarray
+    pr_var: float
+    range_rate: np.ndarray | None = None
+    rr_var: float = 0.01
+
+
+
+#: Measurements of the GNSS receiver: their epoch moves with the "td" estimate, and while the
+#: heading is unknown they are used only at rest.
+GNSS_TYPES = (GnssFix, GnssVelocity, SatelliteRanges)

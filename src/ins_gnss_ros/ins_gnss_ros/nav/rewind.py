@@ -1,0 +1,177 @@
+"""The navigator's run state and the checkpoints of it that delayed measurements rewind to.
+
+A measurement older than the state is applied at its epoch, never at arrival: the navigator
+restores the newest checkpoint before the epoch and re-runs the buffered IMU data and the
+measurements applied since, with the late one in its place (exactly what the filter would have
+done had it arrived on time; seed 000 section A2.6 and seed 003 section B4 use the delayed
+measurement against the stored state of its epoch for the same purpose).
+
+Everything the filter changes as it runs is one :class:`RunState`; a checkpoint holds a copy of
+all of it, so no part of the state can be left out of a rewind. What a rewind deliberately
+keeps lies outside it: the noise floors of forced measurement kinds and the times of their
+rejections (:class:`~ins_gnss_ros.nav.integrity.Integrity`: a floor is only ever
+conservative), the IMU samples and the bridged gaps (facts of the input), and the record,
+which is cut back to the checkpoint's length.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from .alignment import Levelling
+from .ekf import ErrorStateEKF
+from .modes import ALIGNING
+from .recording import estimate_sizes
+from .strapdown import NavState
+
+
+@dataclass
+class RunState:
+    """Everything the filter changes as it runs (all times in s on the navigation scale).
+
+    Attributes
+    ----------
+    next_sample : int
+        Number of the next IMU sample to process (:class:`~ins_gnss_ros.nav.imu_buffer.ImuBuffer`).
+    levelling : Levelling
+        Specific force summed before the first fix.
+    gnss_speed : float
+        Horizontal speed of the last GNSS velocity, m/s (NaN before the first).
+    nav : NavState or None
+        The solution (None until the first fix).
+    ekf : ErrorStateEKF or None
+        Covariance, error state and model of the filter (None until the first fix).
+    estimates : dict of str to ndarray
+        Running sensor, clock and extra-block estimates (error_model.py units).
+    mode : str
+        modes.py.
+    heading_known : bool
+        The yaw has been aligned; until then its variance is kept out of the filter.
+    t_epoch, t_model, t_nhc, t_last_aid : float
+        The last filter epoch, model (F) refresh, non-holonomic update and accepted aiding.
+    reject_since : dict of str to float
+        Measurement kind -> start of its current continuous rejection (decides forcing).
+    a_enu : (3,) ndarray
+        Mean acceleration of the last segment, ENU, m/s^2.
+    omega : (3,) ndarray
+        Mean compensated angular rate of the last segment, body FLU, rad/s.
+    omega_time : float
+        Length of that segment.
+    rest_pos : tuple of 3 float or None
+        (lat, lon, h) of the IMU at the last fix at rest while the heading was unknown.
+    last_fix : tuple of 3 float or None
+        (lat, lon, h) of the last GNSS fix (a frozen receiver repeats it).
+    """
+
+    next_sample: int = 0
+    levelling: Levelling = field(default_factory=Levelling)
+    gnss_speed: float = np.nan
+    nav: NavState | None = None
+    ekf: ErrorStateEKF | None = None
+    estimates: dict = field(default_factory=dict)
+    mode: str = ALIGNING
+    heading_known: bool = False
+    t_epoch: float = -np.inf
+    t_model: float = -np.inf
+    t_nhc: float = -np.inf
+    t_last_aid: float = -np.inf
+    reject_since: dict = field(default_factory=dict)
+    a_enu: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    omega: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    omega_time: float = 1.0
+    rest_pos: tuple | None = None
+    last_fix: tuple | None = None
+
+    @classmethod
+    def initial(cls, space):
+        """The state of a navigator with no data, for the filter state `space`."""
+        return cls(estimates={name: np.zeros(size) for name, size in estimate_sizes(space)})
+
+    def copy(self):
+        """A copy that shares nothing mutable with this state (every field, by construction)."""
+        return RunState(**{f.name: _independent(getattr(self, f.name)) for f in fields(self)})
+
+
+def _independent(value):
+    """`value`, or a copy of it where it can be changed in place."""
+    if isinstance(value, np.ndarray):
+        return value.copy()
+    if isinstance(value, dict):
+        return {k: _independent(v) for k, v in value.items()}
+    if isinstance(value, ErrorStateEKF):
+        # Its model and noise are replaced, never changed in place: only P and x are copied.
+        ekf = copy.copy(value)
+        ekf.P, ekf.x = value.P.copy(), value.x.copy()
+        return ekf
+    return value  # immutable: numbers, strings, tuples, None, frozen dataclasses
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """A copy of the run state, and how far the run had got when it was taken."""
+
+    state: RunState
+    epochs: int         # epochs recorded (Recorder.epochs)
+    update_count: int   # update results produced (Recorder.update_count)
+    applied: int        # measurements applied (Rewind.applied_count)
+
+
+class Rewind:
+    """Checkpoints of the last `history` seconds, every `interval` seconds, and the
+    measurements applied since the oldest one."""
+
+    def __init__(self, history, interval):
+        self.history, self.interval = history, interval
+        self.checkpoints = []
+        self._applied = []
+        self._applied_dropped = 0
+        self._t_last = -np.inf
+
+    @property
+    def applied_count(self):
+        """Number of measurements applied so far."""
+        return self._applied_dropped + len(self._applied)
+
+    def applied(self, m):
+        """Measurement m has been applied."""
+        self._applied.append(m)
+
+    def keep(self, state, epochs, update_count):
+        """Take a checkpoint of `state` if `interval` has passed since the last one; drop those
+        no measurement within `history` can need. Returns the oldest checkpoint when older ones
+        were dropped (the update results before it are no longer needed either), else None."""
+        if state.nav.t - self._t_last >= self.interval:
+            self.checkpoints.append(Checkpoint(state.copy(), epochs, update_count,
+                                               self.applied_count))
+            self._t_last = state.nav.t
+            horizon = state.nav.t - self.history
+            cps, drop = self.checkpoints, 0
+            while drop < len(cps) - 1 and cps[drop + 1].state.nav.t < horizon:
+                drop += 1
+            if drop:
+                del cps[:drop]
+                del self._applied[:cps[0].applied - self._applied_dropped]
+                self._applied_dropped = cps[0].applied
+                return cps[0]
+        return None
+
+    def before(self, epoch):
+        """The newest checkpoint older than `epoch`, or None."""
+        return next((c for c in reversed(self.checkpoints) if c.state.nav.t < epoch), None)
+
+    def back_to(self, checkpoint):
+        """Forget what came after `checkpoint`; returns the measurements applied since, in
+        order, to be applied again."""
+        start = checkpoint.applied - self._applied_dropped
+        again = self._applied[start:]
+        del self._applied[start:]
+        t = checkpoint.state.nav.t
+        self.checkpoints = [c for c in self.checkpoints if c.state.nav.t <= t]
+        self._t_last = t
+        return again
+
+    def needed_sample(self, state):
+        """Number of the oldest IMU sample a rewind (or `state`) can still need."""
+        return min([c.state.next_sample for c in self.checkpoints] + [state.next_sample])
