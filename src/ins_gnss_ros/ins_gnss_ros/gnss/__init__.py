@@ -8,7 +8,7 @@ byte-stream decoder and a phase-attitude solver, and a node that only decodes a 
 should not start up scipy.stats and the numba kernels (importing every module costs about 1.4 s,
 ``gnss.time`` alone 35 ms; the gnss_driver node's import time doubled when they were eager).
 """
-import importlib
+from ..lazy_exports import lazy_exports
 
 #: Module -> the public names it defines.
 _PUBLIC = {
@@ -41,18 +41,4 @@ _PUBLIC = {
              "utc_to_posix", "week_tow"),
 }
 _MODULE_OF = {name: module for module, names in _PUBLIC.items() for name in names}
-__all__ = sorted(_MODULE_OF)
-
-
-def __getattr__(name: str):
-    """Import a public name from its module (once: it is then an attribute of the package)."""
-    module = _MODULE_OF.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__, __all__ = lazy_exports(__name__, _MODULE_OF)

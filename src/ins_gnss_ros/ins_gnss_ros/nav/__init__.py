@@ -6,7 +6,7 @@ imported by name. Each name is imported on first use: the filter pulls in the co
 and scipy (``import ins_gnss_ros.nav.navigator`` takes 2.5 s, ``ins_gnss_ros.nav.earth`` 0.2 s),
 which users of the light modules (the simulators, the compass) must not pay for.
 """
-import importlib
+from ..lazy_exports import lazy_exports
 
 #: Public name -> module of this package that defines it.
 _EXPORTS = {
@@ -28,18 +28,4 @@ _EXPORTS = {
     "rts_smooth": "smoother",
     "SmoothedOutput": "smoother",
 }
-
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name):
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__, __all__ = lazy_exports(__name__, _EXPORTS)
