@@ -52,16 +52,14 @@ from ..nav.aiding import Aiding, AidingPolicy
 from ..nav.error_model import LAYOUTS
 from ..nav.filter_config import PARAMS, navigator_config
 from ..nav.increments import SensorErrors
-from ..nav import ALIGNING, DEAD_RECKONING, NAVIGATING, Navigator
+from ..nav import NAVIGATING, Navigator
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import StrapdownSync
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, ParameterError, run
 from .convert import increment_of, nav_state_from_msg, set_vector3, vec
 from .gnss_messages import kepler_from_msg, raw_epoch_from_msg
-from .nav_messages import fix_msg, odom_msg, status_msg
+from .nav_messages import MODES, fix_msg, odom_msg, status_msg
 
-MODES = {ALIGNING: FilterStatus.MODE_ALIGNING, NAVIGATING: FilterStatus.MODE_NAVIGATING,
-         DEAD_RECKONING: FilterStatus.MODE_DEAD_RECKONING}
 
 
 def applied_sensor_errors(msg: InsState) -> SensorErrors:

@@ -10,10 +10,15 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import NavSatFix, NavSatStatus
 
 from ..io import new, sec_to_stamp
+from ..nav import ALIGNING, DEAD_RECKONING, NAVIGATING
 from ..nav.earth import ecef_to_enu, geodetic_to_ecef
 from ..nav.rotations import quat_to_dcm
 from ..nav.strapdown import NavState
 from .convert import to_quaternion, to_vector3
+
+#: Navigator mode -> FilterStatus mode.
+MODES = {ALIGNING: FilterStatus.MODE_ALIGNING, NAVIGATING: FilterStatus.MODE_NAVIGATING,
+         DEAD_RECKONING: FilterStatus.MODE_DEAD_RECKONING}
 
 
 def fix_msg(stamp: Time, st: NavState, cov_pos: np.ndarray, valid: bool) -> NavSatFix:
