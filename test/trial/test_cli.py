@@ -14,7 +14,7 @@ import time
 import pytest
 
 from ins_gnss_ros.trial.cli import main
-from ins_gnss_ros.trial.replay import load_profile
+from ins_gnss_ros.trial.profile import load_profile
 from ins_gnss_ros.trial.supervisor import Supervisor
 
 STRAPDOWN_PROFILE = "strapdown:\n  ros__parameters:\n    init.latitude_deg: 10.0\n"

@@ -13,9 +13,11 @@ import yaml
 from ins_gnss_ros import io as bagio
 from ins_gnss_ros.io import messages_equal
 from ins_gnss_ros.trial import contract_messages as msgs
-from ins_gnss_ros.trial.replay import (ProfileError, gnss_windows, load_profile,
-                                       profile_with_truth_init, replay, replay_offline,
-                                       replay_processes)
+from ins_gnss_ros.trial.offline import replay_offline
+from ins_gnss_ros.trial.outages import gnss_windows
+from ins_gnss_ros.trial.processes import replay_processes
+from ins_gnss_ros.trial.profile import ProfileError, load_profile, profile_with_truth_init
+from ins_gnss_ros.trial.replay import replay
 from ins_gnss_ros.trial.simulate import SimOptions, simulate
 
 DURATION = 6.0

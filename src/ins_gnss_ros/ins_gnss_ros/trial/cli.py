@@ -165,7 +165,9 @@ def cmd_import(args) -> int:
 
 
 def cmd_replay(args) -> int:
-    from ins_gnss_ros.trial import replay
+    from ins_gnss_ros.trial.offline import replay_offline
+    from ins_gnss_ros.trial.processes import replay_processes
+    from ins_gnss_ros.trial.replay import replay
 
     if args.processes and args.rate is None:
         raise ValueError("--processes needs --rate (e.g. --rate 1)")
@@ -179,10 +181,10 @@ def cmd_replay(args) -> int:
         if args.processes or args.init_from_truth:
             raise ValueError("--offline runs no nodes: it takes neither --processes nor "
                              "--init-from-truth")
-        summary = replay.replay_offline(args.bag, args.config, args.out, outages=args.outages,
-                                        progress=_progress(args))
+        summary = replay_offline(args.bag, args.config, args.out, outages=args.outages,
+                                progress=_progress(args))
     else:
-        run = replay.replay_processes if args.processes else replay.replay
+        run = replay_processes if args.processes else replay
         kwargs = {"rate": args.rate} if args.processes else {"faults": args.faults}
         summary = run(args.bag, args.config, args.out, outages=args.outages,
                       progress=_progress(args), init_from_truth=args.init_from_truth, **kwargs)
@@ -226,7 +228,7 @@ def cmd_batch(args) -> int:
 
 
 def cmd_run(args) -> int:
-    from ins_gnss_ros.trial.replay import load_profile
+    from ins_gnss_ros.trial.profile import load_profile
     from ins_gnss_ros.trial.supervisor import Supervisor
 
     profile = load_profile(args.config)

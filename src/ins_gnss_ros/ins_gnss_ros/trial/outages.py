@@ -12,6 +12,8 @@ import numpy as np
 #: No outage starts within this many seconds of the last GNSS epoch, so that each outage is
 #: followed by GNSS again and its end-of-outage drift is observed.
 DEFAULT_END_MARGIN_S = 30.0
+#: Topics withheld during an outage window (prefix, absolute names).
+GNSS_PREFIX = "/gnss/"
 
 
 @dataclass(frozen=True)
@@ -114,3 +116,21 @@ def in_outage(t, windows):
 def gnss_mask(t, windows):
     """True for GNSS epochs `t` to keep (outside every outage window), the mask a replay applies."""
     return ~in_outage(t, windows)
+
+
+def gnss_windows(messages, spec) -> np.ndarray:
+    """Outage windows (ns, shape (k, 2)) of a ``LEN:PERIOD[:FIRST]`` spec over the GNSS span of
+    ``messages`` (:class:`~ins_gnss_ros.io.BagMessage` list); empty without GNSS."""
+    t = [m.t_ns for m in messages if m.topic.startswith(GNSS_PREFIX)]
+    if spec is None or not t:
+        return np.zeros((0, 2), np.int64)
+    # Work relative to the first GNSS epoch: 1e9-scale seconds would lose sub-us resolution.
+    t0 = t[0]
+    windows = outage_windows(parse_outage_spec(spec), 0.0, (t[-1] - t0) * 1e-9)
+    return t0 + np.round(windows * 1e9).astype(np.int64)
+
+
+def in_windows_ns(t_ns, windows) -> bool:
+    """Whether a stamp (ns) falls in one of the [start, end) ``windows`` of :func:`gnss_windows`."""
+    return bool(np.any((windows[:, 0] <= t_ns) & (t_ns < windows[:, 1])))
+

@@ -1,6 +1,6 @@
 """``trial run``: the profile's node graph on real sensors, as supervised processes.
 
-Each node of the graph (see :func:`ins_gnss_ros.trial.replay.load_profile`) runs as its console
+Each node of the graph (see :func:`ins_gnss_ros.trial.profile.load_profile`) runs as its console
 script ``<venv>/bin/<name> --ros-args --params-file PROFILE``. A node that dies is reported on
 stderr and restarted after a back-off that doubles per restart (1, 2, 4 ... s, at most
 :data:`MAX_BACKOFF_S`), up to ``max_restarts`` times; then the supervisor stops the graph and
@@ -114,7 +114,7 @@ class Supervisor:
         return 0
 
     def _shutdown(self, timeout=10.0) -> None:
-        from .replay import stop_processes
+        from .processes import stop_processes
 
         stop_processes([r.process for r in self.nodes.values() if r.process is not None],
                        timeout)
