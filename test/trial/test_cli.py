@@ -13,6 +13,7 @@ import time
 
 import pytest
 
+from ins_gnss_ros import io as bagio
 from ins_gnss_ros.trial.cli import main
 from ins_gnss_ros.trial.profile import load_profile
 from ins_gnss_ros.trial.supervisor import Supervisor
@@ -33,7 +34,14 @@ def test_simulate_replay_evaluate_json(workdir, capsys):
     d = workdir
     assert main(["replay", str(d / "bag"), "--config", str(d / "profile.yaml"),
                  "--init-from-truth", "--out", str(d / "run")]) == 0
-    capsys.readouterr()
+    # What was replayed: messages in, withheld and out per topic (the truth never goes in).
+    lines = capsys.readouterr().out.splitlines()
+    n_delta = len(bagio.read_bag(d / "bag", ["imu/delta"]))
+    assert lines[0].startswith("replayed ") and "in-process" in lines[0]
+    assert lines[1].split() == ["topic", "in", "withheld", "out"]
+    assert [f"{n_delta:,}", "0", "0"] == next(
+        line.split()[1:] for line in lines if line.split()[0] == "/imu/delta")
+    assert not any("truth" in line for line in lines)
     assert main(["evaluate", str(d / "run"), "--json"]) == 0
     out = capsys.readouterr().out
     metrics = json.loads(out)  # one JSON object and nothing else

@@ -168,6 +168,7 @@ def cmd_replay(args) -> int:
     from ins_gnss_ros.trial.offline import replay_offline
     from ins_gnss_ros.trial.processes import replay_processes
     from ins_gnss_ros.trial.replay import replay
+    from ins_gnss_ros.trial.run_folder import counts_table
 
     if args.processes and args.rate is None:
         raise ValueError("--processes needs --rate (e.g. --rate 1)")
@@ -188,6 +189,8 @@ def cmd_replay(args) -> int:
         kwargs = {"rate": args.rate} if args.processes else {"faults": args.faults}
         summary = run(args.bag, args.config, args.out, outages=args.outages,
                       progress=_progress(args), init_from_truth=args.init_from_truth, **kwargs)
+    print(f"replayed {args.bag} ({summary['mode']}, {', '.join(summary['graph'])}):")
+    print("\n".join("  " + line for line in counts_table(summary["messages"])))
     print(f"recorded {', '.join(summary['topics'])} into {args.out}")
     return 0
 

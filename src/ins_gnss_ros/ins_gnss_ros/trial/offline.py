@@ -7,13 +7,15 @@ Deterministic like :func:`ins_gnss_ros.trial.replay.replay`.
 """
 from __future__ import annotations
 
+from collections import Counter
+
 import numpy as np
 
 from ins_gnss_ros import io as bagio
-from ins_gnss_ros.trial.inputs import input_topics
-from ins_gnss_ros.trial.outages import GNSS_PREFIX, gnss_windows
+from ins_gnss_ros.trial.inputs import check_inputs, input_rows
+from ins_gnss_ros.trial.outages import GNSS_PREFIX, gnss_windows, in_outage
 from ins_gnss_ros.trial.profile import Profile, ProfileError, load_profile
-from ins_gnss_ros.trial.run_folder import new_run_folder, write_summary
+from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_summary
 
 
 #: Parameters of the profile's ``navigator`` section (offline path) and their defaults.
@@ -67,8 +69,8 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
     config = offline_config(profile)
     # Every input keeps its place (the time origin t0 is the first input of any topic), but
     # only what the navigator uses is decoded: the IMU topics in bulk, gnss/* one by one.
-    topics = input_topics(bag_path)
-    rows = bagio.read_raw(bag_path, topics) if topics else []
+    check_inputs(bag_path, OFFLINE_IMU_TOPICS + OFFLINE_GNSS_TOPICS)
+    rows = input_rows(bag_path)
     windows = gnss_windows(rows, outages)
     out = new_run_folder(out)
     nav = navmod.Navigator(navmod.NavigatorConfig(
@@ -79,8 +81,10 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
     imu_at, imu_t, imu_th, imu_dv = _imu_increments(rows, t0, c_mount)
     gnss_at = [k for k, m in enumerate(rows) if m.topic.startswith(GNSS_PREFIX)]
     t_gnss = np.array([rows[k].t_ns for k in gnss_at], np.int64)
-    inside = np.any((windows[:, :1] <= t_gnss) & (t_gnss < windows[:, 1:]), axis=0)
-    withheld = int(inside.sum())
+    inside = in_outage(t_gnss, windows)
+    counts = MessageCounts(withheld=Counter(
+        rows[k].topic for k, held in zip(gnss_at, inside) if held))
+    counts.played = Counter(m.topic for m in rows) - counts.withheld
     used = [k for k, out_of_window in zip(gnss_at, ~inside)
             if out_of_window and rows[k].topic in OFFLINE_GNSS_TOPICS]
     measurements = _gnss_measurements(rows, used, t0, config)
@@ -102,8 +106,9 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
     nav.flush()
     result = nav.output()
     _write_navigator_output(out / "bag", result, t0)
-    return write_summary(out, bag_path, profile, outages, windows, withheld, "offline", 0.0,
-                          graph=["navigator"])
+    counts.recorded.update({"/ins/state": len(result.t), "/nav/odom": len(result.t)})
+    return write_summary(out, bag_path, profile, outages, windows, counts, "offline", 0.0,
+                         graph=["navigator"])
 
 
 #: IMU topics the offline path reads (increments, or raw rates it integrates itself).

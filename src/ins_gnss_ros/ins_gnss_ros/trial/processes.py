@@ -18,13 +18,14 @@ import subprocess
 import sys
 import threading
 import time
+from collections import Counter
 from pathlib import Path
 
 from ins_gnss_ros import io as bagio
-from ins_gnss_ros.trial.inputs import read_inputs
-from ins_gnss_ros.trial.outages import GNSS_PREFIX, gnss_windows, in_windows_ns
+from ins_gnss_ros.trial.inputs import check_inputs, read_inputs
+from ins_gnss_ros.trial.outages import gnss_windows, in_gnss_outage
 from ins_gnss_ros.trial.profile import load_profile, profile_with_truth_init
-from ins_gnss_ros.trial.run_folder import new_run_folder, write_summary
+from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_summary
 
 
 def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progress=False,
@@ -50,10 +51,9 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
     out = new_run_folder(out)
     if init_from_truth:
         profile = load_profile(profile_with_truth_init(profile, bag_path, out / "profile.yaml"))
-    inputs = [m for m in messages
-              if not (m.topic.startswith(GNSS_PREFIX) and in_windows_ns(m.t_ns, windows))]
-    withheld = sum(1 for m in messages if m.topic.startswith(GNSS_PREFIX)) - sum(
-        1 for m in inputs if m.topic.startswith(GNSS_PREFIX))
+    inputs = [m for m in messages if not in_gnss_outage(m.topic, m.t_ns, windows)]
+    counts = MessageCounts(played=Counter(m.topic for m in inputs), withheld=Counter(
+        m.topic for m in messages if in_gnss_outage(m.topic, m.t_ns, windows)))
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                      reliability=ReliabilityPolicy.RELIABLE)
     context = rclpy.Context()
@@ -94,11 +94,14 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
                             del copies[i]
                             return
                     writer.write(topic, msg)
+                    counts.recorded[topic] += 1
             return callback
 
         subs = [node.create_subscription(bagio.msg_class(msgtype), topic, recorder(topic), qos)
                 for topic, msgtype in sorted(outputs.items())]
         node_inputs = _subscribed_topics(node, profile.graph)
+        # /clock comes from the player, the default topics from rclpy: not the bag's to feed.
+        check_inputs(bag_path, node_inputs - {"/clock", *_DEFAULT_TOPICS})
         _spin_until(executor, procs, lambda: all(
             p.get_subscription_count() > 0 for t, p in pubs.items() if t in node_inputs)
             and all(s.get_publisher_count() > 0 for s in subs), timeout, "matched endpoints")
@@ -125,8 +128,8 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
         context.try_shutdown()
     with lock:
         writer.close()
-    return write_summary(out, bag_path, profile, outages, windows, withheld,
-                          "processes", float(rate))
+    return write_summary(out, bag_path, profile, outages, windows, counts,
+                         "processes", float(rate))
 
 
 #: Topics every rclpy node publishes: not outputs of the graph.

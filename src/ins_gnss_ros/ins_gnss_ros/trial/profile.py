@@ -13,9 +13,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ins_gnss_ros import io as bagio
 from ins_gnss_ros.nodes import registry
-from ins_gnss_ros.trial.inputs import TRUTH_PREFIX
+from ins_gnss_ros.trial.inputs import TRUTH_PREFIX, iter_topic
 
 
 class ProfileError(ValueError):
@@ -74,7 +73,7 @@ def truth_init_parameters(bag_path) -> dict:
     from ins_gnss_ros.nav.conventions import azimuth_from_yaw
     from ins_gnss_ros.nav.rotations import quat_to_euler
 
-    truth = next(bagio.iter_bag(bag_path, [TRUTH_PREFIX + "state"]), None)
+    truth = next(iter_topic(bag_path, TRUTH_PREFIX + "state"), None)
     if truth is None:
         return {}
     first = truth.msg

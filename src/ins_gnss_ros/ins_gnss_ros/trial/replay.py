@@ -24,12 +24,14 @@ the nodes; what each fault did goes into ``replay.json`` under ``faults``.
 """
 from __future__ import annotations
 
+from collections import Counter
+
 from ins_gnss_ros import io as bagio
 from ins_gnss_ros.nodes import registry
-from ins_gnss_ros.trial.inputs import read_inputs
-from ins_gnss_ros.trial.outages import GNSS_PREFIX, gnss_windows, in_windows_ns
+from ins_gnss_ros.trial.inputs import check_inputs, read_inputs
+from ins_gnss_ros.trial.outages import gnss_windows, in_gnss_outage
 from ins_gnss_ros.trial.profile import ProfileError, load_profile, profile_with_truth_init
-from ins_gnss_ros.trial.run_folder import new_run_folder, write_summary
+from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_summary
 
 #: Bag-time interval of the diagnostics the replay asks every node to publish, ns.
 DIAGNOSTICS_PERIOD_NS = 1_000_000_000
@@ -68,12 +70,16 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
     ------
     ins_gnss_ros.faults.spec.FaultSpecError
         An unusable fault specification (before anything is written).
+    ProfileError
+        A node refused the profile's parameters.
+    ins_gnss_ros.trial.inputs.InputTopicsError
+        No topic of the bag is one the nodes subscribe to.
     """
     import rclpy
     from rclpy.exceptions import ParameterException
     from tqdm import tqdm
 
-    from ins_gnss_ros.nodes.base import InProcessBus, ParameterError
+    from ins_gnss_ros.nodes.base import ParameterError
 
     profile = load_profile(profile_path)
     injector = None
@@ -83,29 +89,31 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
         injector = FaultInjector(load_fault_spec(faults))
     messages = read_inputs(bag_path)
     windows = gnss_windows(messages, outages)
+    counts = MessageCounts(withheld=Counter(
+        m.topic for m in messages if in_gnss_outage(m.topic, m.t_ns, windows)))
     stream = messages
     if injector is not None:
         # Outages are decided on the bag's own time; faults act on what is left.
         stream = (bagio.BagMessage(topic, t_ns, msg) for t_ns, topic, msg in injector(
             (m.t_ns, m.topic, m.msg) for m in messages
-            if not (m.topic.startswith(GNSS_PREFIX) and in_windows_ns(m.t_ns, windows))))
+            if not in_gnss_outage(m.topic, m.t_ns, windows)))
     out = new_run_folder(out)
     if init_from_truth:
         profile = load_profile(profile_with_truth_init(profile, bag_path, out / "profile.yaml"))
     writer = bagio.BagWriter(out / "bag")
     context = rclpy.Context()
     rclpy.init(context=context, args=[])
-    bus = InProcessBus()
+    bus = _bus()
     feeding = [None]  # the input message being delivered: not an output
 
     def record(topic, msg):
         if msg is not feeding[0]:
             writer.write(topic, msg, bagio.msg_stamp_ns(msg) if hasattr(msg, "header")
                          else bus.now_ns)
+            counts.recorded[topic] += 1
 
     bus.recorders.append(record)
     nodes = []
-    withheld = 0
     try:
         for name in profile.graph:
             try:
@@ -118,6 +126,7 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
             except Exception as err:  # rcl's own params-file parser
                 raise ProfileError(f"{profile.path}: node {name}: "
                                    f"{bagio.first_line(err)}") from None
+        check_inputs(bag_path, bus.inputs)
         next_diag = messages[0].t_ns + DIAGNOSTICS_PERIOD_NS if messages else 0
         for m in tqdm(stream, disable=not progress, unit="msg", desc="replay",
                       total=len(messages)):
@@ -127,12 +136,13 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
                     node.diag.publish()
                 bus.drain()
                 next_diag += DIAGNOSTICS_PERIOD_NS
-            if m.topic.startswith(GNSS_PREFIX) and in_windows_ns(m.t_ns, windows):
-                withheld += 1
+            # (Also a message a fault moved into a window: the outage withholds it too.)
+            if in_gnss_outage(m.topic, m.t_ns, windows):
                 continue
             bus.now_ns = m.t_ns
             feeding[0] = m.msg
             bus.publish(m.topic, m.msg)
+            counts.played[m.topic] += 1
             bus.drain()
         feeding[0] = None
     finally:
@@ -140,8 +150,23 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
             node.destroy_node()
         context.try_shutdown()
     writer.close()
-    if injector is not None:
-        withheld = sum(1 for m in messages
-                       if m.topic.startswith(GNSS_PREFIX) and in_windows_ns(m.t_ns, windows))
-    return write_summary(out, bag_path, profile, outages, windows, withheld, "in-process", 0.0,
-                          faults=None if injector is None else injector.summary())
+    return write_summary(out, bag_path, profile, outages, windows, counts, "in-process", 0.0,
+                         faults=None if injector is None else injector.summary())
+
+
+def _bus():
+    # Defined when a replay runs: nodes.base imports rclpy, which this module loads only then.
+    from ins_gnss_ros.nodes.base import InProcessBus
+
+    class Bus(InProcessBus):
+        """The bus, keeping the topics the nodes subscribe to: the graph's inputs."""
+
+        def __init__(self):
+            super().__init__()
+            self.inputs = set()
+
+        def subscribe(self, topic, callback):
+            self.inputs.add(self.resolve(topic))
+            super().subscribe(topic, callback)
+
+    return Bus()
