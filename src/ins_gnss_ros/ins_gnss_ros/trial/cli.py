@@ -123,8 +123,9 @@ def _replay_args(p):
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
     try:
+        # Parsing imports the simulators: a Ctrl-C then is an interruption like any other.
+        args = build_parser().parse_args(argv)
         return COMMANDS[args.command](args)
     except KeyboardInterrupt:
         print("trial: interrupted", file=sys.stderr)

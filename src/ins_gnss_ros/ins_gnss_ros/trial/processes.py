@@ -224,12 +224,17 @@ def _wait_quiet(writer, lock, procs, quiet_s, timeout) -> None:
 
 
 def stop_processes(procs, timeout=10.0) -> None:
-    """SIGINT every running node process (they shut down cleanly), then wait; kill what is
-    still running after ``timeout`` s."""
+    """SIGTERM every running node process, then wait; kill what is still running after
+    ``timeout`` s.
+
+    SIGTERM, not SIGINT: a node that is up shuts down cleanly on either (``nodes/base.py``
+    ``run``), but one still starting (importing, before rclpy handles signals) would print a
+    KeyboardInterrupt traceback on SIGINT, and ends silently on SIGTERM.
+    """
     procs = list(procs)
     for p in procs:
         if p.poll() is None:
-            p.send_signal(signal.SIGINT)
+            p.send_signal(signal.SIGTERM)
     for p in procs:
         try:
             p.wait(timeout)
