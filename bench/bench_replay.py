@@ -59,7 +59,8 @@ def main() -> None:
 
     from ins_gnss_ros import io as bagio
     from ins_gnss_ros.io import cdr
-    from ins_gnss_ros.trial.replay import replay, replay_offline
+    from ins_gnss_ros.trial.offline import replay_offline
+    from ins_gnss_ros.trial.replay import replay
     from ins_gnss_ros.trial.simulate import SimOptions, simulate
 
     work = Path(args.keep or tempfile.mkdtemp(prefix="bench_replay_"))

@@ -157,7 +157,7 @@ def soak(duration: float, rate: float, profile: Path, warmup: float = 20.0) -> d
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
     from ins_gnss_ros.io import msg_class
-    from ins_gnss_ros.trial.replay import stop_processes
+    from ins_gnss_ros.trial.processes import stop_processes
 
     names = graph_nodes(profile)
     if not names:

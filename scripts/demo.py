@@ -26,7 +26,8 @@ SKIP_S = 10.0
 
 def main() -> int:
     from ins_gnss_ros.trial.evaluate import markdown_table
-    from ins_gnss_ros.trial.replay import load_profile, replay
+    from ins_gnss_ros.trial.profile import load_profile
+    from ins_gnss_ros.trial.replay import replay
     from ins_gnss_ros.trial.report import evaluate_run
 
     started = time.monotonic()

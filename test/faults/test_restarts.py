@@ -33,7 +33,7 @@ RESTART_S = 15.0  # bag time of the restart, s after the first message
 
 @pytest.fixture(scope="module")
 def trial(tmp_path_factory):
-    from ins_gnss_ros.trial.replay import load_profile, profile_with_truth_init
+    from ins_gnss_ros.trial.profile import load_profile, profile_with_truth_init
 
     root = tmp_path_factory.mktemp("restarts")
     bag = bench_faults.simulate_car(root / "car", DURATION, 50.0)
@@ -53,7 +53,8 @@ def _run_with_restart(bag, profile, restart: str | None, out: Path):
 
     from ins_gnss_ros.nodes import registry
     from ins_gnss_ros.nodes.base import InProcessBus
-    from ins_gnss_ros.trial.replay import load_profile, read_inputs
+    from ins_gnss_ros.trial.inputs import read_inputs
+    from ins_gnss_ros.trial.profile import load_profile
 
     graph = load_profile(profile).graph
     messages = read_inputs(bag)
@@ -186,7 +187,7 @@ def test_restarted_ekf_realigns_and_corrects_the_strapdown(trial, tmp_path):
 # ---------------------------------------------------------------------------------------------
 def test_sigkilled_strapdown_process_is_restarted_and_resynchronised(trial, tmp_path):
     pytest.importorskip("rclpy")
-    from ins_gnss_ros.trial.replay import replay_processes
+    from ins_gnss_ros.trial.processes import replay_processes
 
     bag, profile = trial
     script = Path(sys.executable).parent / "strapdown"

@@ -10,11 +10,13 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import pytest
 
+from ins_gnss_ros import io as bagio
 from ins_gnss_ros.trial.cli import main
-from ins_gnss_ros.trial.replay import load_profile
+from ins_gnss_ros.trial.profile import load_profile
 from ins_gnss_ros.trial.supervisor import Supervisor
 
 STRAPDOWN_PROFILE = "strapdown:\n  ros__parameters:\n    init.latitude_deg: 10.0\n"
@@ -33,7 +35,14 @@ def test_simulate_replay_evaluate_json(workdir, capsys):
     d = workdir
     assert main(["replay", str(d / "bag"), "--config", str(d / "profile.yaml"),
                  "--init-from-truth", "--out", str(d / "run")]) == 0
-    capsys.readouterr()
+    # What was replayed: messages in, withheld and out per topic (the truth never goes in).
+    lines = capsys.readouterr().out.splitlines()
+    n_delta = len(bagio.read_bag(d / "bag", ["imu/delta"]))
+    assert lines[0].startswith("replayed ") and "in-process" in lines[0]
+    assert lines[1].split() == ["topic", "in", "withheld", "out"]
+    assert [f"{n_delta:,}", "0", "0"] == next(
+        line.split()[1:] for line in lines if line.split()[0] == "/imu/delta")
+    assert not any("truth" in line for line in lines)
     assert main(["evaluate", str(d / "run"), "--json"]) == 0
     out = capsys.readouterr().out
     metrics = json.loads(out)  # one JSON object and nothing else
@@ -154,3 +163,43 @@ def test_run_supervisor_restarts_a_crashed_node(workdir):
         runner.join(20)
     assert status == [0] and supervisor.events[-1] == "stopped"
     assert record.process.poll() is not None  # stopped with the supervisor
+
+
+def _children(pid):
+    """Process ids of the children of ``pid`` (None where /proc does not list them)."""
+    try:
+        return (Path("/proc") / str(pid) / "task" / str(pid) / "children").read_text().split()
+    except OSError:
+        return None
+
+
+@pytest.mark.parametrize("command, status", [(["run"], 0),
+                                             (["replay", "--rate", "1", "--processes"], 130)])
+def test_ctrl_c_stops_the_graph_without_a_traceback(workdir, tmp_path, command, status):
+    """Ctrl-C at a terminal: SIGINT to the foreground process group, here 0.5 s after the first
+    node process started (still importing: the hardest case, where a node given SIGINT prints a
+    KeyboardInterrupt traceback). The nodes are stopped, trial ends with its status and no
+    traceback, from itself or from a node."""
+    argv = [str(Path(sys.executable).parent / "trial"), command[0]]
+    if command[0] == "replay":
+        argv += [str(workdir / "bag"), "--out", str(tmp_path / "out"), *command[1:]]
+    argv += ["--config", str(workdir / "profile.yaml")]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)  # a job of its own, like a shell's
+    try:
+        deadline = time.monotonic() + 30
+        while not _children(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        nodes = _children(proc.pid)
+        if not nodes:
+            pytest.skip(f"no node process started (status {proc.poll()})")
+        time.sleep(0.5)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)  # the nodes hold stderr too: they are gone
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert "Traceback" not in err, err
+    assert proc.returncode == status, err
+    assert not any((Path("/proc") / pid).exists() for pid in nodes)

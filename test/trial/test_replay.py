@@ -13,9 +13,13 @@ import yaml
 from ins_gnss_ros import io as bagio
 from ins_gnss_ros.io import messages_equal
 from ins_gnss_ros.trial import contract_messages as msgs
-from ins_gnss_ros.trial.replay import (ProfileError, gnss_windows, load_profile,
-                                       profile_with_truth_init, replay, replay_offline,
-                                       replay_processes)
+from ins_gnss_ros.trial.cli import main
+from ins_gnss_ros.trial.inputs import InputTopicsError
+from ins_gnss_ros.trial.offline import replay_offline
+from ins_gnss_ros.trial.outages import gnss_windows
+from ins_gnss_ros.trial.processes import replay_processes
+from ins_gnss_ros.trial.profile import ProfileError, load_profile, profile_with_truth_init
+from ins_gnss_ros.trial.replay import replay
 from ins_gnss_ros.trial.simulate import SimOptions, simulate
 
 DURATION = 6.0
@@ -150,6 +154,67 @@ def test_outages_withhold_gnss_and_are_recorded(tmp_path, profile):
     assert saved["outage_windows_ns"] == [[t0 + 10 * 10**9, t0 + 15 * 10**9],
                                           [t0 + 25 * 10**9, t0 + 30 * 10**9]]
     assert saved["outages"] == "5:15:10"
+    # What went in and came out, per topic: the outputs as the output bag holds them.
+    counts = saved["messages"]
+    assert counts["/imu/delta"] == {"in": 600, "withheld": 0, "out": 0}
+    assert counts["/gnss/fix"] == {"in": 51, "withheld": 10, "out": 0}
+    recorded = bagio.read_bag(tmp_path / "out" / "bag")
+    outputs = {t for t in counts if counts[t]["out"]}
+    assert outputs == {m.topic for m in recorded} == {"/ins/state", "/diagnostics"}
+    assert all(counts[t]["out"] == sum(m.topic == t for m in recorded) for t in outputs)
+    assert counts["/diagnostics"]["out"] == 60  # once per second of bag time
+
+
+def test_relative_topic_names_replay_like_absolute_ones(first_run, car_bag, profile, tmp_path,
+                                                        relative_copy):
+    """A bag recorded as ``imu/delta`` (no leading ``/``) gives the identical outputs, under
+    fully qualified names, in-process (truth init included) and offline."""
+    bag = relative_copy(car_bag, tmp_path / "relative")
+    out, summary = first_run
+    again = replay(bag, profile, tmp_path / "r", init_from_truth=True)
+    assert again["messages"] == summary["messages"]
+    a, b = bagio.read_bag(out / "bag"), bagio.read_bag(tmp_path / "r" / "bag")
+    assert len(a) == len(b) > 0 and {m.topic for m in b} == {"/ins/state", "/diagnostics"}
+    assert all(x.topic == y.topic and x.t_ns == y.t_ns and messages_equal(x.msg, y.msg)
+               for x, y in zip(a, b))
+    offline = tmp_path / "offline.yaml"
+    offline.write_text(PROFILE + "navigator:\n  ros__parameters:\n    imu_grade: navigation\n")
+    replay_offline(car_bag, offline, tmp_path / "oa")
+    replay_offline(bag, offline, tmp_path / "or")
+    a, b = bagio.read_bag(tmp_path / "oa" / "bag"), bagio.read_bag(tmp_path / "or" / "bag")
+    assert len(a) == len(b) > 0
+    assert all(x.topic == y.topic and x.t_ns == y.t_ns and messages_equal(x.msg, y.msg)
+               for x, y in zip(a, b))
+
+
+@pytest.fixture
+def magnetometer_bag(tmp_path):
+    """A bag whose only topic (imu/mag) neither the strapdown nor the navigator reads."""
+    t0 = 1_767_225_600 * 10**9
+    with bagio.BagWriter(tmp_path / "mag_only") as writer:
+        for k in range(10):
+            writer.write("imu/mag", msgs.mag_msg(t0 + k * 10**8, [2e-5, 0.0, -4e-5], 1e-14))
+    return tmp_path / "mag_only"
+
+
+def test_a_bag_matching_no_input_is_refused(magnetometer_bag, profile, tmp_path, capsys):
+    with pytest.raises(InputTopicsError, match="/imu/mag.*/imu/delta"):
+        replay(magnetometer_bag, profile, tmp_path / "a")
+    offline = tmp_path / "offline.yaml"
+    offline.write_text(PROFILE + "navigator:\n  ros__parameters:\n    imu_grade: navigation\n")
+    with pytest.raises(InputTopicsError, match="/imu/mag.*/gnss/fix"):
+        replay_offline(magnetometer_bag, offline, tmp_path / "b")
+    assert main(["replay", str(magnetometer_bag), "--config", str(profile), "--out",
+                 str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("trial: error: ") and "\n" not in err and "/imu/mag" in err
+
+
+def test_a_bag_matching_no_input_is_refused_by_the_processes(magnetometer_bag, profile,
+                                                              tmp_path):
+    """The node processes' subscriptions, found by graph queries, are the inputs."""
+    with pytest.raises(InputTopicsError, match="/imu/mag.*/imu/delta"):
+        replay_processes(magnetometer_bag, profile, tmp_path / "p", rate=1.0)
 
 
 def test_bad_profiles_are_one_line_errors(tmp_path, car_bag):

@@ -116,7 +116,7 @@ def run_batch(config, out, scheduler=None, workers=2, **task_options) -> dict:
     dict
         path (of batch.json), runs (per-run results), aggregate, failed (count).
     """
-    from ins_gnss_ros.trial.replay import load_profile
+    from ins_gnss_ros.trial.profile import load_profile
 
     load_profile(config)  # bad profile: one error now, not one per run
     out = Path(out)

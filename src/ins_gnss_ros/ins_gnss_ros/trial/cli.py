@@ -132,8 +132,9 @@ def _replay_args(p):
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
     try:
+        # Parsing imports the simulators: a Ctrl-C then is an interruption like any other.
+        args = build_parser().parse_args(argv)
         return COMMANDS[args.command](args)
     except KeyboardInterrupt:
         print("trial: interrupted", file=sys.stderr)
@@ -176,7 +177,10 @@ def cmd_import(args) -> int:
 
 
 def cmd_replay(args) -> int:
-    from ins_gnss_ros.trial import replay
+    from ins_gnss_ros.trial.offline import replay_offline
+    from ins_gnss_ros.trial.processes import replay_processes
+    from ins_gnss_ros.trial.replay import replay
+    from ins_gnss_ros.trial.run_folder import counts_table
 
     if args.processes and args.rate is None:
         raise ValueError("--processes needs --rate (e.g. --rate 1)")
@@ -190,13 +194,15 @@ def cmd_replay(args) -> int:
         if args.processes or args.init_from_truth:
             raise ValueError("--offline runs no nodes: it takes neither --processes nor "
                              "--init-from-truth")
-        summary = replay.replay_offline(args.bag, args.config, args.out, outages=args.outages,
-                                        progress=_progress(args))
+        summary = replay_offline(args.bag, args.config, args.out, outages=args.outages,
+                                progress=_progress(args))
     else:
-        run = replay.replay_processes if args.processes else replay.replay
+        run = replay_processes if args.processes else replay
         kwargs = {"rate": args.rate} if args.processes else {"faults": args.faults}
         summary = run(args.bag, args.config, args.out, outages=args.outages,
                       progress=_progress(args), init_from_truth=args.init_from_truth, **kwargs)
+    print(f"replayed {args.bag} ({summary['mode']}, {', '.join(summary['graph'])}):")
+    print("\n".join("  " + line for line in counts_table(summary["messages"])))
     print(f"recorded {', '.join(summary['topics'])} into {args.out}")
     return 0
 
@@ -238,7 +244,7 @@ def cmd_batch(args) -> int:
 
 
 def cmd_run(args) -> int:
-    from ins_gnss_ros.trial.replay import load_profile
+    from ins_gnss_ros.trial.profile import load_profile
     from ins_gnss_ros.trial.supervisor import Supervisor
 
     profile = load_profile(args.config)

@@ -12,6 +12,8 @@ import numpy as np
 #: No outage starts within this many seconds of the last GNSS epoch, so that each outage is
 #: followed by GNSS again and its end-of-outage drift is observed.
 DEFAULT_END_MARGIN_S = 30.0
+#: Topics withheld during an outage window (prefix, absolute names).
+GNSS_PREFIX = "/gnss/"
 
 
 @dataclass(frozen=True)
@@ -99,11 +101,12 @@ def outage_windows(spec, t_start, t_end, end_margin=DEFAULT_END_MARGIN_S):
 def in_outage(t, windows):
     """True where time(s) `t` fall inside any [start, end) window of `windows`.
 
-    `windows` is (k, 2), sorted by start and not overlapping, as `outage_windows` returns.
+    `windows` is (k, 2), sorted by start and not overlapping, as `outage_windows` and
+    `gnss_windows` return. Integer times and windows (ns) are compared as integers: exactly.
     """
     shape = np.shape(t)
-    t = np.atleast_1d(np.asarray(t, float)).ravel()
-    windows = np.asarray(windows, float).reshape(-1, 2)
+    t = np.atleast_1d(np.asarray(t)).ravel()
+    windows = np.asarray(windows).reshape(-1, 2)
     # searchsorted finds the last window starting at or before t; windows do not overlap.
     index = np.searchsorted(windows[:, 0], t, side="right") - 1
     inside = index >= 0
@@ -114,3 +117,22 @@ def in_outage(t, windows):
 def gnss_mask(t, windows):
     """True for GNSS epochs `t` to keep (outside every outage window), the mask a replay applies."""
     return ~in_outage(t, windows)
+
+
+def in_gnss_outage(topic, t_ns, windows) -> bool:
+    """Whether a replay withholds the message on ``topic`` (absolute) stamped ``t_ns``: a GNSS
+    topic inside one of the ``windows`` of :func:`gnss_windows`."""
+    return topic.startswith(GNSS_PREFIX) and bool(in_outage(t_ns, windows))
+
+
+def gnss_windows(messages, spec) -> np.ndarray:
+    """Outage windows (ns, shape (k, 2)) of a ``LEN:PERIOD[:FIRST]`` spec over the GNSS span of
+    ``messages`` (:class:`~ins_gnss_ros.io.BagMessage` list); empty without GNSS."""
+    t = [m.t_ns for m in messages if m.topic.startswith(GNSS_PREFIX)]
+    if spec is None or not t:
+        return np.zeros((0, 2), np.int64)
+    # Work relative to the first GNSS epoch: 1e9-scale seconds would lose sub-us resolution.
+    t0 = t[0]
+    windows = outage_windows(parse_outage_spec(spec), 0.0, (t[-1] - t0) * 1e-9)
+    return t0 + np.round(windows * 1e9).astype(np.int64)
+

@@ -20,6 +20,7 @@ from ins_gnss_ros import io as bagio
 from ins_gnss_ros.nav.lever_arm import lever_arm_position
 from ins_gnss_ros.nav.rotations import quat_normalize, quat_to_dcm
 from ins_gnss_ros.trial.evaluate import Trajectory, _subset, evaluate, markdown_table
+from ins_gnss_ros.trial.inputs import iter_topic
 
 #: Output-bag topics.
 STATE_TOPIC, ODOM_TOPIC, TRUTH_TOPIC = "/ins/state", "/nav/odom", "/truth/state"
@@ -113,7 +114,7 @@ def load_run(out, truth_bag=None):
     truth_bag = truth_bag or summary.get("input_bag")
     if truth_bag is None:
         raise ValueError(f"{out}: no replay.json naming the input bag: give --truth BAG")
-    truth_msgs = bagio.read_bag(truth_bag, [TRUTH_TOPIC])
+    truth_msgs = list(iter_topic(truth_bag, TRUTH_TOPIC))
     if not truth_msgs:
         raise ValueError(f"{truth_bag}: no {TRUTH_TOPIC} messages to evaluate against")
     t0_ns = truth_msgs[0].t_ns

@@ -1,12 +1,15 @@
 """``trial run``: the profile's node graph on real sensors, as supervised processes.
 
-Each node of the graph (see :func:`ins_gnss_ros.trial.replay.load_profile`) runs as its console
+Each node of the graph (see :func:`ins_gnss_ros.trial.profile.load_profile`) runs as its console
 script ``<venv>/bin/<name> --ros-args --params-file PROFILE``. A node that dies is reported on
 stderr and restarted after a back-off that doubles per restart (1, 2, 4 ... s, at most
 :data:`MAX_BACKOFF_S`), up to ``max_restarts`` times; then the supervisor stops the graph and
 exits 1. A node that exits with status 2 rejected its parameters: restarting cannot help, so the
-supervisor stops with status 2 at once. SIGINT/SIGTERM stop every node with SIGINT (their clean
-shutdown) and exit 0.
+supervisor stops with status 2 at once. SIGINT, SIGTERM and SIGHUP stop every node
+(:func:`~ins_gnss_ros.trial.processes.stop_processes`: SIGTERM, their clean shutdown) and exit 0.
+The nodes run in a process group of their own: a Ctrl-C at the terminal, which signals the whole
+foreground group, reaches the supervisor alone, so each node is stopped once and in order (a
+node signalled while still starting up, or twice while shutting down, would print a traceback).
 """
 from __future__ import annotations
 
@@ -66,14 +69,15 @@ class Supervisor:
         print(f"supervisor: {text}", file=self.log, flush=True)
 
     def stop(self, *_signal_args) -> None:
-        """Ask :meth:`run` to stop the graph (also the SIGINT/SIGTERM handler)."""
+        """Ask :meth:`run` to stop the graph (also the SIGINT/SIGTERM/SIGHUP handler)."""
         self._stop.set()
 
     def run(self, install_signal_handlers=True) -> int:
         """Supervise until stopped; return the exit status (0, 1 gave up, 2 bad parameters)."""
         if install_signal_handlers:
-            signal.signal(signal.SIGINT, self.stop)
-            signal.signal(signal.SIGTERM, self.stop)
+            # SIGHUP too: the nodes, in their own process group, no longer get the terminal's.
+            for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+                signal.signal(signum, self.stop)
         status = 0
         try:
             for record in self.nodes.values():
@@ -87,7 +91,7 @@ class Supervisor:
         return status
 
     def _start(self, record: NodeRecord) -> None:
-        record.process = subprocess.Popen(record.argv)
+        record.process = subprocess.Popen(record.argv, process_group=0)
         self.report(f"started {record.name} (pid {record.process.pid})")
 
     def _check(self) -> int:
@@ -114,7 +118,7 @@ class Supervisor:
         return 0
 
     def _shutdown(self, timeout=10.0) -> None:
-        from .replay import stop_processes
+        from .processes import stop_processes
 
         stop_processes([r.process for r in self.nodes.values() if r.process is not None],
                        timeout)

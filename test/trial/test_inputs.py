@@ -1,0 +1,46 @@
+"""What a replay reads from a bag: inputs under absolute names, truth apart, matching checked.
+
+Truth: small bags written by ``BagWriter`` (absolute names) and their copies with relative names.
+"""
+import pytest
+
+from ins_gnss_ros import io as bagio
+from ins_gnss_ros.trial import contract_messages as msgs
+from ins_gnss_ros.trial.inputs import (InputTopicsError, check_inputs, iter_topic, read_inputs)
+
+T0 = 1_767_225_600 * 10**9
+
+
+@pytest.fixture
+def bags(tmp_path, relative_copy):
+    with bagio.BagWriter(tmp_path / "abs") as writer:
+        for k in range(1, 11):
+            writer.write("imu/delta", msgs.delta_msg(T0 + k * 10**8, [0, 0, 0], [0, 0, 0.981],
+                                                      0.1))
+        writer.write("gnss/fix", msgs.fix_msg(T0 + 5 * 10**8, 0.1, 0.2, 3.0, [1, 1, 1]))
+        writer.write("truth/state", msgs.ins_state_msg(T0, 0.1, 0.2, 3.0, [0, 0, 0],
+                                                       [1, 0, 0, 0]))
+    return tmp_path / "abs", relative_copy(tmp_path / "abs", tmp_path / "rel")
+
+
+def test_relative_topic_names_read_as_absolute(bags):
+    absolute, relative = bags
+    assert set(bagio.bag_topics(relative)) == {"imu/delta", "gnss/fix", "truth/state"}
+    a, r = read_inputs(absolute), read_inputs(relative)
+    assert [m.topic for m in r] == [m.topic for m in a] == ["/imu/delta"] * 5 + ["/gnss/fix"] + \
+        ["/imu/delta"] * 5
+    assert all(x.t_ns == y.t_ns and bagio.messages_equal(x.msg, y.msg) for x, y in zip(a, r))
+    for bag in bags:
+        for name in ("truth/state", "/truth/state"):
+            (truth,) = iter_topic(bag, name)
+            assert truth.topic == "/truth/state" and truth.t_ns == T0
+
+
+def test_a_bag_matching_no_input_is_one_line_naming_both(bags):
+    check_inputs(bags[1], {"/imu/delta", "/ins/correction"})  # relative names match
+    with pytest.raises(InputTopicsError) as info:
+        check_inputs(bags[1], {"/imu/data_raw", "/ins/correction"})
+    text = str(info.value)
+    assert "\n" not in text and isinstance(info.value, ValueError)
+    for name in ("imu/delta", "gnss/fix", "truth/state", "/imu/data_raw", "/ins/correction"):
+        assert name in text
