@@ -29,10 +29,6 @@ STRAPDOWN = """\
 strapdown:
   ros__parameters:
     init.latitude_deg: 0.0
-navigator:
-  ros__parameters:
-    imu_grade: mems_adis16405
-    lever_arm: [0.0, 0.0, 1.5]
 """
 FULL_GRAPH = STRAPDOWN + """\
 imu_preprocessor:
@@ -72,8 +68,8 @@ def main() -> None:
     # The imu/delta trial (strapdown alone, offline path); --graph-only needs only imu/data_raw.
     bag = None if args.graph_only else simulate("car", args.duration, 1, work / "car",
                                                 SimOptions(imu_topic="delta"))
-    offline = ("offline filter path (navigator)", replay_offline, bag, strapdown, "offline", {},
-               100.0)
+    offline = ("offline filter path (imu_preprocessor and ekf cores)", replay_offline, bag, full,
+               "offline", {}, 100.0)
 
     def full_graph(raw):
         return ("full graph imu_preprocessor+strapdown+ekf, in-process", replay, raw, full,
@@ -82,7 +78,7 @@ def main() -> None:
     if args.offline_only:
         # Loads the numba kernels (compiled machine code from the cache), untimed.
         replay_offline(simulate("car", 10.0, 1, work / "car_warmup", SimOptions(imu_topic="delta")),
-                       strapdown, work / "warmup")
+                       full, work / "warmup")
         runs = (offline,)
     elif args.graph_only:
         # Loads the numba kernels and the message modules, untimed.

@@ -178,7 +178,7 @@ def test_relative_topic_names_replay_like_absolute_ones(first_run, car_bag, prof
     assert all(x.topic == y.topic and x.t_ns == y.t_ns and messages_equal(x.msg, y.msg)
                for x, y in zip(a, b))
     offline = tmp_path / "offline.yaml"
-    offline.write_text(PROFILE + "navigator:\n  ros__parameters:\n    imu_grade: navigation\n")
+    offline.write_text(PROFILE + "ekf:\n  ros__parameters:\n    imu_grade: navigation\n")
     replay_offline(car_bag, offline, tmp_path / "oa")
     replay_offline(bag, offline, tmp_path / "or")
     a, b = bagio.read_bag(tmp_path / "oa" / "bag"), bagio.read_bag(tmp_path / "or" / "bag")
@@ -189,7 +189,7 @@ def test_relative_topic_names_replay_like_absolute_ones(first_run, car_bag, prof
 
 @pytest.fixture
 def magnetometer_bag(tmp_path):
-    """A bag whose only topic (imu/mag) neither the strapdown nor the navigator reads."""
+    """A bag whose only topic (imu/mag) neither the strapdown nor the offline filter reads."""
     t0 = 1_767_225_600 * 10**9
     with bagio.BagWriter(tmp_path / "mag_only") as writer:
         for k in range(10):
@@ -201,7 +201,7 @@ def test_a_bag_matching_no_input_is_refused(magnetometer_bag, profile, tmp_path,
     with pytest.raises(InputTopicsError, match="/imu/mag.*/imu/delta"):
         replay(magnetometer_bag, profile, tmp_path / "a")
     offline = tmp_path / "offline.yaml"
-    offline.write_text(PROFILE + "navigator:\n  ros__parameters:\n    imu_grade: navigation\n")
+    offline.write_text(PROFILE + "ekf:\n  ros__parameters:\n    imu_grade: navigation\n")
     with pytest.raises(InputTopicsError, match="/imu/mag.*/gnss/fix"):
         replay_offline(magnetometer_bag, offline, tmp_path / "b")
     assert main(["replay", str(magnetometer_bag), "--config", str(profile), "--out",
@@ -249,14 +249,15 @@ def test_nodes_as_processes_on_dds(car_bag, profile, tmp_path):
 
 
 def test_offline_filter_path_records_states_and_covariances(car_bag, tmp_path):
-    """--offline: the navigator over the bag; the standing car's GNSS-aided position stays
-    within the 0.5 m fix noise, and nav/odom carries a positive-definite pose covariance."""
+    """--offline: the ekf section's filter over the bag without the graph; the standing car's
+    GNSS-aided position stays within the 0.5 m fix noise, nav/odom carries a positive-definite
+    pose covariance, and the outputs are the graph's topics."""
     profile = tmp_path / "offline.yaml"
-    profile.write_text(PROFILE + "navigator:\n  ros__parameters:\n    imu_grade: navigation\n"
+    profile.write_text(PROFILE + "ekf:\n  ros__parameters:\n    imu_grade: navigation\n"
                        "    lever_arm: [0.0, 0.0, 1.5]\n")
     summary = replay_offline(car_bag, profile, tmp_path / "o")
     assert summary["mode"] == "offline"
-    assert set(summary["topics"]) == {"/ins/state", "/nav/odom"}
+    assert set(summary["topics"]) == {"/ins/state", "/nav/odom", "/nav/fix", "/nav/status"}
     states = _states(tmp_path / "o")
     truth = bagio.read_bag(car_bag, ["truth/state"])[-1].msg
     last = states[-1]
@@ -267,7 +268,7 @@ def test_offline_filter_path_records_states_and_covariances(car_bag, tmp_path):
     pose = np.reshape(odom.pose.covariance, (6, 6))
     assert np.all(np.linalg.eigvalsh(pose) > 0) and pose[0, 0] < 0.5 ** 2
     bad = tmp_path / "bad.yaml"
-    bad.write_text(PROFILE + "navigator:\n  ros__parameters:\n    imu_grade: potato\n")
+    bad.write_text(PROFILE + "ekf:\n  ros__parameters:\n    imu_grade: potato\n")
     with pytest.raises(ProfileError, match="imu_grade"):
         replay_offline(car_bag, bad, tmp_path / "bad")
 

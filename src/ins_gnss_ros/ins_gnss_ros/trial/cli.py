@@ -79,8 +79,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--processes", action="store_true",
                    help="run the nodes as processes on DDS with /clock (needs --rate)")
     p.add_argument("--offline", action="store_true",
-                   help="offline filter path: the navigator of the profile's 'navigator' "
-                        "section instead of the node graph")
+                   help="offline filter path: the profile's imu_preprocessor and ekf "
+                        "sections run without the node graph (no strapdown node)")
     p.add_argument("--faults", default=None, metavar="FILE",
                    help="fault specification (YAML) applied to the bag's messages on their way "
                         "to the nodes (in-process replay only)")
