@@ -2,8 +2,8 @@
 
 Each cell simulates a drive (``trial simulate``: IMU rate and grade, stamp jitter, GNSS rate,
 with or without velocity and covariance), replays it through the node graph of
-config/default.yaml (``trial replay``, in-process, the sensor-source nodes left out as for any
-recorded bag) and judges the outputs against the simulation's truth:
+config/default.yaml (``trial replay``, in-process; a replay leaves the sensor-source nodes
+out) and judges the outputs against the simulation's truth:
 
 * alignment: time from the start until ``nav/status`` first says NAVIGATING, s;
 * horizontal RMS of the corrected ``ins/state`` after alignment, and its ratio to the RMS of the
@@ -28,14 +28,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 TRIAL = [sys.executable, "-m", "ins_gnss_ros.trial.cli"]
-#: Nodes that produce sensor data: a replay's sensors are the bag.
-SOURCES = ("gnss_driver", "gnss_simulator")
-
-
+PROFILE = REPO / "config" / "default.yaml"
 @dataclass(frozen=True)
 class Cell:
     name: str
@@ -52,16 +48,6 @@ CELLS += [Cell("fix only 1 Hz", ("--gnss-rate", "1", "--no-gnss-vel")),
           Cell("fix + velocity, no covariance", ("--no-gnss-cov",)),
           Cell("RTK 2 cm", ("--gnss-sigma-h", "0.02", "--gnss-sigma-v", "0.04"))]
 SHORT = [CELLS[0], CELLS[3], CELLS[10]]
-
-
-def graph_profile(tmp: Path) -> Path:
-    """config/default.yaml without the sensor-source nodes."""
-    data = yaml.safe_load((REPO / "config" / "default.yaml").read_text())
-    for name in SOURCES:
-        data.pop(name, None)
-    path = tmp / "graph.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    return path
 
 
 def judge(bag: Path, out: Path) -> dict:
@@ -131,13 +117,13 @@ def judge(bag: Path, out: Path) -> dict:
             "valid_fixes": len(valid)}
 
 
-def run_cell(cell: Cell, tmp: Path, profile: Path, duration: float, seed: int) -> dict:
+def run_cell(cell: Cell, tmp: Path, duration: float, seed: int) -> dict:
     tag = "".join(c if c.isalnum() else "_" for c in cell.name)
     bag, out = tmp / f"{tag}_bag", tmp / f"{tag}_out"
     subprocess.run(TRIAL + ["simulate", "--scenario", "car", "--duration", str(duration),
                             "--seed", str(seed), *cell.simulate, "--out", str(bag)],
                    check=True, cwd=REPO, capture_output=True)
-    subprocess.run(TRIAL + ["replay", str(bag), "--config", str(profile), "--out", str(out)],
+    subprocess.run(TRIAL + ["replay", str(bag), "--config", str(PROFILE), "--out", str(out)],
                    check=True, cwd=REPO, capture_output=True)
     return judge(bag, out)
 
@@ -155,9 +141,8 @@ def main(argv=None) -> int:
     if args.json:
         with tempfile.TemporaryDirectory() as tmp:
             tmp = Path(tmp)
-            profile = graph_profile(tmp)
             for cell in cells:
-                result = run_cell(cell, tmp, profile, args.duration, args.seed)
+                result = run_cell(cell, tmp, args.duration, args.seed)
                 print(json.dumps({"cell": cell.name, **{k: float(v) for k, v in result.items()}}),
                       flush=True)
         return 0
@@ -166,9 +151,8 @@ def main(argv=None) -> int:
     print("|---|---:|---:|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        profile = graph_profile(tmp)
         for cell in cells:
-            r = run_cell(cell, tmp, profile, args.duration, args.seed)
+            r = run_cell(cell, tmp, args.duration, args.seed)
             print(f"| {cell.name} | {r['align_s']:.1f} | {r['rms_m']:.2f} | {r['raw_m']:.2f} | "
                   f"{r['ratio']:.2f} | {r['valid_early']} | {r['valid_beyond_5_sigma']} of "
                   f"{r['valid_fixes']} |", flush=True)

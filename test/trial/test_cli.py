@@ -108,7 +108,7 @@ def _bad_cases(d):
         "unknown import": ["import", "gpx", "x", "--out", str(d / "o8")],
         "bad duration": ["simulate", "--scenario", "car", "--duration", "-3", "--out",
                          str(d / "o9")],
-        "GNSS rate": ["simulate", "--scenario", "car", "--duration", "1", "--gnss-rate", "7",
+        "GNSS rate": ["simulate", "--scenario", "car", "--duration", "1", "--gnss-rate", "0",
                       "--out", str(d / "o10")],
     }
 

@@ -17,6 +17,10 @@ NODES = {
     "ekf": "ins_gnss_ros.nodes.ekf_node:EkfNode",
 }
 
+#: Nodes that make sensor data (from a receiver, from a simulation): a replay's sensors are the
+#: bag, so a replay leaves them out of the graph (``trial run`` keeps them).
+SENSOR_SOURCES = ("gnss_driver", "gnss_simulator")
+
 
 def node_class(name: str):
     """The NavNode subclass of executable ``name`` (KeyError names the known ones)."""

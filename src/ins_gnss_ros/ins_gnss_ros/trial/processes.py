@@ -73,11 +73,11 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
         [str(Path(sys.executable).parent / name), "--ros-args", "--params-file",
          str(profile.path), "-p", "use_sim_time:=true"],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=dict(os.environ))
-        for name in profile.graph]
+        for name in profile.replay_graph]
     writer = bagio.BagWriter(out / "bag")
     lock = threading.Lock()
     try:
-        outputs = _wait_for_graph(node, executor, procs, profile.graph, timeout)
+        outputs = _wait_for_graph(node, executor, procs, profile.replay_graph, timeout)
 
         # A topic both played and published by a node reaches the recorder from both: the
         # played copies (same topic, stamp and fields) are not outputs. (Not bytes: rclpy's
@@ -99,15 +99,15 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
 
         subs = [node.create_subscription(bagio.msg_class(msgtype), topic, recorder(topic), qos)
                 for topic, msgtype in sorted(outputs.items())]
-        node_inputs = _subscribed_topics(node, profile.graph)
+        node_inputs = _subscribed_topics(node, profile.replay_graph)
         # /clock comes from the player, the default topics from rclpy: not the bag's to feed.
         check_inputs(bag_path, node_inputs - {"/clock", *_DEFAULT_TOPICS})
         _spin_until(executor, procs, lambda: all(
             p.get_subscription_count() > 0 for t, p in pubs.items() if t in node_inputs)
             and all(s.get_publisher_count() > 0 for s in subs), timeout, "matched endpoints")
         t_bag0 = inputs[0].t_ns if inputs else 0
-        _clock_handshake(clock_pub, Clock(clock=bagio.ns_to_stamp(t_bag0)), len(profile.graph),
-                         procs, timeout)
+        _clock_handshake(clock_pub, Clock(clock=bagio.ns_to_stamp(t_bag0)),
+                         len(profile.replay_graph), procs, timeout)
         spinner = threading.Thread(target=executor.spin, daemon=True)
         spinner.start()
         t_wall0 = time.monotonic()

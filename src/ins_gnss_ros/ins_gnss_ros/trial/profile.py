@@ -41,6 +41,12 @@ class Profile:
     graph: tuple
     ignored: tuple
 
+    @property
+    def replay_graph(self) -> tuple:
+        """The graph a replay runs: without the sensor sources (the bag is the sensor;
+        a profile for live use, such as config/default.yaml, names them)."""
+        return tuple(name for name in self.graph if name not in registry.SENSOR_SOURCES)
+
 
 def load_profile(path) -> Profile:
     """Read and check a params file (``<node>: ros__parameters: {...}``, plus ``/**``) with the

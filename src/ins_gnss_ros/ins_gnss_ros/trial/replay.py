@@ -115,7 +115,7 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
     bus.recorders.append(record)
     nodes = []
     try:
-        for name in profile.graph:
+        for name in profile.replay_graph:
             try:
                 nodes.append(registry.node_class(name)(
                     bus=bus, context=context, use_global_arguments=False,

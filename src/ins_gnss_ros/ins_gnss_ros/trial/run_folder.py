@@ -94,8 +94,10 @@ def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
     summary = {
         "input_bag": str(Path(bag_path).resolve()),
         "profile": str(profile.path.resolve()),
-        "graph": list(profile.graph if graph is None else graph),
+        "graph": list(profile.replay_graph if graph is None else graph),
         "ignored_sections": list(profile.ignored),
+        "sensor_sources_left_out": [name for name in profile.graph
+                                    if name not in profile.replay_graph],
         "mode": mode,
         "rate": rate,
         "outages": outages,
