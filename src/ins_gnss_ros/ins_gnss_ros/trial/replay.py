@@ -136,7 +136,7 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
                     node.diag.publish()
                 bus.drain()
                 next_diag += DIAGNOSTICS_PERIOD_NS
-            # (Also a message a fault moved into a window: the outage withholds it too.)
+            # Withheld: with faults, only one a fault moved into a window gets this far.
             if in_gnss_outage(m.topic, m.t_ns, windows):
                 continue
             bus.now_ns = m.t_ns
