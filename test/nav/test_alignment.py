@@ -186,7 +186,7 @@ def test_levelled_start_and_yaw_rotation():
     from ins_gnss_ros.nav.error_model import make_layout
 
     f_b = quat_to_dcm(quat_from_euler(0.02, -0.01, 0.0)).T @ [0.0, 0.0, 9.8]
-    levelling = al.Levelling().add(np.tile(f_b * 0.01, (100, 1)), 0.01)
+    levelling = al.Levelling().add(np.zeros((100, 3)), np.tile(f_b * 0.01, (100, 1)), 0.01)
     assert levelling.time == pytest.approx(1.0)
     lever = np.zeros(3)
     st = al.levelled_state(levelling, 0.8, 0.1, 10.0, lever, 2.0, 0.1, 5.0)

@@ -139,7 +139,7 @@ class Aiding:
         self.datum = None  # (lat rad, lon rad, h m) of the first fix used
         self.inputs: dict[str, InputStats] = {}
         self.last_accepted_t = -math.inf  # newest accepted update, s
-        self.forced: set[str] = set()  # kinds forced in since the last accepted one of each
+        self.forced: set[str] = set()  # kinds forced in since the filter last NAVIGATED
         self._recent_fixes: list[tuple[float, np.ndarray, np.ndarray]] = []  # t, ECEF, cov ENU
         self.last_increment_t = math.inf  # end of the last increment, s
 
@@ -155,8 +155,7 @@ class Aiding:
         for u in updates:
             if u.reason == "forced":
                 self.forced.add(u.name)
-            elif u.accepted:
-                self.forced.discard(u.name)
+            if u.accepted:
                 self.last_accepted_t = max(self.last_accepted_t, u.t)
 
     def explain(self, t: float, imu_running: bool) -> str:
@@ -165,6 +164,7 @@ class Aiding:
         if not imu_running:
             return "waiting for imu/delta"
         if nav.mode == NAVIGATING:
+            self.forced.clear()  # confirmed again
             return "navigating"
         if nav.mode == ALIGNING:
             fix = self.inputs.get("gnss/fix")
@@ -174,7 +174,7 @@ class Aiding:
                 return f"aligning: every gnss/fix refused ({fix.refused})"
             return "aligning: " + (NO_HEADING if not nav.heading_known else "levelling")
         if self.forced:
-            return ("dead reckoning (degraded): forced in and not yet confirmed: "
+            return ("dead reckoning (degraded): forced in, their noise floors not yet decayed: "
                     + ", ".join(sorted(self.forced)))
         return f"dead reckoning: no aiding accepted for {t - self.last_accepted_t:.1f} s"
 

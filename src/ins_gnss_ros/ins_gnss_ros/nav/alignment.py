@@ -224,22 +224,34 @@ def initial_attitude(roll, pitch, yaw, sigma_tilt, sigma_yaw):
 
 @dataclass(frozen=True)
 class Levelling:
-    """Velocity increments summed over the IMU data before the first fix, for its levelling.
+    """IMU increments summed over the data before the first fix, for its levelling.
 
     Attributes
     ----------
-    dv_sum : (3,) ndarray
-        Sum of the raw velocity increments, body FLU [m/s].
+    dv_sum, dtheta_sum : (3,) ndarray
+        Sums of the raw velocity [m/s] and angle [rad] increments, body FLU.
     time : float
         Time they cover [s].
     """
 
     dv_sum: np.ndarray = field(default_factory=lambda: np.zeros(3))
     time: float = 0.0
+    dtheta_sum: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
-    def add(self, dv, dt):
-        """The levelling with increments dv (N, 3) [m/s] of dt [s] each added."""
-        return Levelling(self.dv_sum + dv.sum(axis=0), self.time + len(dv) * dt)
+    def add(self, dtheta, dv, dt):
+        """The levelling with increments dtheta, dv (N, 3) [rad, m/s] of dt [s] each added."""
+        return Levelling(self.dv_sum + dv.sum(axis=0), self.time + len(dv) * dt,
+                         self.dtheta_sum + dtheta.sum(axis=0))
+
+    def gyro_bias(self, gyro_psd, bias_sigma):
+        """The gyro bias of a static start: the mean rate [rad/s, FLU], and its variance
+        [rad^2/s^2] (the Earth rate the mean also holds, unknown without the heading, plus the
+        white noise over the levelling time), or None where the gyros are too good for it: a
+        bias sigma below ten Earth rates is better known than the mean tells (tactical and
+        navigation grades gyrocompass instead)."""
+        if bias_sigma < 10.0 * WGS84.omega or self.time <= 0.0:
+            return None
+        return self.dtheta_sum / self.time, WGS84.omega ** 2 + gyro_psd / self.time
 
     def attitude(self):
         """Levelled attitude q_nb with yaw 0 (:func:`level` of the mean specific force)."""

@@ -20,8 +20,8 @@ __all__ = ["PARAMS", "navigator_config", "noise_model"]
 #: The ekf node's parameters (the names the profiles' ``ekf`` sections use).
 PARAMS = (
     Param("layout", "15", "error-state layout (error_model.LAYOUTS key)", choices=tuple(LAYOUTS)),
-    Param("imu_grade", "mems_adis16405", "IMU noise model preset (sensor_errors.GRADES)",
-          choices=tuple(GRADES)),
+    Param("imu_grade", "mems_adis16405_datasheet",
+          "IMU noise model preset (sensor_errors.GRADES)", choices=tuple(GRADES)),
     Param("bias_model", "gm", "bias process: gm (constant + Gauss-Markov) or rw (random walk)",
           choices=("gm", "rw")),
     Param("noise.gyro_white", 0.0, "gyro white noise, rad/s/sqrt(Hz) (0: the grade's)", 0.0, 1.0),

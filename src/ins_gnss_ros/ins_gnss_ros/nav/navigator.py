@@ -236,16 +236,33 @@ class Navigator:
             if k > s.next_sample:
                 dt = float(np.median(np.diff(buf.times(buf.first, k)))) \
                     if k - buf.first > 1 else 0.0
-                s.levelling = s.levelling.add(buf.rows(s.next_sample, k)[2], dt)
+                _, dtheta, dv = buf.rows(s.next_sample, k)[:3]
+                s.levelling = s.levelling.add(dtheta, dv, dt)
                 s.next_sample = k
             if isinstance(m, GnssVelocity):
                 s.gnss_speed = float(np.hypot(*m.v_enu[:2]))
             if not isinstance(m, GnssFix) or s.levelling.time < cfg.level_time or k == buf.first:
                 continue
+            P0 = initial_covariance(self._space, cfg.noise, cfg.sigma_pos0, cfg.sigma_vel0,
+                                    cfg.sigma_tilt0)
+            # At rest by the last GNSS speed, or by the velocity of the fix's own epoch (a
+            # receiver's velocity usually follows its fix).
+            speed = s.gnss_speed if np.isfinite(s.gnss_speed) else next(
+                (float(np.hypot(*p.v_enu[:2])) for e, _, p in self._pending
+                 if isinstance(p, GnssVelocity) and e - epoch < 0.5), np.nan)
+            static = speed <= cfg.static_speed
+            bias = s.levelling.gyro_bias(cfg.noise.gyro_psd, cfg.noise.blocks["bg"].sigma0) \
+                if static and "bg" in self._space else None
+            if bias is not None:
+                # A MEMS unit's turn-on bias (degrees per second, data sheets) taken from the
+                # stationary mean instead of being left to the filter: with it unknown, the
+                # tilt drifts faster than the aiding corrects it and the updates are gated.
+                S = self._space["bg"]
+                s.estimates["bg"] = bias[0]
+                P0[S, S] = np.eye(3) * bias[1]
             self._start(levelled_state(s.levelling, m.lat, m.lon, m.h, self._lever,
                                        s.gnss_speed, cfg.static_speed, float(buf.time(k - 1))),
-                        initial_covariance(self._space, cfg.noise, cfg.sigma_pos0,
-                                           cfg.sigma_vel0, cfg.sigma_tilt0))
+                        P0)
         if s.nav is None and not self._pending and len(buf):
             # Without a measurement to start on, keep only the samples of the last `history`
             # (at least `level_time`) seconds: the first fix is levelled on the samples before
