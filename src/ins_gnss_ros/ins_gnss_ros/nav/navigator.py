@@ -5,9 +5,8 @@ the IMU rate, any batch size) and time-stamped measurements (:meth:`add_measurem
 measurement_types.py) in any interleaving; :meth:`flush` at the end. The navigator
 
 * compensates the increments with the running sensor-error estimates, applies the one-sample
-  coning/sculling terms (imu_buffer.py) and mechanises them in compiled batches between filter
-  epochs, propagating the covariance every `cov_interval` seconds and at every measurement
-  epoch (propagation.py);
+  coning/sculling terms to raw ones (imu_buffer.py) and mechanises them in compiled batches,
+  propagating the covariance every `cov_interval` s and at each measurement (propagation.py);
 * applies each measurement at ITS epoch, never at arrival: a late one by rewinding to a
   checkpoint before its epoch (rewind.py). With a "td" extra state the epoch of a GNSS
   measurement stamped t is t - td;
@@ -15,8 +14,9 @@ measurement_types.py) in any interleaving; :meth:`flush` at the end. The navigat
   frozen receiver that repeats a fix while the INS moves, and forces a measurement kind through
   after `max_reject_time` seconds of continuous rejection (integrity.py);
 * adds the process noise of IMU gaps the caller bridged with held rates (imu_gaps.py);
-* runs the modes (modes.py) ALIGNING (levelling at the first fix, heading from the first motion
-  or a heading fix: alignment.py; GNSS used only while at rest), NAVIGATING, DEAD_RECKONING;
+* runs the modes (modes.py) ALIGNING (levelling at the first fix, the gyro bias of a static
+  start, heading from the first motion or a heading fix: alignment.py; GNSS used only while at
+  rest), NAVIGATING, DEAD_RECKONING;
 * starts again from ALIGNING when the IMU time jumps backwards.
 
 Per-epoch outputs (recording.py) keep what the RTS smoother (smoother.py) needs.
@@ -30,7 +30,7 @@ import numpy as np
 from . import measurements as meas
 from . import modes
 from .alignment import Levelling, initial_covariance, levelled_state, rotate_yaw, \
-    yaw_error_from_heading, yaw_error_from_motion
+    take_static_gyro_bias, yaw_error_from_heading, yaw_error_from_motion
 from .earth import WGS84
 from .ekf import ErrorStateEKF, StateSpace
 from .error_model import make_layout
@@ -163,15 +163,8 @@ class Navigator:
                          "far, including forgotten ones. A delayed measurement that re-runs "
                          "the filter can make it go back.")
 
-    @property
-    def space(self):
-        """The filter's StateSpace."""
-        return self._space
-
-    @property
-    def lever_arm_b(self):
-        """GNSS antenna relative to the IMU, FLU, m."""
-        return self._lever
+    space = property(lambda self: self._space, doc="The filter's StateSpace.")
+    lever_arm_b = property(lambda self: self._lever, doc="GNSS antenna relative to the IMU, FLU, m.")
 
     def covariance(self):
         """The covariance to publish (n, n), once :attr:`started`: the filter's P plus the
@@ -245,21 +238,12 @@ class Navigator:
                 continue
             P0 = initial_covariance(self._space, cfg.noise, cfg.sigma_pos0, cfg.sigma_vel0,
                                     cfg.sigma_tilt0)
-            # At rest by the last GNSS speed, or by the velocity of the fix's own epoch (a
-            # receiver's velocity usually follows its fix).
-            speed = s.gnss_speed if np.isfinite(s.gnss_speed) else next(
-                (float(np.hypot(*p.v_enu[:2])) for e, _, p in self._pending
-                 if isinstance(p, GnssVelocity) and e - epoch < 0.5), np.nan)
-            static = speed <= cfg.static_speed
-            bias = s.levelling.gyro_bias(cfg.noise.gyro_psd, cfg.noise.blocks["bg"].sigma0) \
-                if static and "bg" in self._space else None
-            if bias is not None:
-                # A MEMS unit's turn-on bias (degrees per second, data sheets) taken from the
-                # stationary mean instead of being left to the filter: with it unknown, the
-                # tilt drifts faster than the aiding corrects it and the updates are gated.
-                S = self._space["bg"]
-                s.estimates["bg"] = bias[0]
-                P0[S, S] = np.eye(3) * bias[1]
+            # At rest by the last GNSS speed, or by the velocity of the fix's own epoch.
+            speed = s.gnss_speed if np.isfinite(s.gnss_speed) else next((np.hypot(*p.v_enu[:2])
+                for e, _, p in self._pending if isinstance(p, GnssVelocity) and e - epoch < 0.5),
+                np.nan)
+            if speed <= cfg.static_speed:
+                take_static_gyro_bias(s.levelling, self._space, cfg.noise, P0, s.estimates)
             self._start(levelled_state(s.levelling, m.lat, m.lon, m.h, self._lever,
                                        s.gnss_speed, cfg.static_speed, float(buf.time(k - 1))),
                         P0)
