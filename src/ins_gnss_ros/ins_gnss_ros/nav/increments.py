@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["MAX_RATE", "MAX_SPECIFIC_FORCE", "SensorErrors", "classify_gap", "held_increments",
-           "increment_problem", "CONTIGUOUS", "BRIDGED", "LOST"]
+__all__ = ["MAX_RATE", "MAX_SPECIFIC_FORCE", "SENSOR_BLOCKS", "SensorErrors", "classify_gap",
+           "held_increments", "increment_problem", "CONTIGUOUS", "BRIDGED", "LOST"]
 
 #: Bounds of a physically possible increment: angular rate (rad/s, ~5700 deg/s) and specific
 #: force (m/s^2, ~1000 g), far beyond any navigation IMU's range. A value past them is a corrupt
@@ -56,6 +56,12 @@ def _zeros():
     return np.zeros(3)
 
 
+#: SensorErrors fields and the filter blocks (error_model.py names) whose running estimates add
+#: up to them.
+SENSOR_BLOCKS = {"gyro_bias": ("bg", "gmg"), "accel_bias": ("ba", "gma"),
+                 "gyro_scale": ("sg",), "accel_scale": ("sa",)}
+
+
 @dataclass(frozen=True)
 class SensorErrors:
     """Sensor-error estimates of a six-axis IMU in base_link (FLU).
@@ -74,6 +80,16 @@ class SensorErrors:
     accel_bias: np.ndarray = field(default_factory=_zeros)
     gyro_scale: np.ndarray = field(default_factory=_zeros)
     accel_scale: np.ndarray = field(default_factory=_zeros)
+
+    @classmethod
+    def of_estimates(cls, estimates: dict) -> "SensorErrors":
+        """What the filter's running estimates (by block name, SENSOR_BLOCKS) add up to; zero
+        where the layout has none of a field's blocks."""
+        values = {}
+        for name, blocks in SENSOR_BLOCKS.items():
+            total = sum(estimates[b] for b in blocks if b in estimates)
+            values[name] = total if np.ndim(total) else np.zeros(3)
+        return cls(**values)
 
     def __add__(self, other: "SensorErrors") -> "SensorErrors":
         return SensorErrors(self.gyro_bias + other.gyro_bias, self.accel_bias + other.accel_bias,

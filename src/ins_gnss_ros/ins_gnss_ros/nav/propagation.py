@@ -7,10 +7,8 @@ from dataclasses import replace
 import numpy as np
 
 from .earth import radii
+from .increments import SensorErrors
 from .strapdown import NavState, run
-
-#: Sensor-error blocks the compensation applies (error_model.py names). "gs" is not supported.
-_GYRO_BIAS, _ACCEL_BIAS = ("bg", "gmg"), ("ba", "gma")
 
 
 def extrapolate(state, dt, a_enu):
@@ -27,17 +25,9 @@ def extrapolate(state, dt, a_enu):
 
 def compensate(th, dv, dts, estimates):
     """Raw increments th (rad), dv (m/s), (N, 3) body FLU, of durations dts (N,) s, corrected
-    by the running bias and scale-factor estimates (error_model.py blocks)."""
-    bg = sum(estimates[b] for b in _GYRO_BIAS if b in estimates)
-    ba = sum(estimates[b] for b in _ACCEL_BIAS if b in estimates)
-    th = th - np.multiply.outer(dts, bg) if np.ndim(bg) else th
-    dv = dv - np.multiply.outer(dts, ba) if np.ndim(ba) else dv
-    # measured = (I + S) true + bias  ->  true = (I + S)^-1 (measured - bias).
-    if "sg" in estimates:
-        th = th / (1.0 + estimates["sg"])
-    if "sa" in estimates:
-        dv = dv / (1.0 + estimates["sa"])
-    return th, dv
+    by the running bias and scale-factor estimates (error_model.py blocks; the model of
+    :class:`~ins_gnss_ros.nav.increments.SensorErrors`)."""
+    return SensorErrors.of_estimates(estimates).compensate(th, dv, dts)
 
 
 def propagate(s, rows, noise, cov_interval, gaps, space):

@@ -29,14 +29,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from .error_model import nav_error
-from .increments import BRIDGED, LOST, SensorErrors, classify_gap, held_increments
+from .increments import BRIDGED, LOST, SENSOR_BLOCKS, SensorErrors, classify_gap, held_increments
 from .strapdown import NavState, Strapdown
 
-__all__ = ["Correction", "ClosedLoopStrapdown", "StrapdownSync", "SENSOR_BLOCKS"]
+__all__ = ["Correction", "ClosedLoopStrapdown", "StrapdownSync"]
 
-#: SensorErrors fields and the filter blocks whose running estimates add up to them.
-SENSOR_BLOCKS = {"gyro_bias": ("bg", "gmg"), "accel_bias": ("ba", "gma"),
-                 "gyro_scale": ("sg",), "accel_scale": ("sa",)}
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ import numpy as np
 from geometry_msgs.msg import Quaternion, Vector3
 
 from ..io import set_stamp_sec, stamp_to_sec
-from ..nav.increments import increment_problem
+from ..nav.increments import SensorErrors, increment_problem
 from ..nav.strapdown import NavState
 
 
@@ -58,3 +58,10 @@ def increment_of(msg) -> tuple[str | None, np.ndarray, np.ndarray]:
     integrated (:func:`ins_gnss_ros.nav.increments.increment_problem`), None when it can."""
     a, v = msg.delta_angle, msg.delta_velocity
     return increment_problem((a.x, a.y, a.z), (v.x, v.y, v.z), msg.dt), vec(a), vec(v)
+
+
+def sensor_errors_of(msg) -> SensorErrors:
+    """The sensor-error fields of an ins_gnss_msgs/InsState or InsCorrection (gyro_bias,
+    accel_bias, gyro_scale_factor, accel_scale_factor)."""
+    return SensorErrors(vec(msg.gyro_bias), vec(msg.accel_bias), vec(msg.gyro_scale_factor),
+                        vec(msg.accel_scale_factor))

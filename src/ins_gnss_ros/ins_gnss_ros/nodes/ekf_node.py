@@ -51,21 +51,13 @@ from ..io import new, ns_to_stamp, stamp_to_ns, stamp_to_sec
 from ..nav.aiding import Aiding, AidingPolicy
 from ..nav.error_model import LAYOUTS
 from ..nav.filter_config import PARAMS, navigator_config
-from ..nav.increments import SensorErrors
 from ..nav import NAVIGATING, Navigator
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import StrapdownSync
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, ParameterError, run
-from .convert import increment_of, nav_state_from_msg, set_vector3, vec
+from .convert import increment_of, nav_state_from_msg, sensor_errors_of, set_vector3, vec
 from .gnss_messages import kepler_from_msg, raw_epoch_from_msg
 from .nav_messages import MODES, fix_msg, odom_msg, status_msg
-
-
-
-def applied_sensor_errors(msg: InsState) -> SensorErrors:
-    """The sensor errors the strapdown applied to reach an ins/state."""
-    return SensorErrors(vec(msg.gyro_bias), vec(msg.accel_bias), vec(msg.gyro_scale_factor),
-                        vec(msg.accel_scale_factor))
 
 
 class EkfNode(NavNode):
@@ -94,7 +86,7 @@ class EkfNode(NavNode):
                                  np.radians(p["datum.longitude_deg"]), p["datum.altitude_m"])
         self.sync = StrapdownSync(p["history_s"], p["sync.min_interval_s"],
                                   p["sync.resend_after_s"],
-                                  lambda msg: (nav_state_from_msg(msg), applied_sensor_errors(msg)))
+                                  lambda msg: (nav_state_from_msg(msg), sensor_errors_of(msg)))
         self.reported_updates = 0
         self.accepted = 0
         self.rejected = 0

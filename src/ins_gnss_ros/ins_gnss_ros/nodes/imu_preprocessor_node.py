@@ -20,9 +20,8 @@ from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from ..imu.preprocessor_params import PARAMS, preprocessor_from_params
 from ..io import NS, new, set_stamp_ns, stamp_to_ns
-from ..nav.increments import SensorErrors
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, run
-from .convert import set_vector3, vec
+from .convert import sensor_errors_of, set_vector3, vec
 
 
 #: ImuPreprocessor events -> diagnostics.
@@ -115,9 +114,7 @@ class ImuPreprocessorNode(NavNode):
         self.preprocessor.temperature = float(msg.temperature)
 
     def on_correction(self, msg: InsCorrection) -> None:
-        increment = SensorErrors(vec(msg.gyro_bias), vec(msg.accel_bias),
-                                 vec(msg.gyro_scale_factor), vec(msg.accel_scale_factor))
-        if not self.preprocessor.add_sensor_errors(increment):
+        if not self.preprocessor.add_sensor_errors(sensor_errors_of(msg)):
             self.diag.count("non-finite sensor correction rejected")
 
     # -- magnetometer --------------------------------------------------------------------------

@@ -23,12 +23,11 @@ from ins_gnss_msgs.msg import ImuDelta, InsCorrection, InsState
 
 from ..io import new, stamp_to_ns, stamp_to_sec
 from ..nav.conventions import yaw_from_azimuth
-from ..nav.increments import SensorErrors
 from ..nav.rotations import quat_from_euler
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import ClosedLoopStrapdown, Correction
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, run
-from .convert import fill_ins_state, increment_of, set_vector3, vec
+from .convert import fill_ins_state, increment_of, sensor_errors_of, set_vector3, vec
 
 #: ClosedLoopStrapdown events -> diagnostics.
 _EVENTS = {"lost": "imu lost: gap in increments beyond max_imu_gap_s, new run",
@@ -40,8 +39,7 @@ def correction_from_msg(msg: InsCorrection) -> Correction:
     """ins_gnss_msgs/InsCorrection -> Correction."""
     return Correction(stamp_to_ns(msg.header.stamp), msg.sequence,
                       vec(msg.position_error), vec(msg.velocity_error), vec(msg.attitude_error),
-                      SensorErrors(vec(msg.gyro_bias), vec(msg.accel_bias),
-                                   vec(msg.gyro_scale_factor), vec(msg.accel_scale_factor)))
+                      sensor_errors_of(msg))
 
 
 class StrapdownNode(NavNode):
