@@ -5,6 +5,7 @@ hand, and the bag's own stamps for the once-per-second diagnostics.
 """
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -291,3 +292,19 @@ def test_generic_graph_with_the_imu_preprocessor(tmp_path):
     truth = bagio.read_bag(bag, ["truth/state"])[-1].msg
     assert len(states) > 100
     assert abs(states[-1].latitude - truth.latitude) * 6.36e6 < 0.5
+
+
+def test_offline_agrees_with_the_graph(tmp_path):
+    """--offline runs the graph's cores without the graph: on a simulated drive through
+    config/default.yaml, its horizontal RMS after the start is within 10 % of the graph's."""
+    from ins_gnss_ros.trial.report import evaluate_run
+    from ins_gnss_ros.trial.simulate import simulate
+
+    bag = simulate("car", 60.0, 3, tmp_path / "drive")
+    profile = Path(__file__).resolve().parents[2] / "config" / "default.yaml"
+    replay(bag, profile, tmp_path / "graph")
+    replay_offline(bag, profile, tmp_path / "offline")
+    graph, _ = evaluate_run(tmp_path / "graph", plots=False, skip_s=35.0)
+    offline, _ = evaluate_run(tmp_path / "offline", plots=False, skip_s=35.0)
+    a, b = graph.stats["horizontal_m"].rms, offline.stats["horizontal_m"].rms
+    assert a < 0.3 and abs(b - a) <= 0.1 * a, (a, b)

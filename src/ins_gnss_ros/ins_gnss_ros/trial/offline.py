@@ -28,8 +28,6 @@ from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_s
 #: The inputs the offline path reads (the ekf's aiding topics and the IMU).
 OFFLINE_TOPICS = ("/imu/delta", "/imu/data_raw", "/gnss/fix", "/gnss/vel", "/gnss/heading",
                   "/mag/heading", "/log/speed")
-#: ins_gnss_msgs/Heading constants (STATUS_NONE, SOURCE_MAGNETIC, REFERENCE_MAGNETIC).
-_HEADING_STATUS_NONE, _HEADING_SOURCE_MAGNETIC, _HEADING_REFERENCE_MAGNETIC = 0, 3, 1
 
 
 def offline_parameters(profile) -> tuple[dict, dict]:
@@ -153,12 +151,14 @@ class _Feeder:
                              np.reshape(msg.twist.covariance, (6, 6))[:3, :3])
 
     def heading(self, msg):
-        magnetic = msg.source == _HEADING_SOURCE_MAGNETIC
-        if msg.status == _HEADING_STATUS_NONE and not magnetic:
+        from ins_gnss_msgs.msg import Heading
+
+        magnetic = msg.source == Heading.SOURCE_MAGNETIC
+        if msg.status == Heading.STATUS_NONE and not magnetic:
             return
         self.aiding.heading(bagio.stamp_to_sec(msg.header.stamp), msg.azimuth,
                             msg.azimuth_variance,
-                            msg.declination if msg.reference == _HEADING_REFERENCE_MAGNETIC
+                            msg.declination if msg.reference == Heading.REFERENCE_MAGNETIC
                             else None, magnetic=magnetic)
 
     def log(self, msg):
@@ -177,7 +177,7 @@ def _write_outputs(path, navigator, datum, ekf_p) -> Counter:
     from ins_gnss_ros.nodes.convert import fill_ins_state
     from ins_gnss_ros.nodes.nav_messages import MODES, fix_msg, odom_msg, status_msg
 
-    ins_modes = {ALIGNING: InsState.MODE_INVALID, NAVIGATING: InsState.MODE_NAVIGATING,
+    ins_modes = {ALIGNING: InsState.MODE_ALIGNING, NAVIGATING: InsState.MODE_NAVIGATING,
                  DEAD_RECKONING: InsState.MODE_DEAD_RECKONING}
 
     result = navigator.output()
