@@ -10,7 +10,8 @@ of that protocol:
   the wrong epoch. Sensor-error increments in a correction are accumulated and applied to every
   increment from that epoch on (unless the IMU preprocessor applies them instead).
 * :class:`StrapdownSync` (the filter's side): keeps the strapdown states it receives; whenever
-  the filter has updated, it compares the strapdown's state of a common epoch with the filter's
+  the filter has corrected its solution (GNSS or a constraint such as the non-holonomic one:
+  ``Navigator.revision``), it compares the strapdown's state of a common epoch with the filter's
   solution and makes the difference a :class:`Correction` referred to that epoch (errors
   "computed minus true", :func:`ins_gnss_ros.nav.error_model.nav_error`). A correction that was
   lost, a strapdown restarted from its parameters or a state published before the last

@@ -4,8 +4,8 @@ The node runs :class:`ins_gnss_ros.nav.navigator.Navigator` on ``imu/delta`` and
 topics, fed through the aiding front end :class:`ins_gnss_ros.nav.aiding.Aiding` and configured
 by :func:`ins_gnss_ros.nav.filter_config.navigator_config` (the offline replay runs the same
 three). It keeps the ``strapdown`` node on the filter's solution by state synchronisation
-(:class:`ins_gnss_ros.nav.strapdown_sync.StrapdownSync`): whenever the filter has updated, the
-strapdown's ``ins/state`` of a common epoch is compared with the filter's solution and the
+(:class:`ins_gnss_ros.nav.strapdown_sync.StrapdownSync`): whenever the filter has corrected its
+solution, the strapdown's ``ins/state`` of a common epoch is compared with the filter's solution and the
 difference goes out as an ``ins/correction`` referred to that epoch.
 
 Coupling: ``loose`` uses ``gnss/fix`` and ``gnss/vel``; ``tight`` uses the pseudoranges and
