@@ -12,7 +12,9 @@ trial with truth. For every published ``nav/fix`` the error against the interpol
 * lost: seconds of the trial after the first solution with no published solution (gaps longer
   than ``GAP_S``);
 * recover: s from the end of the last fault window until the filter reports NAVIGATING again
-  (0 when it never left it; ``-`` when it never came back).
+  (0 when it never left it; ``-`` when it never came back);
+* nav share: of the time after the first NAVIGATING status, the share spent NAVIGATING (the
+  lowest of a class's cases); med sigma: the median published horizontal sigma, m;
 
 Usage::
 
@@ -168,6 +170,17 @@ def integrity(outputs: Path, bag: Path, fault_end_ns: int | None = None) -> dict
     gaps = np.diff(np.concatenate([stamps, [tt[-1]]])) * 1e-9 if len(stamps) else [
         (tt[-1] - tt[0]) * 1e-9]
     lost = float(np.sum([g for g in gaps if g > GAP_S]))
+    # Share of the time after the first NAVIGATING status spent NAVIGATING (each status holds
+    # until the next), and the median published horizontal sigma: a blown-up covariance or a
+    # dropped mode must not pass for robustness.
+    order = np.argsort(st_t, kind="stable")
+    t_sorted, m_sorted = st_t[order], st_mode[order]
+    first = np.flatnonzero(m_sorted == NAVIGATING)
+    share = None
+    if len(first):
+        t_span = np.diff(np.concatenate([t_sorted[first[0]:], [tt[-1]]])).astype(float)
+        share = float(np.sum(t_span[m_sorted[first[0]:] == NAVIGATING]) / max(t_span.sum(), 1.0))
+    sigma_h = np.hypot(sigmas[:, 0], sigmas[:, 1]) if len(sigmas) else np.zeros(0)
     recover = None
     if fault_end_ns is not None:
         after = np.nonzero((st_t >= fault_end_ns) & (st_mode == NAVIGATING))[0]
@@ -177,6 +190,7 @@ def integrity(outputs: Path, bag: Path, fault_end_ns: int | None = None) -> dict
             "wrong": int(wrong.sum()), "beyond": int(beyond.sum()), "lost_s": lost,
             "recover_s": recover,
             "max_ratio_navigating": float(np.max(ratio[navigating], initial=0.0)),
+            "navigating_share": share, "sigma_h": sigma_h,
             "modes": {int(k): int(v) for k, v in zip(*np.unique(st_mode, return_counts=True))},
             "t0_ns": int(tt[0]),
             "status_t_ns": st_t, "status_mode": st_mode, "status_order_ns": st_wall,
@@ -210,13 +224,13 @@ def main() -> None:
           f" NAVIGATING and error > {K_SIGMA:g} sigma of the published nav/fix covariance")
     print(f"{'fault class':20s} {'cases':>5s} {'published':>9s} {'navigating':>10s} "
           f"{'wrong':>5s} {'beyond':>6s} {'lost s':>6s} {'recover s':>10s} {'max e/sigma':>11s} "
-          f"{'crash':>5s}  modes")
+          f"{'nav share':>9s} {'med sigma m':>11s} {'crash':>5s}  modes")
     rows = {}
     for name, runs in [("none", [[]])] + list(cases(args.duration).items()):
         if args.classes and name not in args.classes:
             continue
         total = {"published": 0, "navigating": 0, "wrong": 0, "beyond": 0, "lost_s": 0.0,
-                 "recover": [],
+                 "recover": [], "share": [], "sigma_h": [],
                  "max": 0.0, "modes": set(), "crashed": 0}
         t_run = time.perf_counter()
         for i, faults in enumerate(runs):
@@ -234,6 +248,8 @@ def main() -> None:
             total["lost_s"] += r["lost_s"]
             total["recover"].append(r["recover_s"])
             total["max"] = max(total["max"], r["max_ratio_navigating"])
+            total["share"].append(0.0 if r["navigating_share"] is None else r["navigating_share"])
+            total["sigma_h"].extend(r["sigma_h"].tolist())
             total["modes"].update(r["modes"])
         rec = [x for x in total["recover"] if x is not None]
         rec_text = ("-" if not rec else f"{max(rec):.1f}") + (
@@ -241,8 +257,11 @@ def main() -> None:
         print(f"{name:20s} {len(runs):5d} {total['published']:9d} {total['navigating']:10d} "
               f"{total['wrong']:5d} {total['beyond']:6d} {total['lost_s']:6.1f} {rec_text:>10s}"
               f" {total['max']:11.2f}"
+              f" {min(total['share'], default=0.0):9.2f}"
+              f" {np.median(total['sigma_h']) if total['sigma_h'] else np.nan:11.2f}"
               f" {total['crashed']:5d}"
               f"  {sorted(total['modes'])}  ({time.perf_counter() - t_run:.0f} s)", flush=True)
+        total["sigma_h"] = float(np.median(total["sigma_h"])) if total["sigma_h"] else None
         rows[name] = {k: (sorted(v) if isinstance(v, set) else v) for k, v in total.items()}
     (root / "faults_table.json").write_text(json.dumps(rows, indent=2))
     print(f"runs in {root}")
