@@ -48,10 +48,10 @@ from sensor_msgs.msg import NavSatFix
 from ..gnss.constants import GALILEO, GPS, UBX_GNSS_ID
 from ..gnss.ranges import RangeConfig, ephemeris_valid, satellite_ranges
 from ..io import new, ns_to_stamp, stamp_to_ns, stamp_to_sec
+from ..nav import NAVIGATING, Navigator
 from ..nav.aiding import Aiding, AidingPolicy
 from ..nav.error_model import LAYOUTS
 from ..nav.filter_config import PARAMS, navigator_config
-from ..nav import NAVIGATING, Navigator
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import StrapdownSync
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, ParameterError, run
