@@ -19,6 +19,7 @@ from collections import Counter
 import numpy as np
 
 from ins_gnss_ros import io as bagio
+from ins_gnss_ros.nav.increments import increment_problem
 from ins_gnss_ros.params import ParameterError, resolve
 from ins_gnss_ros.trial.inputs import check_inputs, input_rows
 from ins_gnss_ros.trial.outages import GNSS_PREFIX, gnss_windows, in_outage
@@ -103,6 +104,14 @@ class _Feeder:
     """Bag messages -> the front end, as the nodes translate them."""
 
     def __init__(self, aiding, preprocessor, ekf_p, events):
+        # Message modules load with the first offline run, not with the trial package.
+        from ins_gnss_msgs.msg import Heading
+        from sensor_msgs.msg import NavSatFix
+
+        from ins_gnss_ros.nodes.convert import increment_of
+
+        self.Heading, self.unknown_covariance = Heading, NavSatFix.COVARIANCE_TYPE_UNKNOWN
+        self.increment_of = increment_of
         self.aiding, self.preprocessor, self.p, self.events = aiding, preprocessor, ekf_p, events
         self.handlers = {"/imu/delta": self.delta, "/imu/data_raw": self.raw,
                          "/gnss/fix": self.fix, "/gnss/vel": self.vel}
@@ -113,19 +122,16 @@ class _Feeder:
         if ekf_p["use_speed_log"]:
             self.handlers["/log/speed"] = self.log
 
-    def increment(self, t, dtheta, dv, dt):
-        from ins_gnss_ros.nav.increments import increment_problem
-
-        problem = increment_problem(tuple(dtheta), tuple(dv), dt)
+    def increment(self, problem, t, dtheta, dv, dt):
+        """An increment with its increment_problem verdict, as the ekf node takes it."""
         if problem is not None:
             self.events[problem] += 1
             return
-        self.aiding.increment(t, np.asarray(dtheta, float), np.asarray(dv, float), dt)
+        self.aiding.increment(t, dtheta, dv, dt)
 
     def delta(self, msg):
-        a, v = msg.delta_angle, msg.delta_velocity
-        self.increment(bagio.stamp_to_sec(msg.header.stamp), (a.x, a.y, a.z), (v.x, v.y, v.z),
-                       msg.dt)
+        problem, dtheta, dv = self.increment_of(msg)
+        self.increment(problem, bagio.stamp_to_sec(msg.header.stamp), dtheta, dv, msg.dt)
 
     def raw(self, msg):
         w, f = msg.angular_velocity, msg.linear_acceleration
@@ -135,15 +141,13 @@ class _Feeder:
             if out.rates is None:
                 self.events[f"imu sample rejected: {out.reason}"] += 1
             for inc in out.increments:
-                self.increment(inc.t_ns * 1e-9, inc.dtheta, inc.dv, inc.dt)
+                problem = increment_problem(tuple(inc.dtheta), tuple(inc.dv), inc.dt)
+                self.increment(problem, inc.t_ns * 1e-9, inc.dtheta, inc.dv, inc.dt)
 
     def fix(self, msg):
-        from sensor_msgs.msg import NavSatFix
-
         self.aiding.fix(bagio.stamp_to_sec(msg.header.stamp), msg.latitude, msg.longitude,
                         msg.altitude, np.reshape(msg.position_covariance, (3, 3)),
-                        msg.status.status,
-                        msg.position_covariance_type != NavSatFix.COVARIANCE_TYPE_UNKNOWN)
+                        msg.status.status, msg.position_covariance_type != self.unknown_covariance)
 
     def vel(self, msg):
         l = msg.twist.twist.linear
@@ -151,8 +155,7 @@ class _Feeder:
                              np.reshape(msg.twist.covariance, (6, 6))[:3, :3])
 
     def heading(self, msg):
-        from ins_gnss_msgs.msg import Heading
-
+        Heading = self.Heading
         magnetic = msg.source == Heading.SOURCE_MAGNETIC
         if msg.status == Heading.STATUS_NONE and not magnetic:
             return
