@@ -33,30 +33,15 @@ RUNS = {
 }
 
 
-def graph_profile(tmp: Path) -> Path:
-    """config/default.yaml without the sensor sources (driver, simulator): the graph that a
-    replay of a recorded bag runs."""
-    import yaml
-
-    data = yaml.safe_load((REPO / "config" / "default.yaml").read_text())
-    for name in ("gnss_driver", "gnss_simulator"):
-        data.pop(name, None)
-    path = tmp / "graph.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    return path
-
-
 def run_all(out: Path) -> None:
     out.mkdir(parents=True)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        profile = graph_profile(tmp)
         sim = tmp / "sim_car"
         subprocess.run(TRIAL + ["simulate", "--scenario", "car", "--duration", "60", "--seed",
                                 "3", "--out", str(sim)], check=True, cwd=REPO)
         for name, (bag, config, extra) in RUNS.items():
             bag = str(sim) if bag == "SIM" else bag
-            config = str(profile) if config == "config/default.yaml" else config
             print(f"{name}: replay {bag} --config {config} {' '.join(extra)}", flush=True)
             subprocess.run(TRIAL + ["replay", bag, "--config", config, "--out",
                                     str(out / name), "--no-progress"] + extra,
