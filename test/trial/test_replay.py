@@ -258,7 +258,8 @@ def test_offline_filter_path_records_states_and_covariances(car_bag, tmp_path):
                        "    lever_arm: [0.0, 0.0, 1.5]\n")
     summary = replay_offline(car_bag, profile, tmp_path / "o")
     assert summary["mode"] == "offline"
-    assert set(summary["topics"]) == {"/ins/state", "/nav/odom", "/nav/fix", "/nav/status"}
+    assert set(summary["topics"]) == {"/ins/state", "/nav/odom", "/nav/fix", "/nav/status",
+                                      "/tf", "/tf_static"}
     states = _states(tmp_path / "o")
     truth = bagio.read_bag(car_bag, ["truth/state"])[-1].msg
     last = states[-1]
