@@ -108,6 +108,7 @@ class EkfNode(NavNode):
         self.last_output_t = -np.inf
         self.last_status_t = -np.inf
         self.published_datum = None
+        self.converging = False  # re-synchronising the strapdown onto a set pose
         # NavSatStatus (status, service) of the last gnss/fix handed to the filter
         self.fix_input = (NavSatStatus.STATUS_FIX, 0)
 
@@ -242,6 +243,7 @@ class EkfNode(NavNode):
         set_pose(self.navigator, stamp_to_sec(pose.header.stamp), lat, lon, h, q / norm,
                  np.reshape(pose.pose.covariance, (6, 6)))
         self.sync.invalidate()
+        self.converging = True
         self.after_filter()
         response.success, response.message = True, "navigating from the pose"
         return response
@@ -309,6 +311,12 @@ class EkfNode(NavNode):
             self.diag.count("strapdown out of step: re-synchronised on its newest state")
         if c is None:
             return
+        if self.converging:
+            # A pose set far from the strapdown's state is not reached by one (linearised)
+            # correction, and no update may follow to correct it again: compare again until
+            # the strapdown is on it.
+            self.converging = bool(np.linalg.norm(c.position_error) > 1e-3)
+            nav.revision += self.converging
         corr = new(InsCorrection)
         corr.sequence = c.sequence
         corr.header.stamp, corr.header.frame_id = ns_to_stamp(c.t_ns), "map"
