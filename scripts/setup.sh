@@ -54,6 +54,12 @@ if changed msgs $(find src/ins_gnss_msgs packaging/ins_gnss_msgs -type f | sort)
   pip install -q --no-build-isolation --no-deps --force-reinstall ./packaging/ins_gnss_msgs
   done_stamp msgs
 fi
+# tf2_msgs (for /tf, /tf_static) has no PyPI wheel: built the same way from its upstream definition.
+if changed tf2_msgs $(find packaging/tf2_msgs -type f | sort) requirements.txt; then
+  say "building tf2_msgs"
+  pip install -q --no-build-isolation --no-deps --force-reinstall ./packaging/tf2_msgs
+  done_stamp tf2_msgs
+fi
 
 if changed ins_gnss_ros src/ins_gnss_ros/setup.py src/ins_gnss_ros/setup.cfg src/ins_gnss_ros/package.xml; then
   say "installing ins_gnss_ros (editable)"

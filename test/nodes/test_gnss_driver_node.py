@@ -192,8 +192,10 @@ def test_fix_and_velocity_from_nav_pvt(bus_run, walk):
         assert fix.position_covariance[0] == pytest.approx(pvt["h_acc"] ** 2)
         assert fix.position_covariance[8] == pytest.approx(pvt["v_acc"] ** 2)
         assert fix.position_covariance_type == NavSatFix.COVARIANCE_TYPE_DIAGONAL_KNOWN
-        assert fix.status.status == (NavSatStatus.STATUS_GBAS_FIX if pvt["carr"]
-                                     else NavSatStatus.STATUS_FIX)
+        # carrSoln 2 RTK fixed, 1 float (no NavSatStatus of its own: SBAS_FIX), 0 none
+        assert fix.status.status == {2: NavSatStatus.STATUS_GBAS_FIX,
+                                     1: NavSatStatus.STATUS_SBAS_FIX}.get(
+                                         pvt["carr"], NavSatStatus.STATUS_FIX)
         lin = vel.twist.twist.linear
         np.testing.assert_allclose([lin.x, lin.y, lin.z], pvt["vel_enu"], atol=1e-9)
         assert vel.twist.covariance[0] == pytest.approx(pvt["s_acc"] ** 2)

@@ -258,7 +258,8 @@ def test_offline_filter_path_records_states_and_covariances(car_bag, tmp_path):
                        "    lever_arm: [0.0, 0.0, 1.5]\n")
     summary = replay_offline(car_bag, profile, tmp_path / "o")
     assert summary["mode"] == "offline"
-    assert set(summary["topics"]) == {"/ins/state", "/nav/odom", "/nav/fix", "/nav/status"}
+    assert set(summary["topics"]) == {"/ins/state", "/nav/odom", "/nav/fix", "/nav/status",
+                                      "/tf", "/tf_static"}
     states = _states(tmp_path / "o")
     truth = bagio.read_bag(car_bag, ["truth/state"])[-1].msg
     last = states[-1]
@@ -294,17 +295,80 @@ def test_generic_graph_with_the_imu_preprocessor(tmp_path):
     assert abs(states[-1].latitude - truth.latitude) * 6.36e6 < 0.5
 
 
-def test_offline_agrees_with_the_graph(tmp_path):
+@pytest.fixture(scope="module")
+def default_drive(tmp_path_factory):
+    """A simulated drive replayed through config/default.yaml by the graph and offline."""
+    root = tmp_path_factory.mktemp("default_drive")
+    bag = simulate("car", 60.0, 3, root / "drive")
+    profile = Path(__file__).resolve().parents[2] / "config" / "default.yaml"
+    replay(bag, profile, root / "graph")
+    replay_offline(bag, profile, root / "offline")
+    return bag, profile, root / "graph", root / "offline"
+
+
+def test_offline_agrees_with_the_graph(default_drive):
     """--offline runs the graph's cores without the graph: on a simulated drive through
     config/default.yaml, its horizontal RMS after the start is within 10 % of the graph's."""
     from ins_gnss_ros.trial.report import evaluate_run
-    from ins_gnss_ros.trial.simulate import simulate
 
-    bag = simulate("car", 60.0, 3, tmp_path / "drive")
-    profile = Path(__file__).resolve().parents[2] / "config" / "default.yaml"
-    replay(bag, profile, tmp_path / "graph")
-    replay_offline(bag, profile, tmp_path / "offline")
-    graph, _ = evaluate_run(tmp_path / "graph", plots=False, skip_s=35.0)
-    offline, _ = evaluate_run(tmp_path / "offline", plots=False, skip_s=35.0)
+    _, _, graph_out, offline_out = default_drive
+    graph, _ = evaluate_run(graph_out, plots=False, skip_s=35.0)
+    offline, _ = evaluate_run(offline_out, plots=False, skip_s=35.0)
     a, b = graph.stats["horizontal_m"].rms, offline.stats["horizontal_m"].rms
     assert a < 0.3 and abs(b - a) <= 0.1 * a, (a, b)
+
+
+def _walk(tree, static, frame, root):
+    """(translation, rotation matrix) of ``frame`` in ``root`` through the transforms
+    child -> (parent, translation, rotation): REP-105's tree walked up from the leaf."""
+    from ins_gnss_ros.nav.rotations import quat_to_dcm
+
+    t, c = np.zeros(3), np.eye(3)
+    while frame != root:
+        tf = tree.get(frame) or static[frame]
+        r = tf.transform.rotation
+        c_parent = quat_to_dcm([r.w, r.x, r.y, r.z])
+        v = tf.transform.translation
+        t, c = c_parent @ t + np.array([v.x, v.y, v.z]), c_parent @ c
+        frame = tf.header.frame_id
+    return t, c
+
+
+@pytest.mark.parametrize("path", ["graph", "offline"])
+def test_every_replay_bag_holds_the_tf_tree(default_drive, path):
+    """/tf and /tf_static of a replay's bag: base_link and the sensor frames walked up to map
+    at every /tf stamp give nav/odom's pose there; the static frames carry the profile's
+    mounting and lever arm."""
+    from ins_gnss_ros.nav.rotations import dcm_from_euler, quat_to_dcm
+
+    _, profile, graph_out, offline_out = default_drive
+    out = graph_out if path == "graph" else offline_out
+    sections = load_profile(profile).sections
+    rows = bagio.read_bag(out / "bag", ["/tf", "/tf_static", "nav/odom"])
+    static = {tf.child_frame_id: tf for m in rows if m.topic == "/tf_static"
+              for tf in m.msg.transforms}
+    assert set(static) == {"imu_link", "gnss_0"}
+    assert all(tf.header.frame_id == "base_link" for tf in static.values())
+    odom = {bagio.msg_stamp_ns(m.msg): m.msg for m in rows if m.topic == "/nav/odom"}
+    walked = 0
+    for m in rows:
+        if m.topic != "/tf":
+            continue
+        tree = {tf.child_frame_id: tf for tf in m.msg.transforms}
+        stamp = bagio.msg_stamp_ns(tree["base_link"])
+        pose = odom[stamp].pose.pose
+        o = pose.orientation
+        c_nb = quat_to_dcm([o.w, o.x, o.y, o.z])
+        t, c = _walk(tree, static, "base_link", "map")
+        np.testing.assert_allclose(t, [pose.position.x, pose.position.y, pose.position.z],
+                                   atol=1e-9)
+        np.testing.assert_allclose(c, c_nb, atol=1e-12)
+        t, c = _walk(tree, static, "gnss_0", "map")
+        lever = sections["ekf"].get("lever_arm", [0.0, 0.0, 0.0])
+        np.testing.assert_allclose(t, [pose.position.x, pose.position.y, pose.position.z]
+                                   + c_nb @ lever, atol=1e-9)
+        _, c = _walk(tree, static, "imu_link", "map")
+        mounting = sections["imu_preprocessor"].get("mounting_rpy_deg", [0.0, 0.0, 0.0])
+        np.testing.assert_allclose(c, c_nb @ dcm_from_euler(*np.radians(mounting)), atol=1e-12)
+        walked += 1
+    assert walked == len(odom) > 100

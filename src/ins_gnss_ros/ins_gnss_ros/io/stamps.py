@@ -32,8 +32,13 @@ def stamp_to_sec(stamp: Time) -> float:
 
 
 def msg_stamp_ns(msg) -> int:
-    """Integer ns of a message's header stamp (``rosgraph_msgs/Clock``: of its clock field)."""
-    return stamp_to_ns(msg.header.stamp if hasattr(msg, "header") else msg.clock)
+    """Integer ns of a message's header stamp (``rosgraph_msgs/Clock``: of its clock field;
+    ``tf2_msgs/TFMessage``: of its first transform)."""
+    if hasattr(msg, "header"):
+        return stamp_to_ns(msg.header.stamp)
+    if hasattr(msg, "transforms"):
+        return stamp_to_ns(msg.transforms[0].header.stamp)
+    return stamp_to_ns(msg.clock)
 
 
 def set_stamp_ns(stamp: Time, t_ns: int) -> None:

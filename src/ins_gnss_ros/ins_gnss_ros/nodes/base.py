@@ -53,6 +53,16 @@ STATE_QOS = QoSProfile(
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
 
+# /tf and /tf_static as tf2_ros' TransformBroadcaster and StaticTransformBroadcaster offer them
+# (REP-105 consumers subscribe with these); the static transforms reach late joiners.
+TF_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                    reliability=ReliabilityPolicy.RELIABLE)
+TF_STATIC_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                           reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# The last value of a slowly changing fact (the datum), latched for late joiners.
+LATCHED_QOS = TF_STATIC_QOS
+
 
 def descriptor(spec: Param) -> ParameterDescriptor:
     """The ROS descriptor of a parameter spec (ROS enforces scalar ranges itself; lists are
@@ -139,6 +149,7 @@ class InProcessBus:
 
     def __init__(self):
         self._subscribers: dict[str, list[Callable[[Any], None]]] = defaultdict(list)
+        self._services: dict[str, tuple[Any, Callable[[Any, Any], Any]]] = {}
         self._queue: deque[tuple[str, Any]] = deque()
         self.recorders: list[Callable[[str, Any], None]] = []
         self.now_ns = 0  # replay time, set by whoever drives the bus
@@ -152,6 +163,17 @@ class InProcessBus:
 
     def publish(self, topic: str, msg: Any) -> None:
         self._queue.append((self.resolve(topic), msg))
+
+    def add_service(self, name: str, srv_type, callback: Callable[[Any, Any], Any]) -> None:
+        self._services[self.resolve(name)] = (srv_type, callback)
+
+    def call(self, name: str, request):
+        """Call service ``name`` in-process: its callback runs now, and what it publishes is
+        delivered (:meth:`drain`) before the response is returned."""
+        srv_type, callback = self._services[self.resolve(name)]
+        response = callback(request, srv_type.Response())
+        self.drain()
+        return response
 
     def drain(self) -> None:
         while self._queue:
@@ -203,6 +225,16 @@ class NavNode(Node):
             self.bus.subscribe(topic, callback)
         else:
             self.create_subscription(msg_type, topic, callback, qos)
+
+    def service(self, srv_type, name: str, callback) -> None:
+        """A DDS service, or the same callback registered with the bus (``bus.call``); a
+        ``~/`` name is private to the node on both."""
+        if self.bus is None:
+            self.create_service(srv_type, name, callback)
+            return
+        if name.startswith("~/"):
+            name = f"{self.get_fully_qualified_name()}/{name[2:]}"
+        self.bus.add_service(name, srv_type, callback)
 
     def now_ns(self) -> int:
         """Current time, ns: the bus' replay time or the node clock."""

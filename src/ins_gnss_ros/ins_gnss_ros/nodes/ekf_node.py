@@ -17,9 +17,17 @@ same epochs are never both used (the same data would count twice).
 
 Outputs: ``nav/odom`` (ENU ``map`` frame around a datum, covariance from the filter),
 ``nav/fix`` (``STATUS_NO_FIX`` unless the filter is NAVIGATING: aligning or dead reckoning is
-not a fix), ``nav/status`` (mode, coupling, every update with innovation, NIS and verdict);
-/diagnostics says why the filter is not navigating (what it waits for) and, per aiding input,
-its rate, staleness and refusals.
+not a fix; else the augmentation of the fixes it navigates on), ``nav/imu`` (the INS
+orientation as sensor_msgs/Imu), ``nav/status`` (mode, coupling, every update with innovation,
+NIS and verdict), ``nav/datum`` (latched) and, with ``publish_tf``, ``/tf`` map -> base_link
+and ``/tf_static`` base_link -> gnss_0 (REP-105, nodes/tf_messages.py);
+/diagnostics says why the filter is not navigating (what it waits for), the datum and, per
+aiding input, its rate, staleness and refusals.
+
+Services (as robot_localization's and navsat_transform's): ``~/reset`` (std_srvs/Empty: align
+again from nothing), ``~/set_pose`` (the filter navigates on from a map-frame pose:
+:func:`ins_gnss_ros.nav.set_pose.set_pose`), ``~/set_datum``, ``~/to_ll``, ``~/from_ll``
+(:mod:`ins_gnss_ros.nav.local_frame`).
 
 Integrity: a measurement kind rejected at the gate for 2 s is forced in with its innovation
 admitted on both sides (the navigator's integrity logic); until the noise floor this leaves decays
@@ -42,8 +50,11 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import TwistWithCovarianceStamped
 from ins_gnss_msgs.msg import FilterStatus, GnssEphemeris, GnssObservations, Heading, ImuDelta, \
     InsCorrection, InsState
+from ins_gnss_msgs.srv import FromLL, SetDatum, SetPose, ToLL
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import NavSatFix
+from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
+from std_srvs.srv import Empty
+from tf2_msgs.msg import TFMessage
 
 from ..gnss.constants import GALILEO, GPS, UBX_GNSS_ID
 from ..gnss.ranges import RangeConfig, ephemeris_valid, satellite_ranges
@@ -52,16 +63,20 @@ from ..nav import NAVIGATING, Navigator
 from ..nav.aiding import Aiding, AidingPolicy
 from ..nav.error_model import LAYOUTS
 from ..nav.filter_config import PARAMS, navigator_config
+from ..nav.local_frame import datum_from_degrees, from_map, to_map
+from ..nav.set_pose import set_pose
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import StrapdownSync
-from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, ParameterError, run
-from .convert import increment_of, nav_state_from_msg, sensor_errors_of, set_vector3, vec
+from .base import DRIVER_QOS, LATCHED_QOS, SENSOR_QOS, STATE_QOS, TF_QOS, TF_STATIC_QOS, \
+    NavNode, ParameterError, run
+from .convert import increment_of, nav_state_from_msg, quat, sensor_errors_of, set_vector3, vec
 from .gnss_messages import kepler_from_msg, raw_epoch_from_msg
-from .nav_messages import MODES, fix_msg, odom_msg, status_msg
+from .nav_messages import MODES, datum_msg, fix_msg, fix_status, imu_msg, odom_msg, status_msg
+from .tf_messages import FRAME_PARAMS, solution_tf, static_tf
 
 
 class EkfNode(NavNode):
-    PARAMS = PARAMS
+    PARAMS = PARAMS + FRAME_PARAMS
 
     def __init__(self, **kwargs):
         super().__init__("ekf", **kwargs)
@@ -92,11 +107,25 @@ class EkfNode(NavNode):
         self.rejected = 0
         self.last_output_t = -np.inf
         self.last_status_t = -np.inf
+        self.published_datum = None
+        self.converging = False  # re-synchronising the strapdown onto a set pose
+        # NavSatStatus (status, service) of the last gnss/fix handed to the filter
+        self.fix_input = (NavSatStatus.STATUS_FIX, 0)
 
         self.pub_correction = self.publisher(InsCorrection, "ins/correction", STATE_QOS)
         self.pub_odom = self.publisher(Odometry, "nav/odom", SENSOR_QOS)
         self.pub_fix = self.publisher(NavSatFix, "nav/fix", SENSOR_QOS)
         self.pub_status = self.publisher(FilterStatus, "nav/status", STATE_QOS)
+        self.pub_imu = self.publisher(Imu, "nav/imu", SENSOR_QOS)
+        self.pub_datum = self.publisher(NavSatFix, "nav/datum", LATCHED_QOS)
+        self.pub_tf = self.publisher(TFMessage, "/tf", TF_QOS) if p["publish_tf"] else None
+        self.pub_tf_static = self.publisher(TFMessage, "/tf_static", TF_STATIC_QOS) \
+            if p["publish_tf"] else None
+        self.service(Empty, "~/reset", self.on_reset)
+        self.service(SetPose, "~/set_pose", self.on_set_pose)
+        self.service(SetDatum, "~/set_datum", self.on_set_datum)
+        self.service(ToLL, "~/to_ll", self.on_to_ll)
+        self.service(FromLL, "~/from_ll", self.on_from_ll)
         self.subscribe(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS)
         self.subscribe(InsState, "ins/state", self.on_ins_state, SENSOR_QOS)
         self.subscribe(NavSatFix, "gnss/fix", self.on_fix, DRIVER_QOS)
@@ -113,6 +142,8 @@ class EkfNode(NavNode):
 
     # -- inputs --------------------------------------------------------------------------------
     def on_delta(self, msg: ImuDelta) -> None:
+        if self.pub_tf_static is not None:
+            self.publish_static_tf(msg.header.stamp)
         problem, dtheta, dv = increment_of(msg)
         if problem is not None:
             self.diag.count(problem)
@@ -128,6 +159,8 @@ class EkfNode(NavNode):
                            msg.altitude, np.reshape(msg.position_covariance, (3, 3)),
                            msg.status.status,
                            msg.position_covariance_type != NavSatFix.COVARIANCE_TYPE_UNKNOWN):
+            self.fix_input = (msg.status.status, msg.status.service)
+            self.note_datum(msg.header.stamp)
             self.after_filter()
 
     def on_vel(self, msg: TwistWithCovarianceStamped) -> None:
@@ -185,7 +218,86 @@ class EkfNode(NavNode):
         if t - self.last_status_t >= 1.0:  # the mode is reported even when nothing updates
             self.publish_status(t, [])
 
+    # -- services ------------------------------------------------------------------------------
+    def on_reset(self, request, response):
+        """Forget everything: the filter aligns again (the datum stays)."""
+        self.navigator.reset()
+        self.sync.invalidate()  # the strapdown's states are not the solution until re-synced
+        self.get_logger().info("reset: aligning again")
+        return response
+
+    def on_set_pose(self, request: SetPose.Request, response: SetPose.Response):
+        pose = request.pose
+        if pose.header.frame_id not in ("", self.p["map_frame"]):
+            response.message = f"pose in frame {pose.header.frame_id!r}, not {self.p['map_frame']!r}"
+            return response
+        if self.aiding.datum is None:
+            response.message = "no datum yet: set one (~/set_datum) or wait for a fix"
+            return response
+        p, q = pose.pose.pose.position, quat(pose.pose.pose.orientation)
+        norm = np.linalg.norm(q)
+        if not (np.isfinite([p.x, p.y, p.z]).all() and np.isfinite(norm) and norm > 0.5):
+            response.message = "pose not finite or its quaternion not a rotation"
+            return response
+        lat, lon, h = from_map(self.aiding.datum, (p.x, p.y, p.z))
+        set_pose(self.navigator, stamp_to_sec(pose.header.stamp), lat, lon, h, q / norm,
+                 np.reshape(pose.pose.covariance, (6, 6)))
+        self.sync.invalidate()
+        self.converging = True
+        self.after_filter()
+        response.success, response.message = True, "navigating from the pose"
+        return response
+
+    def on_set_datum(self, request: SetDatum.Request, response: SetDatum.Response):
+        try:
+            self.aiding.datum = datum_from_degrees(request.latitude, request.longitude,
+                                                   request.altitude)
+        except ValueError as err:
+            response.message = str(err)
+            return response
+        self.note_datum(self.now_msg())
+        response.success, response.message = True, "datum set"
+        return response
+
+    def on_to_ll(self, request: ToLL.Request, response: ToLL.Response):
+        if self.aiding.datum is None:
+            response.message = "no datum yet"
+            return response
+        p = request.map_point
+        lat, lon, response.altitude = from_map(self.aiding.datum, (p.x, p.y, p.z))
+        response.latitude, response.longitude = float(np.degrees(lat)), float(np.degrees(lon))
+        response.success = True
+        return response
+
+    def on_from_ll(self, request: FromLL.Request, response: FromLL.Response):
+        if self.aiding.datum is None:
+            response.message = "no datum yet"
+            return response
+        p = response.map_point
+        p.x, p.y, p.z = (float(v) for v in to_map(
+            self.aiding.datum, np.radians(request.latitude), np.radians(request.longitude),
+            request.altitude))
+        response.success = True
+        return response
+
     # -- synchronisation and outputs -----------------------------------------------------------
+    def note_datum(self, stamp) -> None:
+        """Publish the datum (latched) and report it on /diagnostics when it is new."""
+        datum = self.aiding.datum
+        if datum is None or datum == self.published_datum:
+            return
+        self.published_datum = datum
+        self.pub_datum.publish(datum_msg(stamp, datum, self.p["map_frame"]))
+        self.diag.set_value("datum", f"{np.degrees(datum[0]):.9f} deg, "
+                                     f"{np.degrees(datum[1]):.9f} deg, {datum[2]:.3f} m")
+
+    def publish_static_tf(self, stamp) -> None:
+        """base_link -> gnss_0 (the antenna lever arm) on /tf_static, once, stamped with the
+        first increment."""
+        pub, self.pub_tf_static = self.pub_tf_static, None
+        pub.publish(static_tf(stamp, self.p["base_link_frame"], [
+            (self.p["gnss_frame"], self.p["lever_arm"], np.eye(3))]))
+
     def after_filter(self) -> None:
         nav = self.navigator
         self.report_updates()
@@ -199,6 +311,12 @@ class EkfNode(NavNode):
             self.diag.count("strapdown out of step: re-synchronised on its newest state")
         if c is None:
             return
+        if self.converging:
+            # A pose set far from the strapdown's state is not reached by one (linearised)
+            # correction, and no update may follow to correct it again: compare again until
+            # the strapdown is on it.
+            self.converging = bool(np.linalg.norm(c.position_error) > 1e-3)
+            nav.revision += self.converging
         corr = new(InsCorrection)
         corr.sequence = c.sequence
         corr.header.stamp, corr.header.frame_id = ns_to_stamp(c.t_ns), "map"
@@ -247,14 +365,27 @@ class EkfNode(NavNode):
     def publish_solution(self, st: NavState, ins: InsState) -> None:
         """nav/fix and nav/odom: the synchronised strapdown state with the filter covariance
         (with the noise floors of forced measurement kinds: Navigator.covariance)."""
-        P, S = self.navigator.covariance(), self.navigator.space
+        P, S, p = self.navigator.covariance(), self.navigator.space, self.p
+        status, service = (NavSatStatus.STATUS_FIX, 0) if self.aiding.use_ranges \
+            else self.fix_input
         self.pub_fix.publish(fix_msg(ins.header.stamp, st, P[S["pos"], S["pos"]],
-                                     valid=self.navigator.mode == NAVIGATING))
+                                     fix_status(self.navigator.mode == NAVIGATING, status),
+                                     service, p["base_link_frame"]))
+        # one navigation-rate sample of gyro and accelerometer white noise (the rate and the
+        # specific force are not filter states)
+        noise, interval = self.config.noise, self.config.cov_interval
+        rate_var = noise.gyro_psd / interval
+        self.pub_imu.publish(imu_msg(ins.header.stamp, st, P, S, ins.angular_velocity,
+                                     ins.specific_force, rate_var, noise.accel_psd / interval,
+                                     p["base_link_frame"]))
         if self.aiding.datum is not None:
-            # one navigation-rate sample of gyro white noise (the rate is not a filter state)
-            rate_var = self.config.noise.gyro_psd / self.config.cov_interval
+            self.note_datum(ins.header.stamp)
+            frames = (p["map_frame"], p["base_link_frame"])
             self.pub_odom.publish(odom_msg(ins.header.stamp, st, P, S, self.aiding.datum,
-                                           ins.angular_velocity, rate_var))
+                                           ins.angular_velocity, rate_var, frames))
+            if self.pub_tf is not None:
+                # map -> base_link; with wheel odometry fused: map -> odom -> base_link
+                self.pub_tf.publish(solution_tf(ins.header.stamp, st, self.aiding.datum, *frames))
 
 
 def main(args=None) -> int:

@@ -129,13 +129,17 @@ def fix_msg(stamp: Time, frame_id: str, lat: float, lon: float, h: float, status
 
 def fix_from_pvt(pvt: PvtFix, stamp: Time, frame_id: str, service: int) -> NavSatFix:
     """NavSatFix of a NAV-PVT solution: ellipsoidal height; status NO_FIX unless the receiver
-    flags gnssFixOK with a 2D/3D(/+DR) fix, GBAS_FIX for an RTK float or fixed solution;
+    flags gnssFixOK with a 2D/3D(/+DR) fix, GBAS_FIX for an RTK fixed solution (carrSoln 2),
+    SBAS_FIX for an RTK float one (carrSoln 1: NavSatStatus has no float state, and a float
+    solution is an augmented one that has not reached carrier-phase accuracy);
     covariance diagonal from hAcc (east and north each) and vAcc, as u-blox's accuracy
     estimates are not split by axis."""
     if not pvt.gnss_fix_ok or pvt.fix_type not in (2, 3, 4):
         status = NavSatStatus.STATUS_NO_FIX
-    elif pvt.carr_soln > 0:
+    elif pvt.carr_soln == 2:
         status = NavSatStatus.STATUS_GBAS_FIX
+    elif pvt.carr_soln == 1:
+        status = NavSatStatus.STATUS_SBAS_FIX
     else:
         status = NavSatStatus.STATUS_FIX
     return fix_msg(stamp, frame_id, pvt.lat, pvt.lon, pvt.h, status, service,
@@ -144,10 +148,11 @@ def fix_from_pvt(pvt: PvtFix, stamp: Time, frame_id: str, service: int) -> NavSa
 
 
 #: GGA quality indicator -> NavSatStatus (0 invalid, 1 GPS, 2 DGPS, 3 PPS, 4 RTK fixed,
-#: 5 RTK float, 6 dead reckoning, 7 manual, 8 simulator: NMEA 0183 v4.11).
+#: 5 RTK float, 6 dead reckoning, 7 manual, 8 simulator: NMEA 0183 v4.11). GBAS_FIX is RTK
+#: fixed only; float is an augmented fix (SBAS_FIX), as in :func:`fix_from_pvt`.
 _GGA_STATUS = {1: NavSatStatus.STATUS_FIX, 2: NavSatStatus.STATUS_SBAS_FIX,
                3: NavSatStatus.STATUS_FIX, 4: NavSatStatus.STATUS_GBAS_FIX,
-               5: NavSatStatus.STATUS_GBAS_FIX}
+               5: NavSatStatus.STATUS_SBAS_FIX}
 
 
 def fix_from_gga(gga: NmeaFix, errors: NmeaErrors | None, stamp: Time, frame_id: str,

@@ -17,11 +17,13 @@ import sys
 import numpy as np
 from ins_gnss_msgs.msg import ImuDelta, InsCorrection
 from sensor_msgs.msg import Imu, MagneticField, Temperature
+from tf2_msgs.msg import TFMessage
 
 from ..imu.preprocessor_params import PARAMS, preprocessor_from_params
 from ..io import NS, new, set_stamp_ns, stamp_to_ns
-from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, run
+from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, TF_STATIC_QOS, NavNode, run
 from .convert import sensor_errors_of, set_vector3, vec
+from .tf_messages import IMU_FRAME_PARAMS, static_tf
 
 
 #: ImuPreprocessor events -> diagnostics.
@@ -32,7 +34,7 @@ _EVENTS = {"clock_jump": "imu clock jump: stamps corrected by the arrival clock"
 
 
 class ImuPreprocessorNode(NavNode):
-    PARAMS = PARAMS
+    PARAMS = PARAMS + IMU_FRAME_PARAMS
 
     def __init__(self, **kwargs):
         super().__init__("imu_preprocessor", **kwargs)
@@ -51,9 +53,20 @@ class ImuPreprocessorNode(NavNode):
             self.subscribe(Temperature, "imu/temperature", self.on_temperature, DRIVER_QOS)
         if p["apply_filter_corrections"]:
             self.subscribe(InsCorrection, "ins/correction", self.on_correction, STATE_QOS)
+        self.pub_tf_static = self.publisher(TFMessage, "/tf_static", TF_STATIC_QOS) \
+            if p["publish_tf"] else None
+
+    def publish_static_tf(self, stamp) -> None:
+        """frame_id -> imu_frame (the mounting; the IMU is base_link's origin) on /tf_static,
+        once, stamped with the first sample."""
+        pub, self.pub_tf_static = self.pub_tf_static, None
+        pub.publish(static_tf(stamp, self._frame_id, [
+            (self.p["imu_frame"], (0.0, 0.0, 0.0), self.preprocessor.calibration.c_bs)]))
 
     # -- IMU samples ---------------------------------------------------------------------------
     def on_imu(self, msg: Imu) -> None:
+        if self.pub_tf_static is not None:
+            self.publish_static_tf(msg.header.stamp)
         w, f = msg.angular_velocity, msg.linear_acceleration
         for out in self.preprocessor.add(stamp_to_ns(msg.header.stamp), self.now_ns(),
                                          (w.x, w.y, w.z), (f.x, f.y, f.z), msg):

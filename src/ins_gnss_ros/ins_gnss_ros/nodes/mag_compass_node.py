@@ -39,7 +39,7 @@ from ..magnetic.wmm import decimal_year, field_elements
 from ..nav.alignment import level
 from ..nav.rotations import quat_to_euler
 from ..params_io import ParamsFileError, load_yaml_file
-from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
+from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import quat, vec
 
 _IDENTITY = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
@@ -119,7 +119,7 @@ class MagCompassNode(NavNode):
                                        math.radians(p["pitch_std_deg"]))
         self.pub = self.publisher(Heading, "mag/heading", SENSOR_QOS)
         self.subscribe(MagneticField, "imu/mag", self.on_mag, SENSOR_QOS)
-        self.subscribe(NavSatFix, "gnss/fix", self.on_fix, SENSOR_QOS)
+        self.subscribe(NavSatFix, "gnss/fix", self.on_fix, DRIVER_QOS)
         self.subscribe(InsState, "ins/state", self.on_ins_state, SENSOR_QOS)
         if p["attitude_source"] == "imu_data":
             self.subscribe(Imu, "imu/data", self.on_imu, SENSOR_QOS)

@@ -1,5 +1,5 @@
 """The navigation solution and the filter's status as ROS messages (``nav/fix``, ``nav/odom``,
-``nav/status``), for the ``ekf`` node and the offline replay alike."""
+``nav/imu``, ``nav/status``, ``nav/datum``), for the ``ekf`` node and the offline replay alike."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,11 +7,11 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Vector3
 from ins_gnss_msgs.msg import FilterStatus, MeasurementUpdate
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import NavSatFix, NavSatStatus
+from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
 
 from ..io import new, sec_to_stamp
 from ..nav import ALIGNING, DEAD_RECKONING, NAVIGATING
-from ..nav.earth import ecef_to_enu, geodetic_to_ecef
+from ..nav.local_frame import to_map
 from ..nav.rotations import quat_to_dcm
 from ..nav.strapdown import NavState
 from .convert import to_quaternion, to_vector3
@@ -21,26 +21,68 @@ MODES = {ALIGNING: FilterStatus.MODE_ALIGNING, NAVIGATING: FilterStatus.MODE_NAV
          DEAD_RECKONING: FilterStatus.MODE_DEAD_RECKONING}
 
 
-def fix_msg(stamp: Time, st: NavState, cov_pos: np.ndarray, valid: bool) -> NavSatFix:
-    """nav/fix: the solution's position with its ENU covariance (m^2); ``valid`` False (the
-    filter is aligning or dead reckoning) publishes it as STATUS_NO_FIX."""
+def fix_status(navigating: bool, input_status: int) -> int:
+    """nav/fix status (REP-145 readers take it as the solution's quality): NO_FIX unless the
+    filter is NAVIGATING (aligning and dead reckoning are not fixes), else the augmentation of
+    the GNSS input the filter navigates on (``input_status``: the NavSatStatus of the last
+    gnss/fix it used, STATUS_FIX for pseudoranges): SBAS_FIX, GBAS_FIX (RTK fixed: the driver
+    reports float as SBAS_FIX), otherwise FIX."""
+    if not navigating:
+        return NavSatStatus.STATUS_NO_FIX
+    if input_status in (NavSatStatus.STATUS_SBAS_FIX, NavSatStatus.STATUS_GBAS_FIX):
+        return input_status
+    return NavSatStatus.STATUS_FIX
+
+
+def fix_msg(stamp: Time, st: NavState, cov_pos: np.ndarray, status: int, service: int = 0,
+            frame_id: str = "base_link") -> NavSatFix:
+    """nav/fix: the solution's position with its ENU covariance (m^2), NavSatStatus ``status``
+    (:func:`fix_status`) and ``service`` bits (the GNSS systems the filter uses)."""
     fix = new(NavSatFix)
-    fix.header.stamp, fix.header.frame_id = stamp, "base_link"
-    fix.status.status = NavSatStatus.STATUS_FIX if valid else NavSatStatus.STATUS_NO_FIX
+    fix.header.stamp, fix.header.frame_id = stamp, frame_id
+    fix.status.status, fix.status.service = status, service
     fix.latitude, fix.longitude, fix.altitude = np.degrees(st.lat), np.degrees(st.lon), st.h
     fix.position_covariance = cov_pos.flatten().tolist()
     fix.position_covariance_type = NavSatFix.COVARIANCE_TYPE_KNOWN
     return fix
 
 
+def datum_msg(stamp: Time, datum: tuple, frame_id: str) -> NavSatFix:
+    """nav/datum: the origin of the map frame (lat rad, lon rad, h m) as a NavSatFix in it."""
+    msg = new(NavSatFix)
+    msg.header.stamp, msg.header.frame_id = stamp, frame_id
+    msg.status.status = NavSatStatus.STATUS_FIX
+    msg.latitude, msg.longitude, msg.altitude = \
+        float(np.degrees(datum[0])), float(np.degrees(datum[1])), float(datum[2])
+    msg.position_covariance_type = NavSatFix.COVARIANCE_TYPE_UNKNOWN
+    return msg
+
+
+def imu_msg(stamp: Time, st: NavState, P: np.ndarray, S, angular_velocity: Vector3,
+            specific_force: Vector3, rate_variance: float, accel_variance: float,
+            frame_id: str = "base_link") -> Imu:
+    """nav/imu: sensor_msgs/Imu with the INS orientation (ENU <- base_link FLU, REP-103/145) and
+    its covariance (small rotations about ENU axes from P), the compensated body rate and
+    specific force with the variances (rad^2/s^2, m^2/s^4) of one navigation-rate sample."""
+    msg = new(Imu)
+    msg.header.stamp, msg.header.frame_id = stamp, frame_id
+    msg.orientation = to_quaternion(st.q_nb)
+    msg.orientation_covariance = P[S["att"], S["att"]].flatten().tolist()
+    msg.angular_velocity, msg.linear_acceleration = angular_velocity, specific_force
+    msg.angular_velocity_covariance = (np.eye(3) * rate_variance).flatten().tolist()
+    msg.linear_acceleration_covariance = (np.eye(3) * accel_variance).flatten().tolist()
+    return msg
+
+
 def odom_msg(stamp: Time, st: NavState, P: np.ndarray, S, datum: tuple,
-             angular_velocity: Vector3, rate_variance: float) -> Odometry:
-    """nav/odom: pose in the ENU ``map`` frame around ``datum`` (lat rad, lon rad, h m), twist
+             angular_velocity: Vector3, rate_variance: float,
+             frames: tuple[str, str] = ("map", "base_link")) -> Odometry:
+    """nav/odom: pose in the ENU map frame around ``datum`` (lat rad, lon rad, h m), twist
     in base_link, covariances from the filter's P (state space S); the angular rate is not a
-    filter state: its variance (rad^2/s^2) is given."""
+    filter state: its variance (rad^2/s^2) is given. ``frames``: (map, base_link) names."""
     odom = new(Odometry)
-    odom.header.stamp, odom.header.frame_id, odom.child_frame_id = stamp, "map", "base_link"
-    enu = ecef_to_enu(geodetic_to_ecef(st.lat, st.lon, st.h), *datum)
+    odom.header.stamp, (odom.header.frame_id, odom.child_frame_id) = stamp, frames
+    enu = to_map(datum, st.lat, st.lon, st.h)
     odom.pose.pose.position.x, odom.pose.pose.position.y, odom.pose.pose.position.z = \
         (float(x) for x in enu)
     odom.pose.pose.orientation = to_quaternion(st.q_nb)

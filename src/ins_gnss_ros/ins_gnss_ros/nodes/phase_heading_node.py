@@ -51,7 +51,7 @@ from ..gnss import (BEIDOU, GALILEO, GPS, UBX_GNSS_ID, AntennaObservations, Atti
                     PhaseHeadingConfig, attitude_heading, gps_seconds, mounted_antennas,
                     parsed_epoch)
 from ..io import stamp_to_sec
-from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
+from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import quat
 from .gnss_messages import heading_msg, kepler_from_msg, kepler_msg_plausible, raw_epoch_from_msg
 
@@ -180,7 +180,7 @@ class PhaseHeadingNode(NavNode):
         self.pub = self.publisher(Heading, "gnss/heading", SENSOR_QOS)
         self.subscribe(GnssObservations, "gnss/observations", self.on_observations, SENSOR_QOS)
         self.subscribe(GnssEphemeris, "gnss/ephemeris", self.on_ephemeris, STATE_QOS)
-        self.subscribe(NavSatFix, "gnss/fix", self.on_fix, SENSOR_QOS)
+        self.subscribe(NavSatFix, "gnss/fix", self.on_fix, DRIVER_QOS)
         self.subscribe(InsState, "ins/state", self.on_ins_state, SENSOR_QOS)
         self.subscribe(FilterStatus, "nav/status", self.on_filter_status, STATE_QOS)
 

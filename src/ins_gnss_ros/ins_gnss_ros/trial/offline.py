@@ -9,8 +9,9 @@ section the :class:`~ins_gnss_ros.nav.navigator.Navigator`
 :class:`~ins_gnss_ros.nav.aiding.Aiding` front end that judges every input. What differs from
 the graph is only that no strapdown node follows the filter: the outputs are the filter's own
 solution at its covariance epochs (10 Hz by default) as ``ins/state``, ``nav/odom``,
-``nav/fix`` (``STATUS_NO_FIX`` unless NAVIGATING) and ``nav/status`` once a second with the
-updates since the last. Deterministic like :func:`ins_gnss_ros.trial.replay.replay`.
+``nav/fix`` (``STATUS_NO_FIX`` unless NAVIGATING, else ``STATUS_FIX``), ``/tf`` (with
+``publish_tf``: map -> base_link, and ``/tf_static`` base_link -> imu_link and gnss_0, built as
+the nodes build them) and ``nav/status`` once a second with the updates since the last. Deterministic like :func:`ins_gnss_ros.trial.replay.replay`.
 """
 from __future__ import annotations
 
@@ -37,12 +38,14 @@ def offline_parameters(profile) -> tuple[dict, dict]:
     section and parameter at fault."""
     from ins_gnss_ros.imu.preprocessor_params import PARAMS as PREPROCESSOR_PARAMS
     from ins_gnss_ros.nav.filter_config import PARAMS as FILTER_PARAMS
+    from ins_gnss_ros.nodes.tf_messages import FRAME_PARAMS, IMU_FRAME_PARAMS
 
     if "ekf" not in profile.sections:
         raise ProfileError(f"{profile.path}: the offline path runs the 'ekf' section's filter: "
                            "the profile has none")
     out = []
-    for name, specs in (("imu_preprocessor", PREPROCESSOR_PARAMS), ("ekf", FILTER_PARAMS)):
+    for name, specs in (("imu_preprocessor", PREPROCESSOR_PARAMS + IMU_FRAME_PARAMS),
+                        ("ekf", FILTER_PARAMS + FRAME_PARAMS)):
         section = {k: v for k, v in profile.sections.get(name, {}).items() if k != "use_sim_time"}
         try:
             out.append(resolve(specs, section))
@@ -92,7 +95,8 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
         if handler is not None:
             handler(bagio.decode_message(row, bag_path))
     navigator.flush()
-    recorded = _write_outputs(out / "bag", navigator, aiding.datum, ekf_p)
+    recorded = _write_outputs(out / "bag", navigator, aiding.datum, ekf_p,
+                              (pre_p, preprocessor.calibration.c_bs))
     counts.recorded.update(recorded)
     summary = write_summary(out, bag_path, profile, outages, windows, counts, "offline", 0.0,
                             graph=["imu_preprocessor", "ekf (filter only)"])
@@ -169,16 +173,19 @@ class _Feeder:
                               msg.twist.covariance[0])
 
 
-def _write_outputs(path, navigator, datum, ekf_p) -> Counter:
-    """ins/state, nav/odom, nav/fix at every recorded epoch of the filter and nav/status once
-    a second; returns the counts per topic."""
+def _write_outputs(path, navigator, datum, ekf_p, imu_mounting) -> Counter:
+    """ins/state, nav/odom, nav/fix, /tf at every recorded epoch of the filter, nav/status once
+    a second and /tf_static (``imu_mounting``: the imu_preprocessor's parameters and C_bs) at
+    the first; returns the counts per topic."""
     from geometry_msgs.msg import Vector3
     from ins_gnss_msgs.msg import InsState
+    from sensor_msgs.msg import NavSatStatus
 
     from ins_gnss_ros.io import ns_to_stamp, sec_to_ns
     from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, NAVIGATING, NavState
     from ins_gnss_ros.nodes.convert import fill_ins_state
-    from ins_gnss_ros.nodes.nav_messages import MODES, fix_msg, odom_msg, status_msg
+    from ins_gnss_ros.nodes.nav_messages import MODES, fix_msg, fix_status, odom_msg, status_msg
+    from ins_gnss_ros.nodes.tf_messages import solution_tf, static_tf
 
     ins_modes = {ALIGNING: InsState.MODE_ALIGNING, NAVIGATING: InsState.MODE_NAVIGATING,
                  DEAD_RECKONING: InsState.MODE_DEAD_RECKONING}
@@ -195,6 +202,16 @@ def _write_outputs(path, navigator, datum, ekf_p) -> Counter:
     u = 0
     accepted = rejected = 0
     next_status = -np.inf
+    frames = (ekf_p["map_frame"], ekf_p["base_link_frame"])
+    pre_p, c_bs = imu_mounting
+    t0_ns = sec_to_ns(float(result.t[0]))
+    # As the imu_preprocessor and ekf nodes publish them: each its own, once.
+    for parent, publish, child in (
+            (pre_p["frame_id"], pre_p["publish_tf"], (pre_p["imu_frame"], (0.0, 0.0, 0.0), c_bs)),
+            (frames[1], ekf_p["publish_tf"], (ekf_p["gnss_frame"], ekf_p["lever_arm"], np.eye(3)))):
+        if publish:
+            writer.write("/tf_static", static_tf(ns_to_stamp(t0_ns), parent, [child]), t0_ns)
+            counts["/tf_static"] += 1
     for k in range(len(result.t)):
         t = float(result.t[k])
         st = NavState(result.lat[k], result.lon[k], result.h[k], result.v_enu[k],
@@ -208,12 +225,18 @@ def _write_outputs(path, navigator, datum, ekf_p) -> Counter:
         state.mode = ins_modes[mode]
         state.correction_sequence = 1  # the filter's own, corrected solution
         writer.write("ins/state", state)
+        # The input's augmentation is not kept per epoch: a NAVIGATING solution is a FIX here.
         writer.write("nav/fix", fix_msg(stamp, st, P[space["pos"], space["pos"]],
-                                        valid=mode == NAVIGATING))
+                                        fix_status(mode == NAVIGATING, NavSatStatus.STATUS_FIX),
+                                        frame_id=frames[1]))
         counts.update(["/ins/state", "/nav/fix"])
         if datum is not None:
-            writer.write("nav/odom", odom_msg(stamp, st, P, space, datum, Vector3(), rate_var))
+            writer.write("nav/odom", odom_msg(stamp, st, P, space, datum, Vector3(), rate_var,
+                                              frames))
             counts["/nav/odom"] += 1
+            if ekf_p["publish_tf"]:
+                writer.write("/tf", solution_tf(stamp, st, datum, *frames), sec_to_ns(t))
+                counts["/tf"] += 1
         if t >= next_status:
             next_status = t + 1.0
             since = []
