@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ins_gnss_ros.nav.aiding import Aiding, AidingPolicy
+from ins_gnss_ros.nav.aiding import Aiding, AidingPolicy, WheelPolicy
 from ins_gnss_ros.nav.filter_config import PARAMS, navigator_config
-from ins_gnss_ros.nav import GnssFix, GnssVelocity, HeadingFix
+from ins_gnss_ros.nav import GnssFix, GnssVelocity, HeadingFix, WheelOdometry, ZeroVelocity
 from ins_gnss_ros.params import ParameterError, resolve
 
 
@@ -61,6 +61,30 @@ def test_velocity_delay_heading_declination_and_range_choice():
     assert not front.heading(3.0, 0.5, 0.0, None, magnetic=False)
     assert front.choose_ranges(4) and not front.fix(4.0, 59.9, 30.3, 0.0, np.eye(3), 0, True)
     assert not front.choose_ranges(8)
+
+
+def test_wheel_odometry_variances_delay_and_zero_speed():
+    wheel = WheelPolicy(sigma=(0.1, 0.2, 0.0), zero_speed=0.01, zero_time=0.5, zero_sigma=0.02,
+                        delay=0.05)
+    front, nav, events = aiding(wheel=wheel)
+    # the message's variances where it has them, the policy's elsewhere; sigma 0: axis left out
+    assert front.wheel_odometry(1.0, np.array([5.0, np.nan, 0.0]), np.array([0.09, -1.0, 0.0]))
+    m = nav.measurements[-1]
+    assert isinstance(m, WheelOdometry) and m.t == pytest.approx(0.95)
+    assert np.array_equal(m.velocity_b, [5.0, 0.0, 0.0])
+    assert np.allclose(m.variance, [0.09, 0.04, np.inf])
+    assert not front.wheel_odometry(1.1, np.array([np.nan, 0.0, 0.0]), np.zeros(3))
+    # zero counts: a speed until they have lasted zero_time, then zero-velocity updates
+    for t in (2.0, 2.25, 2.5, 2.75):
+        assert front.wheel_odometry(t, np.zeros(3), np.zeros(3))
+    kinds = [type(m) for m in nav.measurements[-4:]]
+    assert kinds == [WheelOdometry, WheelOdometry, ZeroVelocity, ZeroVelocity]
+    assert nav.measurements[-1].t == pytest.approx(2.7) and nav.measurements[-1].sigma_v == 0.02
+    assert front.wheel_odometry(3.0, np.array([0.4, 0.0, 0.0]), np.zeros(3))  # moving again
+    assert front.wheel_odometry(3.1, np.zeros(3), np.zeros(3))
+    assert isinstance(nav.measurements[-1], WheelOdometry)
+    assert events == ["wheel/odom without a finite forward speed rejected"]
+    assert front.inputs["wheel/odom"].received == 8 and front.inputs["wheel/odom"].refused == 1
 
 
 def test_a_profile_section_configures_the_filter_the_node_would():

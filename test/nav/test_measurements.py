@@ -20,7 +20,8 @@ from ins_gnss_ros.nav.strapdown import NavState, apply_correction
 NOISE = filter_noise(MEMS_ADIS16405, "rw")
 SPACE = StateSpace(make_layout("24", NOISE), {"td": ExtraState(1, 0.1), "mag": ExtraState(1, 0.1),
                                               "nhc": ExtraState(2, 0.01),
-                                              "log": ExtraState(3, 0.1)})
+                                              "log": ExtraState(3, 0.1),
+                                              "wheel": ExtraState(1, 0.02)})
 TRUE = NavState(np.deg2rad(40.1), np.deg2rad(-105.1), 1600.0, np.array([6.0, -8.0, 0.3]),
                 quat_from_euler(0.1, -0.2, 2.5), 0.0)
 OMEGA = np.array([0.05, -0.1, 0.3])  # true angular rate, FLU rad/s
@@ -31,7 +32,7 @@ def perturbed(dx):
     """Computed state and the residual sensor errors encoded in the error vector dx."""
     S = SPACE
     state = apply_correction(TRUE, -dx[S["pos"]], -dx[S["vel"]], -dx[S["att"]])
-    return state, {name: dx[S[name]] for name in ("bg", "clock", "mag", "nhc", "log")}
+    return state, {name: dx[S[name]] for name in ("bg", "clock", "mag", "nhc", "log", "wheel")}
 
 
 def numerical_H(z_of, dx_scale):
@@ -161,6 +162,26 @@ def test_speed_log_with_current_and_scale():
         return M.speed_log(SPACE, st, speed, 0.01, current - res["log"][:2],
                            scale - res["log"][2]).z
     check(model, z_of, 1e-6)
+
+
+def test_wheel_velocity_with_lever_arm_and_scale():
+    # The true state and the velocity the wheels of a non-skidding point at `arm` read.
+    arm, scale = np.array([-1.2, 0.3, -0.5]), 0.01
+    v_point = M.quat_to_dcm(TRUE.q_nb).T @ TRUE.v_enu + np.cross(OMEGA, arm)
+    measured = np.array([(1 + scale) * v_point[0], v_point[1], v_point[2]])
+    variance = np.array([0.04, 0.01, 0.01])
+    model = M.wheel_velocity(SPACE, TRUE, measured, variance, OMEGA, arm, scale)
+    np.testing.assert_allclose(model.z, 0.0, atol=1e-12)
+    np.testing.assert_allclose(model.R, np.diag(variance))
+
+    def z_of(dx):
+        st, res = perturbed(dx)
+        return M.wheel_velocity(SPACE, st, measured, variance, OMEGA + res["bg"], arm,
+                                scale - res["wheel"][0]).z
+    check(model, z_of, 1e-6)
+    # an infinite variance leaves its axis out: forward speed only
+    forward = M.wheel_velocity(SPACE, TRUE, measured, [0.04, np.inf, np.inf], OMEGA, arm, scale)
+    np.testing.assert_allclose(forward.H, model.H[:1])
 
 
 def test_speed_log_level_heading_terms():

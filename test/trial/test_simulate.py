@@ -154,3 +154,19 @@ def test_any_sensor_rates_jittered_imu_stamps_and_fix_only_receivers(tmp_path):
     fixes = bagio.read_bag(path, ["/gnss/fix"])
     assert len(fixes) == 51 and "/gnss/vel" not in bagio.bag_topics(path)  # 0 s to 20 s
     assert {m.msg.position_covariance_type for m in fixes} == {NavSatFix.COVARIANCE_TYPE_UNKNOWN}
+
+
+def test_wheel_odometry_is_added_and_leaves_the_other_sensors_as_they_were(tmp_path, car):
+    path = simulate("car", DURATION, 7, tmp_path / "wheels", SimOptions(wheel_odometry=True))
+    wheels = bagio.read_bag(path)
+    odom = _by_topic(wheels, "/wheel/odom")
+    assert len(odom) == DURATION * SimOptions.wheel_rate
+    # 50 ms late, in the child frame, a multiple of one encoder count per 20 Hz interval
+    first = odom[0].header.stamp
+    assert (first.sec * 10 ** 9 + first.nanosec) - SIM_EPOCH_NS == pytest.approx(0.1e9, abs=1)
+    assert odom[0].child_frame_id == "base_link"
+    counts = np.array([m.twist.twist.linear.x for m in odom]) / (0.02 * 20.0)
+    assert np.allclose(counts, np.round(counts), atol=1e-6)
+    others = [m for m in wheels if m.topic != "/wheel/odom"]
+    assert len(others) == len(car)
+    assert all(a.topic == b.topic and messages_equal(a.msg, b.msg) for a, b in zip(others, car))

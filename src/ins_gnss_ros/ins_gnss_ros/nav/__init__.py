@@ -18,6 +18,7 @@ _EXPORTS = {
     "GnssVelocity": "measurement_types",
     "HeadingFix": "measurement_types",
     "SpeedLog": "measurement_types",
+    "WheelOdometry": "measurement_types",
     "ZeroVelocity": "measurement_types",
     "SatelliteRanges": "measurement_types",
     "ALIGNING": "modes",

@@ -21,11 +21,12 @@ import numpy as np
 
 from .earth import ecef_to_enu_matrix, geodetic_to_ecef
 from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
-from .measurement_types import GnssFix, GnssVelocity, HeadingFix, SpeedLog
+from .measurement_types import GnssFix, GnssVelocity, HeadingFix, SpeedLog, WheelOdometry, \
+    ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .navigator import Navigator
 
-__all__ = ["Aiding", "AidingPolicy", "InputStats"]
+__all__ = ["Aiding", "AidingPolicy", "InputStats", "WheelPolicy"]
 
 #: Horizontal sigma (m) given to a fix that carries no covariance, by its sensor_msgs/NavSatStatus
 #: status (STATUS_FIX 0, STATUS_SBAS_FIX 1, STATUS_GBAS_FIX 2): a single-point fix (~5 m), an
@@ -38,6 +39,41 @@ UNKNOWN_FIX_SIGMA = {0: 5.0, 1: 2.0, 2: 1.0}
 HEIGHT_RANGE = (-1000.0, 1e5)
 #: Fastest plausible GNSS velocity, m/s (beyond any vehicle this filter is for).
 MAX_SPEED = 1000.0
+
+
+@dataclass(frozen=True)
+class WheelPolicy:
+    """How wheel odometry readings become measurements (the ``wheel.*`` parameters).
+
+    Attributes
+    ----------
+    sigma : tuple of 3 float
+        Forward, lateral and vertical sigma of a reading without its variances, m/s (0: the
+        axis is left out).
+    zero_speed : float
+        A forward speed at or below this is a zero-velocity update, m/s (0: never) ...
+    zero_time : float
+        ... once the speed has stayed there this long, s: encoder counts also read zero while
+        the vehicle crawls off or to a stop (until then a zero reading is a speed).
+    zero_sigma : float
+        Sigma of that update, m/s.
+    delay : float
+        A reading stamped t refers to t - delay, s.
+    """
+
+    sigma: tuple = (0.1, 0.1, 0.1)
+    zero_speed: float = 0.01
+    zero_time: float = 0.5
+    zero_sigma: float = 0.02
+    delay: float = 0.0
+
+    @classmethod
+    def from_params(cls, p: dict) -> "WheelPolicy":
+        """The policy of the ``ekf`` node's parameters."""
+        return cls((p["wheel.speed_sigma_mps"], *p["wheel.nonholonomic_sigma_mps"]),
+                   p["wheel.zero_speed_mps"], p["wheel.zero_speed_time_s"],
+                   p["wheel.zero_velocity_sigma_mps"],
+                   p["wheel.delay_s"])
 
 
 @dataclass(frozen=True)
@@ -60,6 +96,7 @@ class AidingPolicy:
     max_imu_gap : float
         Longest gap in the increments bridged by holding the rates of the increment after it; a
         longer one loses the IMU and the filter aligns again, s.
+    wheel : WheelPolicy
     """
 
     position_sigma_floor: float = 0.02
@@ -68,13 +105,14 @@ class AidingPolicy:
     coupling: str = "loose"
     min_satellites: int = 5
     max_imu_gap: float = 2.5
+    wheel: WheelPolicy = WheelPolicy()
 
     @classmethod
     def from_params(cls, p: dict) -> "AidingPolicy":
         """The policy of the ``ekf`` node's parameters."""
         return cls(p["gnss.position_sigma_floor_m"], p["gnss.velocity_sigma_floor_mps"],
                    p["gnss.velocity_delay_s"], p["coupling"], p["auto.min_satellites"],
-                   p["max_imu_gap_s"])
+                   p["max_imu_gap_s"], wheel=WheelPolicy.from_params(p))
 
 
 #: Course from successive fixes (a receiver without velocity output, e.g. NMEA GGA only): two
@@ -142,6 +180,7 @@ class Aiding:
         self.forced: set[str] = set()  # kinds forced in since the filter last NAVIGATED
         self._recent_fixes: list[tuple[float, np.ndarray, np.ndarray]] = []  # t, ECEF, cov ENU
         self.last_increment_t = math.inf  # end of the last increment, s
+        self.wheel_still_since = math.inf  # stamp of the first of the zero wheel speeds, s
 
     def _seen(self, name: str, t: float, used: bool) -> bool:
         stats = self.inputs.setdefault(name, InputStats(first_t=t))
@@ -285,6 +324,32 @@ class Aiding:
             return self._seen("log/speed", t, False)
         self.navigator.add_measurement(SpeedLog(t, speed, variance))
         return self._seen("log/speed", t, True)
+
+    # -- wheel odometry ----------------------------------------------------------------------
+    def wheel_odometry(self, t: float, velocity_b: np.ndarray, variance: np.ndarray) -> bool:
+        """A wheel odometry twist at t (s): the velocity of its reference point in body axes
+        (m/s; forward from the wheels, lateral and vertical as the wheels allow them) and its
+        per-axis variances ((m/s)^2; a non-positive or non-finite one is replaced by the
+        policy's sigma). A zero forward speed is a zero-velocity update instead. Slip and skid
+        are left to the navigator's gate (the wheels then disagree with the INS)."""
+        policy = self.policy.wheel
+        velocity_b = np.asarray(velocity_b, float)
+        if not np.isfinite(velocity_b[0]):
+            self.report("wheel/odom without a finite forward speed rejected")
+            return self._seen("wheel/odom", t, False)
+        epoch = t - policy.delay
+        still = policy.zero_speed > 0.0 and abs(velocity_b[0]) <= policy.zero_speed
+        self.wheel_still_since = min(self.wheel_still_since, t) if still else math.inf
+        if still and t - self.wheel_still_since >= policy.zero_time:
+            self.navigator.add_measurement(ZeroVelocity(epoch, policy.zero_sigma))
+            return self._seen("wheel/odom", t, True)
+        variance = np.asarray(variance, float)
+        default = np.where(np.array(policy.sigma) > 0.0, np.square(policy.sigma), np.inf)
+        variance = np.where(np.isfinite(variance) & (variance > 0.0), variance, default)
+        lateral = np.isfinite(velocity_b[1:])  # a component not given is the constraint's zero
+        velocity_b = np.concatenate([velocity_b[:1], np.where(lateral, velocity_b[1:], 0.0)])
+        self.navigator.add_measurement(WheelOdometry(epoch, velocity_b, variance))
+        return self._seen("wheel/odom", t, True)
 
     def choose_ranges(self, usable_satellites: int) -> bool:
         """Whether this observation epoch's ranges aid the filter in place of fix and velocity

@@ -69,6 +69,28 @@ PARAMS = (
     Param("speed_log.current_sigma_mps", 0.3, "initial sigma of the water current, m/s",
           0.0, 10.0),
     Param("speed_log.scale_sigma", 0.02, "initial sigma of the log scale error, -", 0.0, 1.0),
+    Param("use_wheel_odometry", False,
+          "use wheel/odom (nav_msgs/Odometry, twist in its child frame at wheel.lever_arm): the "
+          "forward speed with a scale-error state, lateral and vertical as non-holonomic "
+          "constraints, zero speed as a zero-velocity update"),
+    Param("wheel.lever_arm", [0.0, 0.0, 0.0], "wheel odometry reference point (rear-axle "
+          "centre) in base_link (FLU), m", -100.0, 100.0, length=3),
+    Param("wheel.scale_sigma", 0.02, "initial sigma of the wheel odometry scale error, -",
+          0.0, 1.0),
+    Param("wheel.speed_sigma_mps", 0.1, "forward speed sigma of a wheel/odom without its "
+          "variance, m/s", 0.0, 10.0),
+    Param("wheel.nonholonomic_sigma_mps", [0.1, 0.1], "lateral, vertical sigma of a wheel/odom "
+          "without their variances (skid, suspension), m/s; 0 leaves the axis out",
+          0.0, 10.0, length=2),
+    Param("wheel.zero_speed_mps", 0.01, "a wheel/odom at or below this forward speed is a "
+          "zero-velocity update, m/s (0: never)", 0.0, 1.0),
+    Param("wheel.zero_speed_time_s", 0.5, "the forward speed must have stayed at or below "
+          "wheel.zero_speed_mps this long (encoder counts read zero at a crawl too), s",
+          0.0, 60.0),
+    Param("wheel.zero_velocity_sigma_mps", 0.02, "sigma of the zero-velocity update at zero "
+          "wheel speed, m/s", 0.0, 1.0),
+    Param("wheel.delay_s", 0.0, "latency of wheel/odom: a reading stamped t is applied at "
+          "t - delay (transport plus half the speed's averaging interval), s", 0.0, 2.0),
     Param("time_offset_sigma_s", 0.0,
           "initial sigma of the IMU-GNSS time-offset state, s (0: no state)", 0.0, 1.0),
     Param("nonholonomic_sigma_mps", [0.0, 0.0],
@@ -143,6 +165,9 @@ def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
         sigma_current = p["speed_log.current_sigma_mps"]
         extras["log"] = ExtraState(3, np.array([sigma_current, sigma_current,
                                                 p["speed_log.scale_sigma"]]), psd=1e-6)
+    if p["use_wheel_odometry"]:
+        # the tyre radius drifts slowly (temperature, pressure, load): 1e-4/sqrt(s)
+        extras["wheel"] = ExtraState(1, p["wheel.scale_sigma"], psd=1e-8)
     nhc = tuple(p["nonholonomic_sigma_mps"])
     return NavigatorConfig(
         noise=noise_model(p),
@@ -152,6 +177,7 @@ def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
         sigma_tilt0=np.radians(p["init.tilt_sigma_deg"]), align_speed=p["align.speed_mps"],
         static_speed=p["align.static_speed_mps"], dr_timeout=p["dead_reckoning_after_s"],
         nhc_sigma=nhc if min(nhc) > 0.0 else None, history=p["history_s"],
+        wheel_lever_b=np.array(p["wheel.lever_arm"], float),
         floor_tau=p["forced.floor_tau_s"], degraded_ratio=p["forced.degraded_ratio"],
         gap_accel_sigma=p["imu_gap.accel_sigma_mps2"],
         gap_rate_sigma=np.radians(p["imu_gap.rate_sigma_dps"]),

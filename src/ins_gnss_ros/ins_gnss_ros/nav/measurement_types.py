@@ -54,6 +54,18 @@ class SpeedLog:
 
 
 @dataclass(frozen=True)
+class WheelOdometry:
+    """Velocity of the wheel odometry's reference point (rear-axle centre) in body axes (m/s,
+    FLU) at time t, per-axis variances ((m/s)^2): the forward speed the wheels measure, and the
+    lateral and vertical velocity the wheels allow (zero: the non-holonomic constraint); with a
+    "wheel" extra block the odometry's scale error is estimated."""
+
+    t: float
+    velocity_b: np.ndarray
+    variance: np.ndarray
+
+
+@dataclass(frozen=True)
 class ZeroVelocity:
     """The vehicle is known to be at rest at time t: ZUPT (sigma_v m/s) and, if sigma_w is set,
     ZARU (rad/s)."""

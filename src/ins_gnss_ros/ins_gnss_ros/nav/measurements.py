@@ -267,21 +267,67 @@ def nonholonomic(space, state, sigma_lateral, sigma_vertical, omega_ib_b=np.zero
     Innovation
         z = predicted (lateral, vertical) velocity of the point in vehicle axes - 0.
     """
-    lever_b = np.asarray(lever_b, float)
     theta, psi = boresight
-    C = quat_to_dcm(state.q_nb)
-    v = np.asarray(state.v_enu, float)
-    v_b = C.T @ v + cross(omega_ib_b, lever_b)
     # Lateral and vertical vehicle-axes components of a body vector.
     A = np.array([[-psi, 1.0, 0.0], [theta, 0.0, 1.0]])
-    H = _zeros(space, 2)
-    H[:, space["vel"]] = A @ C.T
-    H[:, space["att"]] = -A @ C.T @ skew(v)
-    _gyro_columns(space, H, -A @ skew(lever_b))
+    v_b, H = _point_velocity_rows(space, state, omega_ib_b, lever_b, A)
     if "nhc" in space:
         H[:, space["nhc"]] = [[0.0, v_b[0]], [-v_b[0], 0.0]]
     z = A @ v_b
     return Innovation("nhc", z, H, np.diag([sigma_lateral ** 2, sigma_vertical ** 2]))
+
+
+def _point_velocity_rows(space, state, omega_ib_b, lever_b, A):
+    """Body-axes velocity v_b = C^T v + omega x l of the point lever_b (FLU, m) and the rows
+    A (m, 3) of its Jacobian: A C^T dv - A C^T [v x] phi - A [l x] d_omega (the Earth rate is
+    negligible over a lever arm). Returns v_b (3,) and H (m, n)."""
+    lever_b = np.asarray(lever_b, float)
+    C = quat_to_dcm(state.q_nb)
+    v = np.asarray(state.v_enu, float)
+    v_b = C.T @ v + cross(omega_ib_b, lever_b)
+    H = _zeros(space, len(A))
+    H[:, space["vel"]] = A @ C.T
+    H[:, space["att"]] = -A @ C.T @ skew(v)
+    _gyro_columns(space, H, -A @ skew(lever_b))
+    return v_b, H
+
+
+def wheel_velocity(space, state, velocity_b, variance, omega_ib_b, lever_b=np.zeros(3),
+                   scale=0.0):
+    """Wheel odometry: the body-axes velocity of its reference point (the rear-axle centre).
+
+    The wheels measure the forward speed (1 + s) v_x, s their scale error (tyre radius); the
+    lateral and vertical velocities v_y, v_z they allow are zero when nothing skids (the
+    non-holonomic constraint, as in :func:`nonholonomic`), v_b = C^T v + omega x l. With a
+    "wheel" extra block (the residual scale error, true minus `scale`) H_wheel = -v_x on the
+    forward row (as the speed log's scale column in :func:`speed_log`).
+
+    Parameters
+    ----------
+    velocity_b : array_like, shape (3,)
+        Measured velocity of the point, FLU, m/s (forward from the wheels, lateral and vertical
+        usually zero).
+    variance : array_like, shape (3,)
+        Per-axis variances, (m/s)^2; an infinite one leaves that axis out.
+    omega_ib_b : array_like, shape (3,)
+        Compensated angular rate, FLU, rad/s.
+    lever_b : array_like, shape (3,)
+        Reference point relative to the IMU, FLU, m.
+    scale : float
+        Current scale-error estimate, -.
+
+    Returns
+    -------
+    Innovation
+        z = predicted - measured velocity of the point, one row per axis kept.
+    """
+    rows = np.isfinite(variance)
+    A = np.diag([1.0 + scale, 1.0, 1.0])[rows]
+    v_b, H = _point_velocity_rows(space, state, omega_ib_b, lever_b, A)
+    if "wheel" in space and rows[0]:
+        H[0, space["wheel"]] = -v_b[0]
+    z = A @ v_b - np.asarray(velocity_b, float)[rows]
+    return Innovation("wheel", z, H, np.diag(np.asarray(variance, float)[rows]))
 
 
 def speed_log(space, state, speed, variance, current_enu=np.zeros(2), scale=0.0):

@@ -40,7 +40,7 @@ from .imu_gaps import BridgedGaps
 from .integrity import Integrity
 from .lever_arm import lever_arm_velocity
 from .measurement_types import GNSS_TYPES, GnssFix, GnssVelocity, HeadingFix, SatelliteRanges, \
-    SpeedLog, ZeroVelocity
+    SpeedLog, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .propagation import extrapolate, propagate
 from .recording import Recorder
@@ -382,6 +382,14 @@ class Navigator:
         self._update(meas.speed_log(self._space, st, m.speed, m.variance, log[:2], log[2]),
                      epoch)
 
+    def _wheel_odometry(self, m, st, epoch):
+        if self._held_for_alignment(m, epoch):  # body axes without a heading: not linear
+            return
+        scale = self._state.estimates.get("wheel", np.zeros(1))[0]
+        self._update(meas.wheel_velocity(self._space, st, m.velocity_b, m.variance,
+                                         self._state.omega, self.config.wheel_lever_b, scale),
+                     epoch)
+
     def _zero_velocity(self, m, st, epoch):
         self._update(meas.zero_velocity(self._space, st, m.sigma_v), epoch)
         if m.sigma_w is not None:
@@ -402,7 +410,8 @@ class Navigator:
 
     #: Measurement type -> handler(self, m, st, epoch).
     _HANDLERS = {GnssFix: _gnss_fix, GnssVelocity: _gnss_velocity, HeadingFix: _heading,
-                 SpeedLog: _speed_log, ZeroVelocity: _zero_velocity,
+                 SpeedLog: _speed_log, WheelOdometry: _wheel_odometry,
+                 ZeroVelocity: _zero_velocity,
                  SatelliteRanges: _satellite_ranges}
 
     def _update(self, innov, epoch, aiding=True):

@@ -63,6 +63,8 @@ class NavigatorConfig:
         becomes hypot(sigma_lateral, nhc_rate_arm * yaw rate).
     nhc_lever_b : array_like, shape (3,)
         Point where the constraint holds (rear-axle centre) relative to the IMU, FLU, m.
+    wheel_lever_b : array_like, shape (3,)
+        Reference point of the wheel odometry (rear-axle centre) relative to the IMU, FLU, m.
     zaru_sigma : float or None
         Zero-angular-rate update at every GNSS velocity epoch at rest: noise added to the
         averaged gyro white noise, rad/s (vibration, body sway); None disables it.
@@ -109,6 +111,7 @@ class NavigatorConfig:
     nhc_lever_b: np.ndarray = field(default_factory=lambda: np.zeros(3))
     nhc_interval: float = 0.1
     nhc_rate_arm: float = 0.0
+    wheel_lever_b: np.ndarray = field(default_factory=lambda: np.zeros(3))
     zaru_sigma: float | None = 1e-4
     frozen_speed: float = 0.5
     history: float = 3.0

@@ -139,6 +139,8 @@ class EkfNode(NavNode):
             self.subscribe(Heading, "mag/heading", self.on_heading, SENSOR_QOS)
         if p["use_speed_log"]:
             self.subscribe(TwistWithCovarianceStamped, "log/speed", self.on_log, DRIVER_QOS)
+        if p["use_wheel_odometry"]:
+            self.subscribe(Odometry, "wheel/odom", self.on_wheel, DRIVER_QOS)
 
     # -- inputs --------------------------------------------------------------------------------
     def on_delta(self, msg: ImuDelta) -> None:
@@ -204,6 +206,11 @@ class EkfNode(NavNode):
     def on_log(self, msg: TwistWithCovarianceStamped) -> None:
         if self.aiding.speed_log(stamp_to_sec(msg.header.stamp), msg.twist.twist.linear.x,
                                  msg.twist.covariance[0]):
+            self.after_filter()
+
+    def on_wheel(self, msg: Odometry) -> None:
+        if self.aiding.wheel_odometry(stamp_to_sec(msg.header.stamp), vec(msg.twist.twist.linear),
+                                      np.diag(np.reshape(msg.twist.covariance, (6, 6)))[:3]):
             self.after_filter()
 
     def on_ins_state(self, msg: InsState) -> None:

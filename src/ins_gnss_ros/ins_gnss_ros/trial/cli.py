@@ -58,6 +58,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="horizontal position noise per axis, m")
     p.add_argument("--gnss-sigma-v", type=float, default=SimOptions.gnss_sigma_v,
                    help="vertical position noise, m")
+    p.add_argument("--wheel-odometry", action="store_true",
+                   help="also write wheel/odom (scale error, slips, encoder counts, latency)")
+    p.add_argument("--wheel-scale-error", type=float, default=SimOptions.wheel_scale_error,
+                   help="wheel odometry scale error, -")
+    p.add_argument("--wheel-slip-interval", type=float,
+                   default=SimOptions.wheel_slip_interval, metavar="S",
+                   help="mean time between wheel slip events, s (inf: none)")
     p.add_argument("--out", required=True, help="new bag folder")
 
     p = sub.add_parser("import", help="convert recorded data into a bag")
@@ -161,7 +168,10 @@ def cmd_simulate(args) -> int:
                                imu_rate=args.imu_rate, imu_stamp_jitter=args.imu_stamp_jitter,
                                gnss_rate=args.gnss_rate, gnss_velocity=not args.no_gnss_vel,
                                gnss_covariance=not args.no_gnss_cov,
-                               gnss_sigma_h=args.gnss_sigma_h, gnss_sigma_v=args.gnss_sigma_v))
+                               gnss_sigma_h=args.gnss_sigma_h, gnss_sigma_v=args.gnss_sigma_v,
+                               wheel_odometry=args.wheel_odometry,
+                               wheel_scale_error=args.wheel_scale_error,
+                               wheel_slip_interval=args.wheel_slip_interval))
     print(path)
     return 0
 

@@ -7,6 +7,7 @@ import math
 import numpy as np
 from geometry_msgs.msg import Quaternion, TwistWithCovarianceStamped, Vector3
 from ins_gnss_msgs.msg import Heading, ImuDelta, InsState
+from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, MagneticField, NavSatFix, NavSatStatus
 from std_msgs.msg import Header
 
@@ -59,6 +60,20 @@ def twist_msg(t_ns, linear, cov_diag, frame_id):
     cov[0], cov[7], cov[14] = (float(c) for c in cov_diag)
     cov[21] = cov[28] = cov[35] = -1.0
     msg.twist.covariance = cov
+    return msg
+
+
+def wheel_odom_msg(t_ns, speed, cov_diag, frame_id="odom", child_frame_id="base_link"):
+    """nav_msgs/Odometry of a wheel odometry: the forward speed (m/s) in the child frame,
+    lateral and vertical zero (the wheels allow no other motion), their variances ((m/s)^2);
+    pose and angular rate not provided (variance -1)."""
+    msg = Odometry(header=_header(t_ns, frame_id), child_frame_id=child_frame_id)
+    msg.twist.twist.linear = _vector3((speed, 0.0, 0.0))
+    cov = [0.0] * 36
+    cov[0], cov[7], cov[14] = (float(c) for c in cov_diag)
+    cov[21] = cov[28] = cov[35] = -1.0
+    msg.twist.covariance = cov
+    msg.pose.covariance = [-1.0 if i % 7 == 0 else 0.0 for i in range(36)]
     return msg
 
 

@@ -129,13 +129,16 @@ class OutageDrift:
     """Horizontal drift during one GNSS outage window [start, end), s and m.
 
     `max_horizontal_m` is the largest horizontal error at evaluated epochs inside the window,
-    `end_horizontal_m` the error at the last evaluated epoch inside it (NaN without epochs).
+    `end_horizontal_m` the error at the last evaluated epoch inside it (NaN without epochs),
+    `distance_m` the path length of the truth over those epochs (dead-reckoning drift is
+    quoted per distance driven).
     """
 
     start: float
     end: float
     max_horizontal_m: float
     end_horizontal_m: float
+    distance_m: float = np.nan
 
 
 @dataclass(frozen=True)
@@ -164,6 +167,12 @@ class Evaluation:
         """(RMS, max) over outages of the maximum horizontal error within each window, m."""
         return _rms_max([o.max_horizontal_m for o in self.outages])
 
+    def outage_drift_percent(self):
+        """RMS over outages of the maximum horizontal error within each window per distance
+        driven in it, %."""
+        return _rms_max([100.0 * o.max_horizontal_m / o.distance_m if o.distance_m > 0.0
+                         else np.nan for o in self.outages])[0]
+
     def outage_end_drift(self):
         """(RMS, max) over outages of the horizontal error at the end of each window, m."""
         return _rms_max([o.end_horizontal_m for o in self.outages])
@@ -190,9 +199,11 @@ class Evaluation:
                                         ("outage_end", self.outage_end_drift())):
                 out[f"{prefix}_rms_m"] = _finite_or_none(rms)
                 out[f"{prefix}_max_m"] = _finite_or_none(peak)
+            out["outage_drift_rms_percent"] = _finite_or_none(self.outage_drift_percent())
             out["outages"] = [{"start": o.start, "end": o.end,
                                "max_horizontal_m": _finite_or_none(o.max_horizontal_m),
-                               "end_horizontal_m": _finite_or_none(o.end_horizontal_m)}
+                               "end_horizontal_m": _finite_or_none(o.end_horizontal_m),
+                               "distance_m": _finite_or_none(o.distance_m)}
                               for o in self.outages]
         return out
 
@@ -279,10 +290,10 @@ def evaluate(estimate, truth, windows=None, max_gap=DEFAULT_MAX_GAP_S):
             for name, values in (("position", errors.nees_pos), ("velocity", errors.nees_vel),
                                  ("attitude", errors.nees_att))}
     return Evaluation(errors=errors, stats=stats, nees=nees,
-                      outages=outage_drifts(errors, windows) if windows is not None else ())
+                      outages=outage_drifts(errors, windows, true) if windows is not None else ())
 
 
-def outage_drifts(errors, windows):
+def outage_drifts(errors, windows, truth=None):
     """Horizontal drift within and at the end of each outage window.
 
     Parameters
@@ -290,6 +301,8 @@ def outage_drifts(errors, windows):
     errors : ErrorSeries
     windows : ndarray, shape (k, 2)
         [start, end) of each outage, s.
+    truth : Trajectory, optional
+        The truth at the epochs of `errors`, for the distance driven in each window.
 
     Returns
     -------
@@ -300,8 +313,13 @@ def outage_drifts(errors, windows):
     for start, end in np.asarray(windows, float).reshape(-1, 2):
         inside = (errors.time >= start) & (errors.time < end)
         if inside.any():
+            distance = np.nan
+            if truth is not None:
+                r = geodetic_to_ecef(truth.lat[inside], truth.lon[inside], truth.height[inside])
+                distance = float(np.sum(np.linalg.norm(np.diff(np.reshape(r, (-1, 3)), axis=0),
+                                                       axis=1)))
             drifts.append(OutageDrift(float(start), float(end), float(horizontal[inside].max()),
-                                      float(horizontal[inside][-1])))
+                                      float(horizontal[inside][-1]), distance))
         else:
             drifts.append(OutageDrift(float(start), float(end), np.nan, np.nan))
     return tuple(drifts)
@@ -325,12 +343,14 @@ def markdown_table(evaluation):
     if evaluation.outages:
         t0 = evaluation.errors.time[0]
         lines += ["", "| outage | start (s from first epoch) | length (s) | max horizontal (m) "
-                  "| at end (m) |", "|---:|---:|---:|---:|---:|"]
+                  "| at end (m) | distance (m) |", "|---:|---:|---:|---:|---:|---:|"]
         for number, o in enumerate(evaluation.outages, start=1):
             lines.append(f"| {number} | {o.start - t0:.1f} | {o.end - o.start:.1f} | "
-                         f"{o.max_horizontal_m:.3f} | {o.end_horizontal_m:.3f} |")
+                         f"{o.max_horizontal_m:.3f} | {o.end_horizontal_m:.3f} | "
+                         f"{o.distance_m:.1f} |")
         (rms, peak), (end_rms, end_peak) = evaluation.outage_drift(), evaluation.outage_end_drift()
-        lines.append(f"| RMS / max | | | {rms:.3f} / {peak:.3f} | {end_rms:.3f} / {end_peak:.3f} |")
+        lines.append(f"| RMS / max | | | {rms:.3f} / {peak:.3f} | {end_rms:.3f} / {end_peak:.3f} "
+                     f"| max per distance RMS {evaluation.outage_drift_percent():.2f} % |")
     return "\n".join(lines)
 
 

@@ -29,7 +29,7 @@ from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_s
 
 #: The inputs the offline path reads (the ekf's aiding topics and the IMU).
 OFFLINE_TOPICS = ("/imu/delta", "/imu/data_raw", "/gnss/fix", "/gnss/vel", "/gnss/heading",
-                  "/mag/heading", "/log/speed")
+                  "/mag/heading", "/log/speed", "/wheel/odom")
 
 
 def offline_parameters(profile) -> tuple[dict, dict]:
@@ -125,6 +125,8 @@ class _Feeder:
             self.handlers["/mag/heading"] = self.heading
         if ekf_p["use_speed_log"]:
             self.handlers["/log/speed"] = self.log
+        if ekf_p["use_wheel_odometry"]:
+            self.handlers["/wheel/odom"] = self.wheel
 
     def increment(self, problem, t, dtheta, dv, dt):
         """An increment with its increment_problem verdict, as the ekf node takes it."""
@@ -171,6 +173,11 @@ class _Feeder:
     def log(self, msg):
         self.aiding.speed_log(bagio.stamp_to_sec(msg.header.stamp), msg.twist.twist.linear.x,
                               msg.twist.covariance[0])
+
+    def wheel(self, msg):
+        l = msg.twist.twist.linear
+        self.aiding.wheel_odometry(bagio.stamp_to_sec(msg.header.stamp), np.array([l.x, l.y, l.z]),
+                                   np.diag(np.reshape(msg.twist.covariance, (6, 6)))[:3])
 
 
 def _write_outputs(path, navigator, datum, ekf_p, imu_mounting) -> Counter:

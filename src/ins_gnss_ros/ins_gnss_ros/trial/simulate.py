@@ -12,6 +12,8 @@ and setup"):
 * ``imu/mag_raw``: :mod:`ins_gnss_ros.sim.mag_sim` in the WMM field at the start point and date;
 * ``log/speed`` (sea only): :mod:`ins_gnss_ros.sim.log_sim`, longitudinal speed through the water
   (transverse and vertical NaN: a single-axis log), body frame;
+* ``wheel/odom`` (with ``wheel_odometry``): :mod:`ins_gnss_ros.sim.wheel_sim`, the forward
+  speed of the rear-axle centre with a scale error, slip events, encoder counts and a latency;
 * ``truth/state`` (with the true sensor biases in the bias fields) and ``truth/heading``.
 
 Stamps: simulated time 0 is :data:`SIM_EPOCH_NS` on the ROS time axis (2026-01-01T00:00:00,
@@ -35,6 +37,7 @@ from ins_gnss_ros.sim import scenarios
 from ins_gnss_ros.sim.imu_sim import ImuSpec, simulate_imu
 from ins_gnss_ros.sim.log_sim import CurrentModel, LogSpec, simulate_log
 from ins_gnss_ros.sim.mag_sim import MagErrors, simulate_magnetometer
+from ins_gnss_ros.sim.wheel_sim import WheelSpec, simulate_wheel
 from ins_gnss_ros.trial import contract_messages as msgs
 
 #: ROS time of simulated t = 0: 2026-01-01T00:00:00 UTC, ns.
@@ -81,6 +84,18 @@ class SimOptions:
         Speed-log rate (Hz) and white noise (m/s), sea scenario.
     log_lever_arm : tuple of 3 float
         Speed-log transducer relative to the IMU, m.
+    wheel_odometry : bool
+        Write ``wheel/odom``.
+    wheel_rate, wheel_scale_error, wheel_tick, wheel_latency : float
+        Its rate (Hz), scale error (-), distance per encoder count (m) and stamp latency (s).
+    wheel_slip_interval : float
+        Mean time between slip events (spin or lock of 0.3-1.5 s, slip ratio 0.1-0.3), s.
+    wheel_sigma : tuple of 3 float
+        Forward, lateral, vertical sigma the odometry claims, m/s (the forward one near its
+        quantisation, tick * rate / sqrt(6)).
+    wheel_lever_arm : tuple of 3 float
+        Rear-axle centre relative to the IMU, m (below it: the simulated car slips nowhere, so
+        the axle keeps the constraint there).
     truth_rate : float
         Rate of ``truth/state`` and ``truth/heading``, Hz.
     """
@@ -101,6 +116,14 @@ class SimOptions:
     log_rate: float = 2.0
     log_noise: float = 0.05
     log_lever_arm: tuple = (0.0, 0.0, -2.0)
+    wheel_odometry: bool = False
+    wheel_rate: float = 20.0
+    wheel_scale_error: float = 0.01
+    wheel_tick: float = 0.02
+    wheel_latency: float = 0.05
+    wheel_slip_interval: float = 30.0
+    wheel_sigma: tuple = (0.2, 0.1, 0.1)
+    wheel_lever_arm: tuple = (0.0, 0.0, -0.4)
     truth_rate: float = 20.0
 
 
@@ -133,7 +156,8 @@ def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions
         raise ValueError(f"unknown IMU grade {grade_name!r}; known: {', '.join(GRADES)}")
     grade = GRADES[grade_name]
     writer = bag.BagWriter(out)  # an existing output is refused before the work
-    seeds = np.random.SeedSequence(seed).generate_state(4)
+    # Words of one SeedSequence: a fifth (the wheels) leaves the first four as they were.
+    seeds = np.random.SeedSequence(seed).generate_state(5)
     sc = scenarios.SCENARIOS[scenario](duration=duration, seed=seed,
                                        rate=trajectory_rate(options, scenario))
     traj = sc.trajectory
@@ -142,6 +166,8 @@ def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions
     _write_mag(writer, traj, options, int(seeds[2]))
     if scenario == "sea":
         _write_log(writer, traj, sc.water_current_enu, options, int(seeds[3]))
+    if options.wheel_odometry:
+        _write_wheel(writer, traj, options, int(seeds[4]))
     _write_truth(writer, traj, imu, options)
     return writer.close()
 
@@ -152,6 +178,8 @@ def trajectory_rate(options: SimOptions, scenario: str) -> float:
     rates = [options.imu_rate, options.gnss_rate, options.mag_rate, options.truth_rate]
     if scenario == "sea":
         rates.append(options.log_rate)
+    if options.wheel_odometry:
+        rates.append(options.wheel_rate)
     fractions = [Fraction(r).limit_denominator(1000) for r in rates]
     if min(fractions) <= 0:
         raise ValueError(f"sensor rates must be > 0 Hz, got {rates}")
@@ -221,6 +249,17 @@ def _write_log(writer, traj, current_enu, options, seed):
     var = [options.log_noise ** 2, np.nan, np.nan]
     writer.write_all("log/speed", (msgs.twist_msg(t, (v, np.nan, np.nan), var, "base_link")
                                    for t, v in zip(t_ns, log.speed)))
+
+
+def _write_wheel(writer, traj, options, seed):
+    spec = WheelSpec(rate=options.wheel_rate, scale_error=options.wheel_scale_error,
+                     tick=options.wheel_tick, latency=options.wheel_latency,
+                     slip_interval=options.wheel_slip_interval,
+                     lever_arm_b=np.asarray(options.wheel_lever_arm, float))
+    wheel = simulate_wheel(traj, spec, seed)
+    var = np.square(options.wheel_sigma)
+    writer.write_all("wheel/odom", (msgs.wheel_odom_msg(t, v, var) for t, v in
+                                    zip(bag.sec_to_ns(wheel.stamp, SIM_EPOCH_NS), wheel.speed)))
 
 
 def _write_truth(writer, traj, imu, options):
