@@ -247,3 +247,24 @@ def test_process_on_dds_serves_a_published_nav_fix(probe, executor):
             _, log_ns, fix = received[0]
             _check_location_fix(fix, log_ns, _fix(), None)
         assert proc.stop() == 0, proc.output()
+
+
+def test_a_profile_with_a_live_view_section_replays_it_and_changes_no_output(tmp_path):
+    """The live view is an optional node of the graph: a profile section starts it in
+    `trial replay` (config/default.yaml has none), and watching changes nothing the graph
+    publishes."""
+    from ins_gnss_ros.trial.compare import compare
+    from ins_gnss_ros.trial.replay import replay
+    from ins_gnss_ros.trial.simulate import SimOptions, simulate
+
+    bag = simulate("car", 3.0, 5, tmp_path / "car",
+                   SimOptions(imu_topic="delta", imu_grade="navigation"))
+    plain = tmp_path / "plain.yaml"
+    plain.write_text("strapdown:\n  ros__parameters:\n    init.latitude_deg: 0.0\n"
+                     "    init.longitude_deg: 0.0\n")
+    viewed = tmp_path / "viewed.yaml"
+    viewed.write_text(plain.read_text() + "live_view:\n  ros__parameters:\n    port: 0\n")
+    assert replay(bag, plain, tmp_path / "a", init_from_truth=True)["graph"] == ["strapdown"]
+    summary = replay(bag, viewed, tmp_path / "b", init_from_truth=True)
+    assert summary["graph"] == ["strapdown", "live_view"]
+    assert compare(tmp_path / "a", tmp_path / "b").identical
