@@ -3,8 +3,9 @@
 ROS-free: the messages come in as rclpy objects, but only their fields are read. What each
 topic becomes (:data:`VIEWS`; channel: schema):
 
-* ``nav/fix`` -> ``/nav/fix``: ``foxglove.LocationFix``, the Map panel's track, with the heading
-  of the latest ``ins/state``; blue while a fix, red while NO_FIX (aligning, dead reckoning).
+* ``nav/fix`` -> ``/nav/fix``: ``foxglove.LocationFix``, the Map panel's track, carrying the
+  heading of the latest ``ins/state``; blue while a fix, red while NO_FIX (aligning, dead
+  reckoning).
 * ``gnss/fix`` -> ``/gnss/fix``: ``foxglove.LocationFix``, the receiver's track, orange.
 * ``nav/odom`` -> ``/nav/odom``: ``foxglove.PoseInFrame`` in ``map`` (3D panel), and
   ``/nav/odom/tf``: ``foxglove.FrameTransform`` map -> base_link.
@@ -15,8 +16,8 @@ topic becomes (:data:`VIEWS`; channel: schema):
 
 Channel names are the resolved ROS names given to :class:`FoxgloveView`. A message is translated
 only when a client subscribes to its channel (``has_sinks``): with no client a message costs a
-dictionary look-up and one call into the SDK per channel. Messages are logged at their header stamp (sensor
-time), so Foxglove's timeline is the graph's time axis.
+dictionary look-up and one call into the SDK per channel. Messages are logged at their header
+stamp (sensor time), so Foxglove's timeline is the graph's time axis.
 
 The server offers no client capabilities (no publishing, parameters or services): a viewer can
 only watch.
@@ -73,6 +74,10 @@ def _quaternion(q) -> Quaternion:
     return Quaternion(x=q.x, y=q.y, z=q.z, w=q.w)
 
 
+def _vector(v) -> Vector3:
+    return Vector3(x=v.x, y=v.y, z=v.z)
+
+
 def _angles(state) -> tuple[float, float, float]:
     """(azimuth of the body x axis clockwise from true north, pitch nose up, roll right wing
     down), rad, of an InsState's orientation."""
@@ -81,8 +86,8 @@ def _angles(state) -> tuple[float, float, float]:
 
 
 def location_fix(fix, color: Color, heading: float | None = None) -> LocationFix:
-    """A NavSatFix (degrees, m, ENU covariance m^2) as a LocationFix; ``heading`` rad clockwise
-    from true north (Foxglove's convention too) draws the Map marker's direction."""
+    """A NavSatFix (degrees, m, ENU covariance m^2) as a LocationFix, with ``heading`` (rad
+    clockwise from true north: the Heading azimuth convention is Foxglove's too)."""
     return LocationFix(
         timestamp=timestamp(msg_stamp_ns(fix)), frame_id=fix.header.frame_id,
         latitude=fix.latitude, longitude=fix.longitude, altitude=fix.altitude,
@@ -96,8 +101,7 @@ def pose_in_frame(odom) -> PoseInFrame:
     """nav/odom's pose in its frame (``map``, ENU)."""
     p = odom.pose.pose
     return PoseInFrame(timestamp=timestamp(msg_stamp_ns(odom)), frame_id=odom.header.frame_id,
-                       pose=Pose(position=Vector3(x=p.position.x, y=p.position.y,
-                                                  z=p.position.z),
+                       pose=Pose(position=_vector(p.position),
                                  orientation=_quaternion(p.orientation)))
 
 
@@ -107,7 +111,7 @@ def frame_transform(odom) -> FrameTransform:
     return FrameTransform(timestamp=timestamp(msg_stamp_ns(odom)),
                           parent_frame_id=odom.header.frame_id,
                           child_frame_id=odom.child_frame_id,
-                          translation=Vector3(x=p.position.x, y=p.position.y, z=p.position.z),
+                          translation=_vector(p.position),
                           rotation=_quaternion(p.orientation))
 
 
