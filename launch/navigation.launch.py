@@ -1,7 +1,8 @@
 """The whole navigation graph for real sensors: `ros2 launch ins_gnss_ros navigation.launch.py`.
 
 Arguments: ``profile`` (a params file in the package's config/, without .yaml; default
-``default``) and ``nodes`` (comma-separated executables to start; default the live graph).
+``default``) and ``nodes`` (comma-separated executables to start; default the live graph; append ``live_view``
+for the Foxglove live view, docs/VIEWING.md).
 Every node respawns after a crash, as ``trial run`` does without ROS launch.
 """
 

@@ -30,6 +30,7 @@ setup(
         "gnss_driver = ins_gnss_ros.nodes.gnss_driver_node:main",
         "gnss_simulator = ins_gnss_ros.nodes.gnss_simulator_node:main",
         "ekf = ins_gnss_ros.nodes.ekf_node:main",
+        "live_view = ins_gnss_ros.nodes.live_view_node:main",
         # the main job: simulate, import, replay, evaluate, batch, run
         "trial = ins_gnss_ros.trial.cli:main",
         # calibration tools

@@ -26,7 +26,13 @@ CONTRACT = {
                         "/gnss/time_reference"], ["/sim/truth"]),
     "ekf": (["/ins/correction", "/nav/odom", "/nav/fix", "/nav/status"],
             ["/imu/delta", "/ins/state", "/gnss/fix", "/gnss/vel", "/gnss/heading"]),
+    # extension (README): the Foxglove live view
+    "live_view": ([], ["/nav/fix", "/gnss/fix", "/nav/odom", "/ins/state", "/nav/status",
+                       "/diagnostics"]),
 }
+# Arguments a node needs beside the params file here: the live view on any free port, so that
+# test runs side by side never compete for Foxglove's 8765.
+ROS_ARGS = {"live_view": ("-p", "port:=0")}
 
 
 def test_every_node_is_in_the_contract_table():
@@ -35,7 +41,7 @@ def test_every_node_is_in_the_contract_table():
 
 @pytest.mark.parametrize("script", NODES)
 def test_node_starts_with_params_file_and_stops_cleanly(script, probe, executor):
-    with NodeProcess(script, params_file=PARAMS) as proc:
+    with NodeProcess(script, *ROS_ARGS.get(script, ()), params_file=PARAMS) as proc:
         proc.wait_on_graph(probe, executor)
         publishes, subscribes = CONTRACT[script]
         wait_for_endpoints(probe, executor, publishes, subscribes)

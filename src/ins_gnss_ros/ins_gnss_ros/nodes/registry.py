@@ -15,6 +15,8 @@ NODES = {
     "gnss_driver": "ins_gnss_ros.nodes.gnss_driver_node:GnssDriverNode",
     "gnss_simulator": "ins_gnss_ros.nodes.gnss_simulator_node:GnssSimulatorNode",
     "ekf": "ins_gnss_ros.nodes.ekf_node:EkfNode",
+    # optional: runs where a profile has a live_view section (config/default.yaml has none)
+    "live_view": "ins_gnss_ros.nodes.live_view_node:LiveViewNode",
 }
 
 #: Nodes that make sensor data (from a receiver, from a simulation): a replay's sensors are the
