@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -12,6 +14,11 @@ from ins_gnss_ros.params import ParameterError, resolve
 
 
 class Recorder:
+    """A navigator that keeps what it is given (levelled and aligned)."""
+
+    config = SimpleNamespace(noise=SimpleNamespace(accel_psd=1e-6, gyro_psd=1e-8))
+    started = True
+
     def __init__(self):
         self.measurements, self.heading_known = [], True
 

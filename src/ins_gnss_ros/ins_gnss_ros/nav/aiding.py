@@ -5,8 +5,9 @@ gap is bridged or loses the IMU; which readings are
 refused (no fix, non-finite, beyond any vehicle), what variance a reading without one gets, the
 variance floors, the receiver's velocity latency, how a magnetic heading is referred to true
 north, when GNSS ranges replace fix and velocity (tight coupling, seed 004 section 2.1), and,
-for a receiver without velocity output, the course over ground from successive fixes that
-aligns the heading.
+for a receiver without velocity output, the rest that a still IMU and unmoving fixes show
+(zero-velocity updates in place of the receiver's speed, nav/rest_detector.py) and the course
+over ground from successive fixes that aligns the heading.
 The ``ekf`` node feeds it the topics' messages as plain values; the offline replay feeds it the
 same values from a bag (the configuration both build from the ``ekf`` parameters:
 :mod:`ins_gnss_ros.nav.filter_config`).
@@ -25,6 +26,7 @@ from .measurement_types import GnssFix, GnssVelocity, HeadingFix, SpeedLog, Whee
     ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .navigator import Navigator
+from .rest_detector import RestDetector
 
 __all__ = ["Aiding", "AidingPolicy", "InputStats", "WheelPolicy"]
 
@@ -121,6 +123,9 @@ class AidingPolicy:
 #: navigator's 3 s history, where it is applied at the mid-epoch).
 COURSE_WINDOW_S = 2.0
 COURSE_MIN_SIGMAS = 10.0
+#: Longest the first fixes of a receiver without velocity wait for the rest detector, s (a
+#: noisy receiver confirms rest slowly: the filter then levels without the static gyro bias).
+REST_DECISION_S = 10.0
 #: Horizontal acceleration assumed between two fixes for the course velocity's variance, m/s^2.
 COURSE_ACCELERATION = 2.0
 
@@ -179,6 +184,9 @@ class Aiding:
         self.last_accepted_t = -math.inf  # newest accepted update, s
         self.forced: set[str] = set()  # kinds forced in since the filter last NAVIGATED
         self._recent_fixes: list[tuple[float, np.ndarray, np.ndarray]] = []  # t, ECEF, cov ENU
+        noise = navigator.config.noise
+        self._rest = RestDetector(noise.accel_psd, noise.gyro_psd)
+        self._first_fix_t: dict[str, float] = {}  # "t": the first fix held for the rest detector
         self.last_increment_t = math.inf  # end of the last increment, s
         self.wheel_still_since = math.inf  # stamp of the first of the zero wheel speeds, s
 
@@ -235,6 +243,8 @@ class Aiding:
             self.navigator.add_imu(*held_increments(t, dtheta, dv, dt, interval))
             return gap
         self.navigator.add_imu(t, dtheta, dv)
+        if self._rest.increment(t, dtheta, dv, dt) and "gnss/vel" not in self.inputs:
+            self.navigator.add_measurement(ZeroVelocity(t))
         return None if gap == CONTIGUOUS else gap
 
     def fix(self, t: float, lat_deg: float, lon_deg: float, h: float, cov: np.ndarray,
@@ -262,9 +272,21 @@ class Aiding:
         lat, lon = np.radians(lat_deg), np.radians(lon_deg)
         if self.datum is None:
             self.datum = (lat, lon, h)
+        if self._rest.fix(t, lat, lon, h, cov) and self._without_velocity_before_start():
+            self.navigator.add_measurement(ZeroVelocity(t))  # levels as a static start
+        elif self._rest.undecided and self._without_velocity_before_start() and \
+                t - self._first_fix_t.setdefault("t", t) < REST_DECISION_S:
+            self.report("gnss/fix held: telling rest from motion before levelling", log=False)
+            return self._seen("gnss/fix", t, True)
         self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov))
         self._course(t, lat, lon, h, cov)
         return self._seen("gnss/fix", t, True)
+
+    def _without_velocity_before_start(self) -> bool:
+        """No gnss/vel so far and the filter not yet levelled: the first fixes wait for the
+        rest detector, so that a static start takes its gyro bias from the stationary mean
+        (the navigator's levelling) as with a receiver that gives its speed."""
+        return "gnss/vel" not in self.inputs and not self.navigator.started
 
     def _course(self, t: float, lat: float, lon: float, h: float, cov: np.ndarray) -> None:
         """Without any gnss/vel and before the heading is known, turn successive fixes into a

@@ -67,12 +67,11 @@ class WheelOdometry:
 
 @dataclass(frozen=True)
 class ZeroVelocity:
-    """The vehicle is known to be at rest at time t: ZUPT (sigma_v m/s) and, if sigma_w is set,
-    ZARU (rad/s)."""
+    """The vehicle is known to be at rest at time t: ZUPT (sigma_v m/s per axis) and the
+    navigator's ZARU (its ``zaru_sigma``); GNSS is then used while the heading is unknown."""
 
     t: float
-    sigma_v: float = 0.01
-    sigma_w: float | None = None
+    sigma_v: float = 0.02
 
 
 @dataclass(frozen=True)

@@ -47,6 +47,10 @@ from .recording import Recorder
 from .rewind import Rewind, RunState
 from .strapdown import apply_correction
 
+#: A zero-velocity update tells the vehicle at rest for this long after its epoch, s (the
+#: front end sends one per still IMU block, nav/rest_detector.py).
+REST_HOLD = 0.5
+
 
 def _view(part, name, doc):
     """A read-only property showing attribute `name` of the navigator's attribute `part`."""
@@ -234,6 +238,8 @@ class Navigator:
                 s.next_sample = k
             if isinstance(m, GnssVelocity):
                 s.gnss_speed = float(np.hypot(*m.v_enu[:2]))
+            elif isinstance(m, ZeroVelocity):
+                s.t_rest = epoch
             if not isinstance(m, GnssFix) or s.levelling.time < cfg.level_time or k == buf.first:
                 continue
             P0 = initial_covariance(self._space, cfg.noise, cfg.sigma_pos0, cfg.sigma_vel0,
@@ -242,7 +248,7 @@ class Navigator:
             speed = s.gnss_speed if np.isfinite(s.gnss_speed) else next((np.hypot(*p.v_enu[:2])
                 for e, _, p in self._pending if isinstance(p, GnssVelocity) and e - epoch < 0.5),
                 np.nan)
-            if speed <= cfg.static_speed:
+            if speed <= cfg.static_speed or epoch - s.t_rest <= REST_HOLD:
                 take_static_gyro_bias(s.levelling, self._space, cfg.noise, P0, s.estimates)
             self._start(levelled_state(s.levelling, m.lat, m.lon, m.h, self._lever,
                                        s.gnss_speed, cfg.static_speed, float(buf.time(k - 1))),
@@ -316,12 +322,15 @@ class Navigator:
             raise TypeError(f"unknown measurement {type(m).__name__}")
         handler(self, m, st, epoch)
 
-    def _at_rest(self):
-        return self._state.gnss_speed <= self.config.static_speed
+    def _at_rest(self, epoch):
+        """At rest by the last GNSS speed, or by a zero-velocity update within REST_HOLD s."""
+        s = self._state
+        return s.gnss_speed <= self.config.static_speed or epoch - s.t_rest <= REST_HOLD
 
     def _held_for_alignment(self, m, epoch):
         """While aligning, GNSS is used only at rest: reject m ("aligning") in motion."""
-        if self._state.mode == ALIGNING and not self._state.heading_known and not self._at_rest():
+        if self._state.mode == ALIGNING and not self._state.heading_known and \
+                not self._at_rest(epoch):
             self._refuse(m, epoch, "aligning")
             return True
         return False
@@ -333,7 +342,7 @@ class Navigator:
         v_ant = lever_arm_velocity(st.v_enu, st.q_nb, s.omega, self._lever, st.lat)
         innov = meas.gnss_position(self._space, st, m.lat, m.lon, m.h, m.cov_enu, self._lever,
                                    dzdt=v_ant)
-        if self._at_rest() and not s.heading_known:
+        if self._at_rest(epoch) and not s.heading_known:
             s.rest_pos = (st.lat, st.lon, st.h)
         fix = (m.lat, m.lon, m.h)
         frozen = fix == s.last_fix and np.linalg.norm(v_ant) > self.config.frozen_speed
@@ -355,16 +364,22 @@ class Navigator:
             return
         innov = meas.gnss_velocity(self._space, st, m.v_enu, m.cov_enu, s.omega, self._lever,
                                    dzdt=s.a_enu)
-        if self._at_rest() and cfg.zaru_sigma is not None:
-            # At rest the gyros see only the Earth rate: their biases become observable
-            # (while aligning, the unknown yaw hides the horizontal Earth rate, hence the
-            # added Omega cos(lat) term).
-            sigma = np.sqrt(cfg.noise.gyro_psd / s.omega_time + cfg.zaru_sigma ** 2)
-            if not s.heading_known:
-                sigma = np.hypot(sigma, WGS84.omega * np.cos(st.lat))
-            self._update(meas.zero_angular_rate(self._space, st, s.omega, sigma), epoch,
-                         aiding=False)
+        if self._at_rest(epoch):
+            self._zero_rate(st, epoch)
         self._update(innov, epoch)
+
+    def _zero_rate(self, st, epoch):
+        """ZARU at rest: the gyros see only the Earth rate, so their biases become observable
+        (while aligning, the unknown yaw hides the horizontal Earth rate, hence the added
+        Omega cos(lat) term)."""
+        s, cfg = self._state, self.config
+        if cfg.zaru_sigma is None:
+            return
+        sigma = np.sqrt(cfg.noise.gyro_psd / s.omega_time + cfg.zaru_sigma ** 2)
+        if not s.heading_known:
+            sigma = np.hypot(sigma, WGS84.omega * np.cos(st.lat))
+        self._update(meas.zero_angular_rate(self._space, st, s.omega, sigma), epoch,
+                     aiding=False)
 
     def _heading(self, m, st, epoch):
         s = self._state
@@ -391,10 +406,9 @@ class Navigator:
                      epoch)
 
     def _zero_velocity(self, m, st, epoch):
+        self._state.t_rest = epoch
+        self._zero_rate(st, epoch)
         self._update(meas.zero_velocity(self._space, st, m.sigma_v), epoch)
-        if m.sigma_w is not None:
-            self._update(meas.zero_angular_rate(self._space, st, self._state.omega, m.sigma_w),
-                         epoch)
 
     def _satellite_ranges(self, m, st, epoch):
         if self._held_for_alignment(m, epoch):

@@ -39,6 +39,8 @@ class RunState:
         Specific force summed before the first fix.
     gnss_speed : float
         Horizontal speed of the last GNSS velocity, m/s (NaN before the first).
+    t_rest : float
+        Epoch of the last zero-velocity update.
     nav : NavState or None
         The solution (None until the first fix).
     ekf : ErrorStateEKF or None
@@ -68,6 +70,7 @@ class RunState:
     next_sample: int = 0
     levelling: Levelling = field(default_factory=Levelling)
     gnss_speed: float = np.nan
+    t_rest: float = -np.inf
     nav: NavState | None = None
     ekf: ErrorStateEKF | None = None
     estimates: dict = field(default_factory=dict)

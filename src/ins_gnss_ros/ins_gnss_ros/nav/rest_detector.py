@@ -1,0 +1,144 @@
+"""Rest detection for the aiding front end: an IMU that is still and fixes that do not move.
+
+A receiver that outputs no velocity (NMEA GGA, many SBAS units) leaves the filter without the
+speed that tells it the vehicle stands, so it would neither use the fixes of a static start nor
+learn the gyro biases there. An IMU alone cannot tell rest from steady straight motion (the
+specific force and the rate are the same), so rest is declared only when both agree:
+
+* IMU: in blocks of ``BLOCK_S`` the scatter of the specific force and of the rate about their
+  block means stays within what the sensor's white noise and a small vibration explain (the
+  variance test among the zero-velocity detectors of I. Skog, P. Handel, J.-O. Nilsson and
+  J. Rantakokko, "Zero-velocity detection - an algorithm evaluation", IEEE Trans. Biomed. Eng.
+  57(11), 2010), and the block means stay those of the first still block (a smooth start has
+  no scatter within a block, but its specific force changes), for at least ``MIN_STILL_S``;
+* GNSS: the velocity fitted by least squares to the fixes since the IMU became still is below
+  ``REST_SPEED`` with three sigmas to spare (a noisy receiver simply takes longer to confirm).
+
+While both hold, every still block yields a zero-velocity update; any block with motion in it
+ends the rest at once.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .earth import ecef_to_enu_matrix, geodetic_to_ecef
+
+#: Length of the IMU blocks whose scatter is tested, s.
+BLOCK_S = 0.25
+#: Stillness needed before the fixes are asked, s.
+MIN_STILL_S = 1.0
+#: Vibration a standing vehicle may show beyond the sensor noise (1 sigma per axis): 5 mg and
+#: 0.2 deg/s, an engine idling on soft mounts shows more (its rest then goes undetected, and the
+#: filter waits for motion as without this detector).
+VIBRATION_ACCEL = 0.05
+VIBRATION_RATE = math.radians(0.2)
+#: The block scatter may reach this many times its expectation at rest (a chi-square of 3(n-1)
+#: degrees of freedom over n samples stays below twice its mean for n >= 20 at 1e-4).
+SCATTER_MARGIN = 2.0
+#: Horizontal speed the fixes must rule out (at three sigmas) to declare rest, m/s.
+REST_SPEED = 0.3
+
+
+class RestDetector:
+    """Decides from IMU increments and GNSS fixes whether the vehicle stands.
+
+    Parameters
+    ----------
+    accel_psd, gyro_psd : float
+        White-noise densities of the accelerometers ((m/s^2)^2/Hz) and gyros ((rad/s)^2/Hz).
+    """
+
+    def __init__(self, accel_psd: float, gyro_psd: float):
+        self.accel_psd, self.gyro_psd = accel_psd, gyro_psd
+        self._block = None          # [t_start, n, sum f, sum f^2, sum w, sum w^2, dt]
+        self._reference = None      # block means (f, w) at the start of the still run
+        self.still_since = math.nan  # start of the current run of still blocks, s
+        self.at_rest = False         # the fixes of this run confirmed rest
+        self._fixes = None           # least-squares sums of the run's fixes
+
+    @property
+    def undecided(self) -> bool:
+        """The IMU is still but the fixes have not yet confirmed rest."""
+        return not math.isnan(self.still_since) and not self.at_rest
+
+    def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray, dt: float) -> bool:
+        """Add an IMU increment over dt (s) ending at t (s). Returns True when it closed a
+        still block while rest is confirmed (the caller's cue for a zero-velocity update)."""
+        f, w = dv / dt, dtheta / dt
+        b = self._block
+        if b is None:
+            self._block = b = [t - dt, 0, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), dt]
+        b[1] += 1
+        b[2] += f
+        b[3] += f * f
+        b[4] += w
+        b[5] += w * w
+        if t - b[0] < BLOCK_S:
+            return False
+        self._block = None
+        if self._still(b):
+            if math.isnan(self.still_since):
+                self.still_since = b[0]
+            return self.at_rest
+        self._end_run()
+        return False
+
+    def _still(self, b) -> bool:
+        t0, n, sf, sff, sw, sww, dt = b
+        if n < 2:
+            return False
+        var_f = float(np.sum(sff - sf * sf / n)) / (n - 1)
+        var_w = float(np.sum(sww - sw * sw / n)) / (n - 1)
+        # Per-sample variance of white noise of density q at interval dt: q / dt per axis.
+        noise_f, noise_w = self.accel_psd / dt, self.gyro_psd / dt
+        if var_f > SCATTER_MARGIN * 3.0 * (noise_f + VIBRATION_ACCEL ** 2) or \
+                var_w > SCATTER_MARGIN * 3.0 * (noise_w + VIBRATION_RATE ** 2):
+            return False
+        means = sf / n, sw / n
+        if self._reference is None:
+            self._reference = means
+            return True
+        # The difference of two block means: twice the noise of one mean, plus the vibration.
+        df = float(np.sum((means[0] - self._reference[0]) ** 2))
+        dw = float(np.sum((means[1] - self._reference[1]) ** 2))
+        return df <= SCATTER_MARGIN * 3.0 * (2.0 * noise_f / n + VIBRATION_ACCEL ** 2) and \
+            dw <= SCATTER_MARGIN * 3.0 * (2.0 * noise_w / n + VIBRATION_RATE ** 2)
+
+    def _end_run(self) -> None:
+        self.still_since, self.at_rest, self._fixes = math.nan, False, None
+        self._reference = None
+
+    def fix(self, t: float, lat: float, lon: float, h: float, cov_enu: np.ndarray) -> bool:
+        """Add a fix at t (s; rad, rad, m, ENU covariance m^2) and return whether the vehicle is
+        confirmed at rest: the IMU still for ``MIN_STILL_S`` and the fixes of the still run
+        moving at less than ``REST_SPEED`` with three sigmas to spare."""
+        if math.isnan(self.still_since) or t < self.still_since:
+            self._fixes = None
+            return False
+        r = geodetic_to_ecef(lat, lon, h)
+        if self._fixes is None:
+            self._fixes = {"r0": r, "R": ecef_to_enu_matrix(lat, lon), "t0": t, "n": 0,
+                           "st": 0.0, "stt": 0.0, "sx": np.zeros(2), "stx": np.zeros(2),
+                           "var": 0.0}
+        s = self._fixes
+        x = (s["R"] @ (r - s["r0"]))[:2]
+        tau = t - s["t0"]
+        s["n"] += 1
+        s["st"] += tau
+        s["stt"] += tau * tau
+        s["sx"] += x
+        s["stx"] += tau * x
+        s["var"] = max(s["var"], 0.5 * float(cov_enu[0, 0] + cov_enu[1, 1]))
+        n = s["n"]
+        spread = s["stt"] - s["st"] ** 2 / n  # sum of (t - mean t)^2
+        if n < 3 or t - self.still_since < MIN_STILL_S or spread <= 0.0:
+            return self.at_rest
+        v = (s["stx"] - s["st"] * s["sx"] / n) / spread
+        sigma_v = math.sqrt(s["var"] / spread)
+        if math.hypot(*v) + 3.0 * sigma_v < REST_SPEED:
+            self.at_rest = True
+        elif math.hypot(*v) - 3.0 * sigma_v > REST_SPEED:
+            self._end_run()   # steady motion the IMU cannot see: not at rest until it moves
+        return self.at_rest

@@ -1,0 +1,65 @@
+"""nav/rest_detector.py: rest needs a still IMU and fixes that do not move."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ins_gnss_ros.nav.rest_detector import RestDetector
+
+DT = 0.005
+ACCEL_PSD, GYRO_PSD = (2e-3) ** 2, math.radians(0.01) ** 2  # per sqrt(Hz)
+LAT, LON = math.radians(59.9), math.radians(30.3)
+M_PER_RAD = 6.37e6
+
+
+def run(seconds, speed=0.0, accel=0.0, fix_sigma=0.5, fix_rate=5.0, seed=1, start=0.0):
+    """A detector fed an IMU at rest or in steady straight motion (the same readings: gravity,
+    the gyro bias, white noise, plus `accel` along x after `start` s) and fixes moving east at
+    `speed` m/s. Returns the times (s) at which rest was confirmed and the zero-velocity cues."""
+    rng = np.random.default_rng(seed)
+    det = RestDetector(ACCEL_PSD, GYRO_PSD)
+    bias = np.radians([0.5, -0.3, 0.2])  # a MEMS gyro's turn-on bias: constant, so still
+    confirmed, cues = [], []
+    every = round(1.0 / (fix_rate * DT))
+    for k in range(1, round(seconds / DT) + 1):
+        t = k * DT
+        a = accel if t > start else 0.0
+        f = np.array([a, 0.0, 9.81]) + math.sqrt(ACCEL_PSD / DT) * rng.standard_normal(3)
+        w = bias + math.sqrt(GYRO_PSD / DT) * rng.standard_normal(3)
+        if det.increment(t, w * DT, f * DT, DT):
+            cues.append(t)
+        if k % every == 0:
+            x = speed * t + 0.5 * accel * max(t - start, 0.0) ** 2
+            lon = LON + (x + fix_sigma * rng.standard_normal()) / (M_PER_RAD * math.cos(LAT))
+            lat = LAT + fix_sigma * rng.standard_normal() / M_PER_RAD
+            if det.fix(t, lat, lon, 10.0, np.diag([fix_sigma ** 2] * 2 + [4 * fix_sigma ** 2])):
+                confirmed.append(t)
+    return confirmed, cues
+
+
+def test_a_still_imu_and_unmoving_fixes_confirm_rest_within_seconds():
+    confirmed, cues = run(20.0)
+    assert confirmed and 1.0 <= confirmed[0] <= 6.0
+    # then a cue every still block (4 Hz) to the end
+    assert len(cues) >= 4 * (20.0 - confirmed[0]) - 2
+
+
+def test_steady_motion_the_imu_cannot_see_is_not_rest():
+    confirmed, cues = run(60.0, speed=10.0)
+    assert not confirmed and not cues
+    # a creeping vehicle either: the fixes rule out 0.3 m/s only below it
+    assert not run(60.0, speed=1.0)[0]
+
+
+def test_a_noisy_receiver_confirms_later():
+    fast = run(60.0)[0][0]
+    slow = run(60.0, fix_sigma=5.0, fix_rate=1.0)[0]
+    assert slow and slow[0] > 3 * fast
+
+
+def test_a_smooth_start_ends_rest_at_once():
+    # 0.3 m/s^2 from rest at 20 s: no scatter within a block, but the specific force changes
+    _, cues = run(30.0, accel=0.3, start=20.0)
+    assert cues and 19.5 < cues[-1] <= 20.5
