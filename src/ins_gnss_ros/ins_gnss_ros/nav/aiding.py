@@ -20,7 +20,7 @@ from typing import Callable
 
 import numpy as np
 
-from .earth import ecef_to_enu_matrix, geodetic_to_ecef
+from .course import CourseFromFixes
 from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
 from .measurement_types import GnssFix, GnssVelocity, HeadingFix, SpeedLog, WheelOdometry, \
     ZeroVelocity
@@ -117,17 +117,9 @@ class AidingPolicy:
                    p["max_imu_gap_s"], wheel=WheelPolicy.from_params(p))
 
 
-#: Course from successive fixes (a receiver without velocity output, e.g. NMEA GGA only): two
-#: fixes at most COURSE_WINDOW_S apart whose horizontal displacement exceeds COURSE_MIN_SIGMAS
-#: times its own standard deviation give a velocity for the motion alignment (within the
-#: navigator's 3 s history, where it is applied at the mid-epoch).
-COURSE_WINDOW_S = 2.0
-COURSE_MIN_SIGMAS = 10.0
 #: Longest the first fixes of a receiver without velocity wait for the rest detector, s (a
 #: noisy receiver confirms rest slowly: the filter then levels without the static gyro bias).
 REST_DECISION_S = 10.0
-#: Horizontal acceleration assumed between two fixes for the course velocity's variance, m/s^2.
-COURSE_ACCELERATION = 2.0
 
 #: What the filter waits for while it has fixes but no heading (ALIGNING).
 NO_HEADING = ("no heading source yet: needs gnss/vel, movement well beyond the fixes' noise, "
@@ -183,7 +175,7 @@ class Aiding:
         self.inputs: dict[str, InputStats] = {}
         self.last_accepted_t = -math.inf  # newest accepted update, s
         self.forced: set[str] = set()  # kinds forced in since the filter last NAVIGATED
-        self._recent_fixes: list[tuple[float, np.ndarray, np.ndarray]] = []  # t, ECEF, cov ENU
+        self._course = CourseFromFixes()
         noise = navigator.config.noise
         self._rest = RestDetector(noise.accel_psd, noise.gyro_psd)
         self._first_fix_t: dict[str, float] = {}  # "t": the first fix held for the rest detector
@@ -272,14 +264,14 @@ class Aiding:
         lat, lon = np.radians(lat_deg), np.radians(lon_deg)
         if self.datum is None:
             self.datum = (lat, lon, h)
-        if self._rest.fix(t, lat, lon, h, cov) and self._without_velocity_before_start():
+        if self._rest.fix(t, lat, lon, h, self._course.fix_to_fix(cov)) and self._without_velocity_before_start():
             self.navigator.add_measurement(ZeroVelocity(t))  # levels as a static start
         elif self._rest.undecided and self._without_velocity_before_start() and \
                 t - self._first_fix_t.setdefault("t", t) < REST_DECISION_S:
             self.report("gnss/fix held: telling rest from motion before levelling", log=False)
             return self._seen("gnss/fix", t, True)
         self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov))
-        self._course(t, lat, lon, h, cov)
+        self._course_velocity(t, lat, lon, h, cov)
         return self._seen("gnss/fix", t, True)
 
     def _without_velocity_before_start(self) -> bool:
@@ -288,27 +280,16 @@ class Aiding:
         (the navigator's levelling) as with a receiver that gives its speed."""
         return "gnss/vel" not in self.inputs and not self.navigator.started
 
-    def _course(self, t: float, lat: float, lon: float, h: float, cov: np.ndarray) -> None:
-        """Without any gnss/vel and before the heading is known, turn successive fixes into a
-        velocity (the course over ground aligns the heading, as the receiver's velocity
-        would). Its variance: both fixes' over the interval squared plus a manoeuvre term."""
+    def _course_velocity(self, t: float, lat: float, lon: float, h: float,
+                         cov: np.ndarray) -> None:
+        """Without any gnss/vel and before the heading is known, successive fixes give the
+        velocity that aligns the heading (nav/course.py)."""
         if "gnss/vel" in self.inputs or self.navigator.heading_known:
-            self._recent_fixes.clear()
+            self._course.clear()
             return
-        r = geodetic_to_ecef(lat, lon, h)
-        self._recent_fixes = [f for f in self._recent_fixes if t - f[0] <= COURSE_WINDOW_S]
-        self._recent_fixes.append((t, r, cov))
-        t0, r0, cov0 = self._recent_fixes[0]
-        dt = t - t0
-        if dt <= 0.0:
-            return
-        d = ecef_to_enu_matrix(lat, lon) @ (r - r0)
-        cov_d = cov + cov0
-        if np.hypot(d[0], d[1]) < COURSE_MIN_SIGMAS * np.sqrt(cov_d[0, 0] + cov_d[1, 1]):
-            return
-        cov_v = cov_d / dt ** 2 + np.diag([1.0, 1.0, 0.0]) * (0.5 * COURSE_ACCELERATION * dt) ** 2
-        self.navigator.add_measurement(GnssVelocity(0.5 * (t0 + t), d / dt, cov_v))
-        self._recent_fixes = [self._recent_fixes[-1]]
+        velocity = self._course.add(t, lat, lon, h, cov)
+        if velocity is not None:
+            self.navigator.add_measurement(velocity)
 
     def velocity(self, t: float, v_enu: np.ndarray, cov: np.ndarray) -> bool:
         """A GNSS velocity (m/s, ENU) stamped t (s) with its covariance (m^2/s^2)."""

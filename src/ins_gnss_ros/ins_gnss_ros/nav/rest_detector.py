@@ -111,7 +111,8 @@ class RestDetector:
         self._reference = None
 
     def fix(self, t: float, lat: float, lon: float, h: float, cov_enu: np.ndarray) -> bool:
-        """Add a fix at t (s; rad, rad, m, ENU covariance m^2) and return whether the vehicle is
+        """Add a fix at t (s; rad, rad, m, ENU covariance m^2 of its fix-to-fix noise, which
+        the fit of a velocity sees) and return whether the vehicle is
         confirmed at rest: the IMU still for ``MIN_STILL_S`` and the fixes of the still run
         moving at less than ``REST_SPEED`` with three sigmas to spare."""
         if math.isnan(self.still_since) or t < self.still_since:
@@ -130,7 +131,7 @@ class RestDetector:
         s["stt"] += tau * tau
         s["sx"] += x
         s["stx"] += tau * x
-        s["var"] = max(s["var"], 0.5 * float(cov_enu[0, 0] + cov_enu[1, 1]))
+        s["var"] = 0.5 * float(cov_enu[0, 0] + cov_enu[1, 1])  # the caller's latest estimate
         n = s["n"]
         spread = s["stt"] - s["st"] ** 2 / n  # sum of (t - mean t)^2
         if n < 3 or t - self.still_since < MIN_STILL_S or spread <= 0.0:

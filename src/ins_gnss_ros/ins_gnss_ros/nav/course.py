@@ -1,0 +1,86 @@
+"""Course over ground from successive fixes, for a receiver without velocity output.
+
+A receiver that gives only positions (NMEA GGA, many SBAS units) still tells the direction of
+motion once the vehicle has moved well beyond the fixes' noise: the displacement between two fixes
+over the time between them is a velocity that aligns the heading as the receiver's own would.
+
+What counts as "beyond the noise" is the fix-to-fix noise, not the absolute error: a receiver's
+position error is mostly slow (atmosphere, orbits, multipath over tens of seconds) and cancels in a
+difference over a second or two, and a fix without covariance is given a generous absolute sigma
+(nav/aiding.py). The white part is measured from the fixes themselves: the second difference of
+three equally spaced fixes, e_(k+1) - 2 e_k + e_(k-1), has six times the white variance and no
+velocity in it (an acceleration a adds a dt^2, so the estimate errs on the large side).
+"""
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from .earth import ecef_to_enu_matrix, geodetic_to_ecef
+from .measurement_types import GnssVelocity
+
+#: Two fixes at most WINDOW_S apart whose horizontal displacement exceeds MIN_SIGMAS times its
+#: standard deviation give a velocity (applied at the mid-epoch, within the navigator's 3 s
+#: history).
+WINDOW_S = 2.0
+MIN_SIGMAS = 10.0
+#: Horizontal acceleration assumed between two fixes for the velocity's variance, m/s^2.
+ACCELERATION = 2.0
+#: Second differences kept for the white-noise estimate, and the fewest that make one.
+SCATTER_SAMPLES, MIN_SCATTER_SAMPLES = 50, 10
+#: Median of a chi-square variable of one degree of freedom (a robust variance from squares).
+CHI2_1_MEDIAN = 0.4549
+
+
+class CourseFromFixes:
+    """Turns successive fixes into velocities (:class:`GnssVelocity`)."""
+
+    def __init__(self):
+        self._window: list[tuple[float, np.ndarray, np.ndarray]] = []  # t, ECEF, cov ENU
+        self._last3: deque = deque(maxlen=3)                           # t, ECEF
+        self._second_differences: deque = deque(maxlen=SCATTER_SAMPLES)  # (2,) squares, m^2
+
+    def clear(self) -> None:
+        """Forget the fixes of the current window (the heading is known, or a velocity came)."""
+        self._window.clear()
+
+    def fix_to_fix(self, cov: np.ndarray) -> np.ndarray:
+        """A fix's ENU covariance (m^2) for differences over a few seconds: its horizontal part
+        no larger than the white variance the fixes show (once enough of them came)."""
+        if len(self._second_differences) < MIN_SCATTER_SAMPLES:
+            return cov
+        white = float(np.median(np.concatenate(self._second_differences))) / CHI2_1_MEDIAN / 6.0
+        out = cov.copy()
+        out[:2, :2] = np.eye(2) * min(white, 0.5 * (cov[0, 0] + cov[1, 1]))
+        return out
+
+    def add(self, t: float, lat: float, lon: float, h: float, cov: np.ndarray):
+        """A fix at t (s; rad, rad, m) with its ENU covariance (m^2). Returns the velocity it
+        completes, or None."""
+        r = geodetic_to_ecef(lat, lon, h)
+        R = ecef_to_enu_matrix(lat, lon)
+        self._scatter(t, r, R)
+        self._window = [f for f in self._window if t - f[0] <= WINDOW_S]
+        self._window.append((t, r, cov))
+        t0, r0, cov0 = self._window[0]
+        dt = t - t0
+        if dt <= 0.0:
+            return None
+        d = R @ (r - r0)
+        cov_d = self.fix_to_fix(cov) + self.fix_to_fix(cov0)
+        if np.hypot(d[0], d[1]) < MIN_SIGMAS * np.sqrt(cov_d[0, 0] + cov_d[1, 1]):
+            return None
+        cov_v = cov_d / dt ** 2 + np.diag([1.0, 1.0, 0.0]) * (0.5 * ACCELERATION * dt) ** 2
+        self._window = [self._window[-1]]
+        return GnssVelocity(0.5 * (t0 + t), d / dt, cov_v)
+
+    def _scatter(self, t: float, r: np.ndarray, R: np.ndarray) -> None:
+        self._last3.append((t, r))
+        if len(self._last3) < 3:
+            return
+        (t0, r0), (t1, r1), (t2, r2) = self._last3
+        if abs((t2 - t1) - (t1 - t0)) > 0.1 * (t2 - t0):
+            return  # a dropped fix: not equally spaced
+        s = (R @ (r2 - 2.0 * r1 + r0))[:2]
+        self._second_differences.append(s * s)
