@@ -46,7 +46,17 @@ CELLS += [Cell("fix only 1 Hz", ("--gnss-rate", "1", "--no-gnss-vel")),
           Cell("fix only 5 Hz", ("--no-gnss-vel",)),
           Cell("fix only 5 Hz, no covariance", ("--no-gnss-vel", "--no-gnss-cov")),
           Cell("fix + velocity, no covariance", ("--no-gnss-cov",)),
-          Cell("RTK 2 cm", ("--gnss-sigma-h", "0.02", "--gnss-sigma-v", "0.04"))]
+          Cell("RTK 2 cm", ("--gnss-sigma-h", "0.02", "--gnss-sigma-v", "0.04")),
+          Cell("IMU orientation (3 deg), fix only 5 Hz", ("--imu-orientation", "3",
+                                                          "--no-gnss-vel")),
+          Cell("rolling start, fix + velocity", ("--static", "0")),
+          Cell("rolling start, fix only 5 Hz", ("--static", "0", "--no-gnss-vel")),
+          Cell("rolling start, IMU orientation, fix only", ("--static", "0", "--no-gnss-vel",
+                                                            "--imu-orientation", "3")),
+          Cell("ground robot: 30 Hz IMU + orientation, 2.5 Hz fixes, no velocity or covariance",
+               ("--imu-rate", "30", "--imu-stamp-jitter", "0.003", "--imu-orientation", "3",
+                "--gnss-rate", "2.5", "--no-gnss-vel", "--no-gnss-cov", "--gnss-sigma-h", "1.0",
+                "--gnss-sigma-v", "2.0"))]
 SHORT = [CELLS[0], CELLS[3], CELLS[10]]
 
 
@@ -91,9 +101,12 @@ def judge(bag: Path, out: Path) -> dict:
 
     outputs = io.read_bag(out / "bag", ["/nav/status", "/ins/state", "/nav/fix"])
     status = [m for m in outputs if m.topic == "/nav/status"]
-    navigating = [io.msg_stamp_ns(m.msg) * 1e-9 for m in status if m.msg.mode == 1]
+    # NAVIGATING from nav/status (1 Hz) or a valid nav/fix (10 Hz), whichever says it first
+    navigating = [io.msg_stamp_ns(m.msg) * 1e-9 for m in status if m.msg.mode == 1] + \
+        [io.msg_stamp_ns(m.msg) * 1e-9 for m in outputs
+         if m.topic == "/nav/fix" and m.msg.status.status >= 0]
     t_start = t_truth[0]
-    t_align = navigating[0] if navigating else np.inf
+    t_align = min(navigating, default=np.inf)
     states = [m for m in outputs if m.topic == "/ins/state" and m.msg.correction_sequence > 0]
     t_state = stamps(states)
     after = t_state >= t_align

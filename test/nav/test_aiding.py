@@ -62,10 +62,11 @@ def test_velocity_delay_heading_declination_and_range_choice():
     vel = nav.measurements[-1]
     assert isinstance(vel, GnssVelocity) and vel.t == pytest.approx(1.9)
     assert not front.velocity(2.0, np.array([2000.0, 0.0, 0.0]), np.eye(3))
-    assert front.heading(3.0, 0.5, 1e-4, declination=0.1, magnetic=True)
+    assert front.heading(3.0, 0.5, 1e-4, declination=0.1, source="mag/heading")
     heading = nav.measurements[-1]
     assert isinstance(heading, HeadingFix) and heading.azimuth == pytest.approx(0.6)
-    assert not front.heading(3.0, 0.5, 0.0, None, magnetic=False)
+    assert heading.bias == "mag"
+    assert not front.heading(3.0, 0.5, 0.0, None)
     assert front.choose_ranges(4) and not front.fix(4.0, 59.9, 30.3, 0.0, np.eye(3), 0, True)
     assert not front.choose_ranges(8)
 

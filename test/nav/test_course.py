@@ -23,7 +23,9 @@ def velocities(noise, assumed, speed=5.0, azimuth=math.radians(30.0), rate=5.0, 
         t = k / rate
         east, north = speed * t * math.sin(azimuth), speed * t * math.cos(azimuth)
         e, n = np.array([east, north]) + noise * rng.standard_normal(2)
-        v = course.add(t, LAT + n / M_PER_RAD, LON + e / (M_PER_RAD * math.cos(LAT)), 10.0, cov)
+        lat, lon = LAT + n / M_PER_RAD, LON + e / (M_PER_RAD * math.cos(LAT))
+        course.observe(t, lat, lon, 10.0)
+        v = course.add(t, lat, lon, 10.0, cov)
         if v is not None:
             out.append(v)
     return out

@@ -105,13 +105,13 @@ def test_heading_level_vehicle_is_phi_up():
 def test_magnetic_heading_with_bias_state():
     az, _ = M.azimuth_of_axis(TRUE.q_nb)
     bias_true = 0.05
-    model = M.magnetic_heading(SPACE, TRUE, az + bias_true, 1e-4, bias=bias_true)
+    model = M.biased_heading(SPACE, TRUE, az + bias_true, 1e-4, bias=bias_true)
     assert model.z[0] == pytest.approx(0.0, abs=1e-12)
 
     def z_of(dx):
         st, res = perturbed(dx)
         # residual = true bias - estimate, so the estimate is true - residual
-        return M.magnetic_heading(SPACE, st, az + bias_true, 1e-4, bias_true - res["mag"][0]).z
+        return M.biased_heading(SPACE, st, az + bias_true, 1e-4, bias_true - res["mag"][0]).z
     check(model, z_of, 1e-7)
 
 

@@ -14,6 +14,7 @@ from ..nav.coning import METHODS
 from ..nav.increments import MAX_RATE, MAX_SPECIFIC_FORCE
 from ..params import Param, ParameterError
 from .calibration import ImuCalibration, read_calibration_file
+from .orientation_heading import OrientationHeadings
 from .preprocessor import ImuPreprocessor, SettingError
 
 __all__ = ["PARAMS", "calibration_from_params", "preprocessor_from_params"]
@@ -98,6 +99,12 @@ PARAMS = (
           "sensor clock, taken out of the stamps (0: never), s", 0.0, 10.0),
     Param("clock_jump.max_s", 2.5, "larger stamp jumps are a new time base (a restarted or "
           "looped source) and pass unchanged, s", 0.0, 3600.0),
+    Param("orientation_heading.rate_hz", 5.0, "rate of imu/heading from the IMU's own "
+          "orientation where its covariance says the yaw is valid (REP-145), Hz; 0: none",
+          0.0, 1000.0),
+    Param("orientation_heading.reference", "magnetic", "north of that orientation's yaw: "
+          "magnetic (a 9-axis AHRS; the ekf applies the WMM declination) or true",
+          choices=("magnetic", "true")),
     Param("time_offset_s", 0.0, "added to the sensor stamps to put them on GNSS time (the "
           "IMU clock's offset, e.g. -0.125 for the car drive's logger), s", -10.0, 10.0),
 )
@@ -123,6 +130,18 @@ def preprocessor_from_params(p: dict) -> ImuPreprocessor:
         name = {"clock_jump": "clock_jump.max_s",
                 "sensor_clock": "sensor_clock.jitter_s"}.get(err.name, err.name)
         raise ParameterError(f"parameter '{name}': {err}") from None
+
+
+def orientation_headings_from_params(p: dict, c_bs) -> tuple[OrientationHeadings | None,
+                                                               float | None]:
+    """The imu/heading source of the node's parameters for mounting c_bs (None: turned off),
+    and the declination its headings need: NaN (magnetic north, the WMM's declination to be
+    applied by the filter) or None (true north)."""
+    rate = p["orientation_heading.rate_hz"]
+    if rate <= 0.0:
+        return None, None
+    return OrientationHeadings(rate, c_bs), (
+        float("nan") if p["orientation_heading.reference"] == "magnetic" else None)
 
 
 def calibration_from_params(p: dict) -> ImuCalibration:

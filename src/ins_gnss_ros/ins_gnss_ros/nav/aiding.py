@@ -20,6 +20,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..magnetic.wmm import decimal_year, field_elements
 from .course import CourseFromFixes
 from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
 from .measurement_types import GnssFix, GnssVelocity, HeadingFix, SpeedLog, WheelOdometry, \
@@ -121,9 +122,13 @@ class AidingPolicy:
 #: noisy receiver confirms rest slowly: the filter then levels without the static gyro bias).
 REST_DECISION_S = 10.0
 
+#: Heading inputs -> the extra block of their own bias (None: a true heading, no bias).
+HEADING_SOURCES = {"gnss/heading": None, "mag/heading": "mag", "imu/heading": "ahrs"}
+
 #: What the filter waits for while it has fixes but no heading (ALIGNING).
 NO_HEADING = ("no heading source yet: needs gnss/vel, movement well beyond the fixes' noise, "
-              "mag/heading or gnss/heading")
+              "an IMU orientation with a valid yaw covariance (imu/heading), mag/heading or "
+              "gnss/heading")
 
 
 @dataclass
@@ -178,6 +183,7 @@ class Aiding:
         self._course = CourseFromFixes()
         noise = navigator.config.noise
         self._rest = RestDetector(noise.accel_psd, noise.gyro_psd)
+        self._wmm_declination = None  # at the datum, once a magnetic heading needs it
         self._first_fix_t: dict[str, float] = {}  # "t": the first fix held for the rest detector
         self.last_increment_t = math.inf  # end of the last increment, s
         self.wheel_still_since = math.inf  # stamp of the first of the zero wheel speeds, s
@@ -264,6 +270,7 @@ class Aiding:
         lat, lon = np.radians(lat_deg), np.radians(lon_deg)
         if self.datum is None:
             self.datum = (lat, lon, h)
+        self._course.observe(t, lat, lon, h)
         if self._rest.fix(t, lat, lon, h, self._course.fix_to_fix(cov)) and self._without_velocity_before_start():
             self.navigator.add_measurement(ZeroVelocity(t))  # levels as a static start
         elif self._rest.undecided and self._without_velocity_before_start() and \
@@ -277,7 +284,9 @@ class Aiding:
     def _without_velocity_before_start(self) -> bool:
         """No gnss/vel so far and the filter not yet levelled: the first fixes wait for the
         rest detector, so that a static start takes its gyro bias from the stationary mean
-        (the navigator's levelling) as with a receiver that gives its speed."""
+        (the navigator's levelling) as with a receiver that gives its speed (also with a
+        heading source: a turn-on bias of degrees per second left to the filter tilts the
+        levelled INS faster than fixes at rest correct it)."""
         return "gnss/vel" not in self.inputs and not self.navigator.started
 
     def _course_velocity(self, t: float, lat: float, lon: float, h: float,
@@ -307,18 +316,33 @@ class Aiding:
         return self._seen("gnss/vel", t, True)
 
     def heading(self, t: float, azimuth: float, variance: float, declination: float | None,
-                magnetic: bool) -> bool:
+                source: str = "gnss/heading") -> bool:
         """An azimuth of the body x axis (rad, clockwise from north) at t (s) with its variance
-        (rad^2). ``declination`` (rad) refers an azimuth from magnetic north to true north
-        (None: already true); ``magnetic`` marks a magnetic compass (its bias state)."""
+        (rad^2) from ``source`` (a key of :data:`HEADING_SOURCES`: which bias state it has).
+        ``declination`` (rad) refers an azimuth from magnetic north to true north (None:
+        already true)."""
+        if declination is not None and not np.isfinite(declination):
+            declination = self._declination(t)
         if declination is not None:
             azimuth = azimuth + declination
         if not (np.isfinite(azimuth) and np.isfinite(variance) and variance > 0.0):
-            self.report("heading without a finite azimuth and variance rejected")
-            return self._seen("mag/heading" if magnetic else "gnss/heading", t, False)
+            self.report(f"{source} without a finite azimuth, declination and variance rejected")
+            return self._seen(source, t, False)
         self.navigator.add_measurement(HeadingFix(t, float(azimuth), float(variance),
-                                                  magnetic=magnetic))
-        return self._seen("mag/heading" if magnetic else "gnss/heading", t, True)
+                                                  bias=HEADING_SOURCES[source]))
+        return self._seen(source, t, True)
+
+    def _declination(self, t: float) -> float:
+        """The WMM declination at the datum (the first fix) for a magnetic azimuth whose
+        publisher did not know it, rad; NaN before the first fix or outside the model."""
+        if self.datum is None:
+            return math.nan
+        if self._wmm_declination is None:
+            try:
+                self._wmm_declination = field_elements(*self.datum, decimal_year(t)).declination
+            except ValueError:  # outside the model's life span
+                self._wmm_declination = math.nan
+        return self._wmm_declination
 
     def speed_log(self, t: float, speed: float, variance: float) -> bool:
         """A water speed along body x (m/s) at t (s) with its variance (m^2/s^2)."""

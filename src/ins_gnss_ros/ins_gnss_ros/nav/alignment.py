@@ -365,10 +365,36 @@ def yaw_error_from_motion(v_gnss, v_ins, q_nb, sigma_v):
         Rotation about Up to apply, and the yaw standard deviation after it
         (:func:`yaw_from_velocity`).
     """
-    course, sigma = yaw_from_velocity(v_gnss, sigma_v)
     if np.hypot(*v_ins[:2]) > 0.3 * np.hypot(*v_gnss[:2]):
+        course, sigma = yaw_from_velocity(v_gnss, sigma_v)
         return course - np.arctan2(v_ins[1], v_ins[0]), sigma
+    return yaw_error_from_course(v_gnss, sigma_v, q_nb)
+
+
+def yaw_error_from_course(v_gnss, sigma_v, q_nb):
+    """Yaw rotation of an INS attitude q_nb that puts its body x axis on the course of the GNSS
+    velocity v_gnss (ENU, m/s; no side-slip), whose horizontal components have the 1-sigma
+    sigma_v (m/s).
+
+    Returns
+    -------
+    delta, sigma : float [rad]
+        Rotation about Up to apply, and the yaw standard deviation after it
+        (:func:`yaw_from_velocity`).
+    """
+    course, sigma = yaw_from_velocity(v_gnss, sigma_v)
     return course - _yaw_of_x(q_nb), sigma
+
+
+def restart_velocity(nav, P, space, v_enu, cov_enu):
+    """The solution's velocity replaced by a measured one (ENU, m/s) and its covariance (3, 3,
+    (m/s)^2), uncorrelated with the rest: for an INS that ran unaided too long to know it."""
+    k = space["vel"]
+    P = P.copy()
+    P[k, :] = 0.0
+    P[:, k] = 0.0
+    P[k, k] = cov_enu
+    return replace(nav, v_enu=np.asarray(v_enu, float).copy()), P
 
 
 def yaw_error_from_heading(azimuth, variance, q_nb):

@@ -56,11 +56,10 @@ class CourseFromFixes:
         return out
 
     def add(self, t: float, lat: float, lon: float, h: float, cov: np.ndarray):
-        """A fix at t (s; rad, rad, m) with its ENU covariance (m^2). Returns the velocity it
-        completes, or None."""
+        """A fix at t (s; rad, rad, m) with its ENU covariance (m^2), already observed
+        (:meth:`observe`). Returns the velocity it completes, or None."""
         r = geodetic_to_ecef(lat, lon, h)
         R = ecef_to_enu_matrix(lat, lon)
-        self._scatter(t, r, R)
         self._window = [f for f in self._window if t - f[0] <= WINDOW_S]
         self._window.append((t, r, cov))
         t0, r0, cov0 = self._window[0]
@@ -75,12 +74,14 @@ class CourseFromFixes:
         self._window = [self._window[-1]]
         return GnssVelocity(0.5 * (t0 + t), d / dt, cov_v)
 
-    def _scatter(self, t: float, r: np.ndarray, R: np.ndarray) -> None:
+    def observe(self, t: float, lat: float, lon: float, h: float) -> None:
+        """Every fix (t s; rad, rad, m), for the fix-to-fix noise of :meth:`fix_to_fix`."""
+        r = geodetic_to_ecef(lat, lon, h)
         self._last3.append((t, r))
         if len(self._last3) < 3:
             return
         (t0, r0), (t1, r1), (t2, r2) = self._last3
         if abs((t2 - t1) - (t1 - t0)) > 0.1 * (t2 - t0):
             return  # a dropped fix: not equally spaced
-        s = (R @ (r2 - 2.0 * r1 + r0))[:2]
+        s = (ecef_to_enu_matrix(lat, lon) @ (r2 - 2.0 * r1 + r0))[:2]
         self._second_differences.append(s * s)

@@ -62,7 +62,7 @@ class ExtraState:
 #: pitch and yaw of the vehicle axes relative to the IMU axes for the non-holonomic
 #: constraint (2, rad), "log" water current E, N (m/s) and speed-log scale error (3), "wheel"
 #: wheel-odometry scale error (1, -).
-KNOWN_EXTRAS = ("td", "mag", "nhc", "log", "wheel")
+KNOWN_EXTRAS = ("td", "mag", "ahrs", "nhc", "log", "wheel")
 
 
 @dataclass(frozen=True)

@@ -62,6 +62,11 @@ PARAMS = (
           0.0, 60.0),
     Param("use_heading", True, "use gnss/heading (phase-difference or receiver azimuth)"),
     Param("use_magnetic_heading", False, "use mag/heading as backup heading aiding"),
+    Param("use_imu_heading", True, "use imu/heading (the IMU's own orientation where its "
+          "covariance says the yaw is valid) as a heading source"),
+    Param("imu_heading_bias_sigma_deg", 5.0, "initial sigma of the imu/heading bias state, deg "
+          "(an AHRS's yaw error: magnetic disturbance, its own alignment; 0: no bias state)",
+          0.0, 30.0),
     Param("magnetic_bias_sigma_deg", 2.0,
           "initial sigma of the magnetic-heading bias state, deg (0: no bias state)", 0.0, 30.0),
     Param("use_speed_log", False,
@@ -129,6 +134,11 @@ PARAMS = (
     Param("datum.altitude_m", 0.0, "map-frame origin ellipsoidal height, m", -1000.0, 1e5),
 )
 
+#: Heading topics of the ekf -> the parameter that turns each on (nav/aiding.HEADING_SOURCES
+#: says which bias state each has).
+HEADING_INPUTS = {"gnss/heading": "use_heading", "mag/heading": "use_magnetic_heading",
+                  "imu/heading": "use_imu_heading"}
+
 
 def noise_model(p: dict) -> FilterNoise:
     """The grade's filter noise with the ``noise.*`` parameters that are set put in its place.
@@ -160,6 +170,8 @@ def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
         extras["td"] = ExtraState(1, p["time_offset_sigma_s"])
     if p["use_magnetic_heading"] and p["magnetic_bias_sigma_deg"] > 0.0:
         extras["mag"] = ExtraState(1, np.radians(p["magnetic_bias_sigma_deg"]))
+    if p["use_imu_heading"] and p["imu_heading_bias_sigma_deg"] > 0.0:
+        extras["ahrs"] = ExtraState(1, np.radians(p["imu_heading_bias_sigma_deg"]))
     if p["use_speed_log"]:
         # water current east, north (m/s) and log scale error (-), slowly varying
         sigma_current = p["speed_log.current_sigma_mps"]

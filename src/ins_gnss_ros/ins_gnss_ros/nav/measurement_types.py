@@ -34,13 +34,15 @@ class GnssVelocity:
 
 @dataclass(frozen=True)
 class HeadingFix:
-    """Azimuth of the body x axis (rad, clockwise from north) at time t; `magnetic` selects the
-    compass model (declination already applied) with its optional bias state."""
+    """Azimuth of the body x axis (rad, clockwise from true north) at time t, variance (rad^2).
+    `bias` names the extra block of the source's own heading bias: "mag" for a magnetic compass,
+    "ahrs" for an IMU's orientation (declination already applied); None for a true heading
+    (phase differences, a dual-antenna receiver)."""
 
     t: float
     azimuth: float
     variance: float
-    magnetic: bool = False
+    bias: str | None = None
 
 
 @dataclass(frozen=True)

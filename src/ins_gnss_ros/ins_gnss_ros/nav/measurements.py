@@ -184,12 +184,14 @@ def heading(space, state, azimuth, variance, baseline_yaw_b=0.0, name="heading")
     return Innovation(name, np.array([wrap_pi(pred - azimuth)]), H, np.array([[variance]]))
 
 
-def magnetic_heading(space, state, azimuth, variance, bias=0.0):
-    """Magnetic compass heading, already corrected for declination (seed 004 section 2.8:
-    z_MK = K_pr - K_mk = phi_h - dK_mk - noise).
+def biased_heading(space, state, azimuth, variance, bias=0.0, block="mag"):
+    """A heading with a bias of its own: a magnetic compass (seed 004 section 2.8:
+    z_MK = K_pr - K_mk = phi_h - dK_mk - noise) or an IMU's orientation, already corrected for
+    declination.
 
-    With a "mag" extra state the compass bias b (measured minus true) is estimated; `bias` is its
-    running estimate, the state is the residual b - bias, so H_mag = -1.
+    With the extra state `block` ("mag", "ahrs") the source's bias b (measured minus true) is
+    estimated; `bias` is its running estimate, the state is the residual b - bias, so
+    H_block = -1.
 
     Parameters
     ----------
@@ -203,10 +205,14 @@ def magnetic_heading(space, state, azimuth, variance, bias=0.0):
     pred, grad = azimuth_of_axis(state.q_nb)
     H = _zeros(space, 1)
     H[0, space["att"]] = grad
-    if "mag" in space:
-        H[0, space["mag"]] = -1.0
-    return Innovation("mag_heading", np.array([wrap_pi(pred + bias - azimuth)]), H,
+    if block in space:
+        H[0, space[block]] = -1.0
+    return Innovation(HEADING_NAMES[block], np.array([wrap_pi(pred + bias - azimuth)]), H,
                       np.array([[variance]]))
+
+
+#: Innovation names of the biased headings by bias block.
+HEADING_NAMES = {"mag": "mag_heading", "ahrs": "imu_heading"}
 
 
 def zero_velocity(space, state, sigma):

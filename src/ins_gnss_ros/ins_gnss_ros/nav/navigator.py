@@ -29,8 +29,9 @@ import numpy as np
 
 from . import measurements as meas
 from . import modes
-from .alignment import Levelling, initial_covariance, levelled_state, rotate_yaw, \
-    take_static_gyro_bias, yaw_error_from_heading, yaw_error_from_motion
+from .alignment import Levelling, initial_covariance, levelled_state, restart_velocity, \
+    rotate_yaw, take_static_gyro_bias, yaw_error_from_course, yaw_error_from_heading, \
+    yaw_error_from_motion
 from .earth import WGS84
 from .ekf import ErrorStateEKF, StateSpace
 from .error_model import make_layout
@@ -50,6 +51,10 @@ from .strapdown import apply_correction
 #: A zero-velocity update tells the vehicle at rest for this long after its epoch, s (the
 #: front end sends one per still IMU block, nav/rest_detector.py).
 REST_HOLD = 0.5
+#: An INS velocity sigma beyond this fraction of the GNSS speed keeps no direction to align on.
+UNINFORMED_VELOCITY = 0.3
+#: Velocity sigma of a start with neither a GNSS speed nor rest known, m/s per axis.
+UNKNOWN_SPEED_SIGMA = 30.0
 
 
 def _view(part, name, doc):
@@ -242,13 +247,17 @@ class Navigator:
                 s.t_rest = epoch
             if not isinstance(m, GnssFix) or s.levelling.time < cfg.level_time or k == buf.first:
                 continue
-            P0 = initial_covariance(self._space, cfg.noise, cfg.sigma_pos0, cfg.sigma_vel0,
-                                    cfg.sigma_tilt0)
             # At rest by the last GNSS speed, or by the velocity of the fix's own epoch.
             speed = s.gnss_speed if np.isfinite(s.gnss_speed) else next((np.hypot(*p.v_enu[:2])
                 for e, _, p in self._pending if isinstance(p, GnssVelocity) and e - epoch < 0.5),
                 np.nan)
-            if speed <= cfg.static_speed or epoch - s.t_rest <= REST_HOLD:
+            at_rest = speed <= cfg.static_speed or epoch - s.t_rest <= REST_HOLD
+            # Neither a speed nor rest known (a receiver without velocity, started on the
+            # move): the INS starts at zero velocity with the uncertainty of a moving vehicle.
+            sigma_vel = cfg.sigma_vel0 if at_rest or np.isfinite(speed) else UNKNOWN_SPEED_SIGMA
+            P0 = initial_covariance(self._space, cfg.noise, cfg.sigma_pos0, sigma_vel,
+                                    cfg.sigma_tilt0)
+            if at_rest:
                 take_static_gyro_bias(s.levelling, self._space, cfg.noise, P0, s.estimates)
             self._start(levelled_state(s.levelling, m.lat, m.lon, m.h, self._lever,
                                        s.gnss_speed, cfg.static_speed, float(buf.time(k - 1))),
@@ -357,8 +366,17 @@ class Navigator:
         s.gnss_speed = float(np.hypot(*np.asarray(m.v_enu)[:2]))
         if s.mode == ALIGNING and not s.heading_known and s.gnss_speed >= cfg.align_speed:
             vel = self._space["vel"].start
-            self._rotate_yaw(*yaw_error_from_motion(np.asarray(m.v_enu, float), s.nav.v_enu,
-                                                    s.nav.q_nb, np.sqrt(s.ekf.P[vel, vel])))
+            v, sigma_ins = np.asarray(m.v_enu, float), np.sqrt(s.ekf.P[vel, vel])
+            if sigma_ins < UNINFORMED_VELOCITY * s.gnss_speed:
+                self._rotate_yaw(*yaw_error_from_motion(v, s.nav.v_enu, s.nav.q_nb, sigma_ins))
+            else:
+                # The INS ran unaided too long (a start on the move without a receiver speed)
+                # for its velocity to keep a direction: the body x axis takes the course (no
+                # side-slip) with the measured velocity's own sigma, and the INS that velocity.
+                sigma_v = np.sqrt(max(m.cov_enu[0, 0], m.cov_enu[1, 1]))
+                self._rotate_yaw(*yaw_error_from_course(v, sigma_v, s.nav.q_nb))
+                s.nav, s.ekf.P = restart_velocity(s.nav, s.ekf.P, self._space, v, m.cov_enu)
+                return
             st = extrapolate(s.nav, st.t - s.nav.t, s.a_enu)
         if self._held_for_alignment(m, epoch):
             return
@@ -384,11 +402,14 @@ class Navigator:
     def _heading(self, m, st, epoch):
         s = self._state
         if not s.heading_known:
-            self._rotate_yaw(*yaw_error_from_heading(m.azimuth, m.variance, s.nav.q_nb))
-        elif m.magnetic:
-            bias = s.estimates["mag"][0] if "mag" in s.estimates else 0.0
-            self._update(meas.magnetic_heading(self._space, st, m.azimuth, m.variance, bias),
-                         epoch)
+            # The alignment takes the source's bias uncertainty along (its block's variance).
+            variance = m.variance + (s.ekf.P[self._space[m.bias], self._space[m.bias]][0, 0]
+                                     if m.bias in self._space else 0.0)
+            self._rotate_yaw(*yaw_error_from_heading(m.azimuth, variance, s.nav.q_nb))
+        elif m.bias is not None:
+            bias = s.estimates[m.bias][0] if m.bias in s.estimates else 0.0
+            self._update(meas.biased_heading(self._space, st, m.azimuth, m.variance, bias,
+                                             m.bias), epoch)
         else:
             self._update(meas.heading(self._space, st, m.azimuth, m.variance), epoch)
 

@@ -38,7 +38,7 @@ VIBRATION_RATE = math.radians(0.2)
 #: degrees of freedom over n samples stays below twice its mean for n >= 20 at 1e-4).
 SCATTER_MARGIN = 2.0
 #: Horizontal speed the fixes must rule out (at three sigmas) to declare rest, m/s.
-REST_SPEED = 0.3
+REST_SPEED = 0.5
 
 
 class RestDetector:
@@ -54,14 +54,16 @@ class RestDetector:
         self.accel_psd, self.gyro_psd = accel_psd, gyro_psd
         self._block = None          # [t_start, n, sum f, sum f^2, sum w, sum w^2, dt]
         self._reference = None      # block means (f, w) at the start of the still run
+        self._any_block = False     # a block has been judged
         self.still_since = math.nan  # start of the current run of still blocks, s
         self.at_rest = False         # the fixes of this run confirmed rest
         self._fixes = None           # least-squares sums of the run's fixes
 
     @property
     def undecided(self) -> bool:
-        """The IMU is still but the fixes have not yet confirmed rest."""
-        return not math.isnan(self.still_since) and not self.at_rest
+        """No IMU block seen yet (a driver or preprocessor still measuring its rate), or the
+        IMU is still but the fixes have not yet confirmed rest."""
+        return not self._any_block or (not math.isnan(self.still_since) and not self.at_rest)
 
     def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray, dt: float) -> bool:
         """Add an IMU increment over dt (s) ending at t (s). Returns True when it closed a
@@ -78,6 +80,7 @@ class RestDetector:
         if t - b[0] < BLOCK_S:
             return False
         self._block = None
+        self._any_block = True
         if self._still(b):
             if math.isnan(self.still_since):
                 self.still_since = b[0]

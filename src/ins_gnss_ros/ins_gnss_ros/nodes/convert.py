@@ -60,6 +60,17 @@ def increment_of(msg) -> tuple[str | None, np.ndarray, np.ndarray]:
     return increment_problem((a.x, a.y, a.z), (v.x, v.y, v.z), msg.dt), vec(a), vec(v)
 
 
+def heading_of(msg) -> tuple[float, float, float, float | None] | None:
+    """An ins_gnss_msgs/Heading as the aiding front end takes it: (stamp s, azimuth rad,
+    variance rad^2, declination rad or None for a true azimuth; NaN: unknown to the publisher),
+    or None for a phase-difference or receiver heading without a solution (STATUS_NONE)."""
+    if msg.status == msg.STATUS_NONE and msg.source in (msg.SOURCE_PHASE_DIFFERENCE,
+                                                        msg.SOURCE_RECEIVER):
+        return None
+    declination = msg.declination if msg.reference == msg.REFERENCE_MAGNETIC else None
+    return stamp_to_sec(msg.header.stamp), msg.azimuth, msg.azimuth_variance, declination
+
+
 def sensor_errors_of(msg) -> SensorErrors:
     """The sensor-error fields of an ins_gnss_msgs/InsState or InsCorrection (gyro_bias,
     accel_bias, gyro_scale_factor, accel_scale_factor)."""

@@ -44,6 +44,7 @@ until the filter has re-synchronised the strapdown.
 from __future__ import annotations
 
 import sys
+from functools import partial
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -62,14 +63,14 @@ from ..io import new, ns_to_stamp, stamp_to_ns, stamp_to_sec
 from ..nav import NAVIGATING, Navigator
 from ..nav.aiding import Aiding, AidingPolicy
 from ..nav.error_model import LAYOUTS
-from ..nav.filter_config import PARAMS, navigator_config
+from ..nav.filter_config import HEADING_INPUTS, PARAMS, navigator_config
 from ..nav.local_frame import datum_from_degrees, from_map, to_map
 from ..nav.set_pose import set_pose
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import StrapdownSync
 from .base import DRIVER_QOS, LATCHED_QOS, SENSOR_QOS, STATE_QOS, TF_QOS, TF_STATIC_QOS, \
     NavNode, ParameterError, run
-from .convert import increment_of, nav_state_from_msg, quat, sensor_errors_of, set_vector3, vec
+from .convert import heading_of, increment_of, nav_state_from_msg, quat, sensor_errors_of, set_vector3, vec
 from .gnss_messages import kepler_from_msg, raw_epoch_from_msg
 from .nav_messages import MODES, datum_msg, fix_msg, fix_status, imu_msg, odom_msg, status_msg
 from .tf_messages import FRAME_PARAMS, solution_tf, static_tf
@@ -133,10 +134,9 @@ class EkfNode(NavNode):
             self.subscribe(GnssObservations, "gnss/observations", self.on_observations, SENSOR_QOS)
             self.subscribe(GnssEphemeris, "gnss/ephemeris", self.on_ephemeris, STATE_QOS)
         self.subscribe(TwistWithCovarianceStamped, "gnss/vel", self.on_vel, DRIVER_QOS)
-        if p["use_heading"]:
-            self.subscribe(Heading, "gnss/heading", self.on_heading, SENSOR_QOS)
-        if p["use_magnetic_heading"]:
-            self.subscribe(Heading, "mag/heading", self.on_heading, SENSOR_QOS)
+        for topic, use in HEADING_INPUTS.items():
+            if p[use]:
+                self.subscribe(Heading, topic, partial(self.on_heading, topic), SENSOR_QOS)
         if p["use_speed_log"]:
             self.subscribe(TwistWithCovarianceStamped, "log/speed", self.on_log, DRIVER_QOS)
         if p["use_wheel_odometry"]:
@@ -195,12 +195,9 @@ class EkfNode(NavNode):
                                                self.ranges)):
             self.after_filter()
 
-    def on_heading(self, msg: Heading) -> None:
-        if msg.status == Heading.STATUS_NONE and msg.source != Heading.SOURCE_MAGNETIC:
-            return
-        if self.aiding.heading(stamp_to_sec(msg.header.stamp), msg.azimuth, msg.azimuth_variance,
-                               msg.declination if msg.reference == Heading.REFERENCE_MAGNETIC
-                               else None, magnetic=msg.source == Heading.SOURCE_MAGNETIC):
+    def on_heading(self, topic: str, msg: Heading) -> None:
+        reading = heading_of(msg)
+        if reading is not None and self.aiding.heading(*reading, source=topic):
             self.after_filter()
 
     def on_log(self, msg: TwistWithCovarianceStamped) -> None:
@@ -344,13 +341,16 @@ class EkfNode(NavNode):
         updates = nav.updates_since(self.reported_updates)
         if updates:
             self.reported_updates = nav.update_count
-            # Stamped with the filter's time: the mode is the current one, also when the last
-            # update was a measurement refused as too old (a looped or restarted source).
-            t = updates[-1].t if nav.solution is None else max(updates[-1].t, nav.solution.t)
-            self.publish_status(t, updates)
+            self.publish_status(updates[-1].t, updates)
 
     def publish_status(self, t: float, updates) -> None:
+        """nav/status at t (s), or at the filter's time where it is ahead: the mode is the
+        current one, also when the last update was a measurement refused as too old (a looped
+        or restarted source) or t is that of an ins/state the strapdown published before the
+        filter got the increments after it."""
         nav = self.navigator
+        if nav.solution is not None:
+            t = max(t, nav.solution.t)
         self.last_status_t = t
         for u in updates:
             self.accepted += u.accepted

@@ -15,11 +15,12 @@ from __future__ import annotations
 import sys
 
 import numpy as np
-from ins_gnss_msgs.msg import ImuDelta, InsCorrection
+from ins_gnss_msgs.msg import Heading, ImuDelta, InsCorrection
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 from tf2_msgs.msg import TFMessage
 
-from ..imu.preprocessor_params import PARAMS, preprocessor_from_params
+from ..imu.preprocessor_params import PARAMS, orientation_headings_from_params, \
+    preprocessor_from_params
 from ..io import NS, new, set_stamp_ns, stamp_to_ns
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, TF_STATIC_QOS, NavNode, run
 from .convert import sensor_errors_of, set_vector3, vec
@@ -47,6 +48,10 @@ class ImuPreprocessorNode(NavNode):
         self.pub_data = self.publisher(Imu, "imu/data", SENSOR_QOS)
         self.pub_delta = self.publisher(ImuDelta, "imu/delta", SENSOR_QOS)
         self.pub_mag = self.publisher(MagneticField, "imu/mag", SENSOR_QOS)
+        self.orientation, self._declination = orientation_headings_from_params(
+            p, self.preprocessor.calibration.c_bs)
+        if self.orientation is not None:
+            self.pub_heading = self.publisher(Heading, "imu/heading", SENSOR_QOS)
         self.subscribe(Imu, "imu/data_raw", self.on_imu, DRIVER_QOS)
         self.subscribe(MagneticField, "imu/mag_raw", self.on_mag, DRIVER_QOS)
         if p["use_temperature"]:
@@ -89,6 +94,28 @@ class ImuPreprocessorNode(NavNode):
                 delta.header.frame_id = self._frame_id
                 self.pub_delta.publish(delta)
             self._publish_data(out.tag, out.t_ns, *out.rates)
+            if self.orientation is not None:
+                self._publish_heading(out.tag, out.t_ns)
+
+    def _publish_heading(self, raw: Imu, t_ns: int) -> None:
+        """imu/heading from the sample's own orientation, when due and valid."""
+        o = raw.orientation
+        heading = self.orientation.add(t_ns, (o.w, o.x, o.y, o.z), raw.orientation_covariance)
+        if heading is None:
+            if self.orientation.without_yaw == 1:
+                self.diag.count("imu orientation given, but its covariance vouches for no yaw "
+                                "(REP-145): not a heading")
+            return
+        out = new(Heading)
+        set_stamp_ns(out.header.stamp, t_ns)
+        out.header.frame_id = self._frame_id
+        out.azimuth, out.azimuth_variance = heading
+        out.pitch = out.roll = out.pitch_variance = out.roll_variance = float("nan")
+        out.source = Heading.SOURCE_INERTIAL
+        magnetic = self._declination is not None
+        out.reference = Heading.REFERENCE_MAGNETIC if magnetic else Heading.REFERENCE_TRUE
+        out.declination = self._declination if magnetic else 0.0
+        self.pub_heading.publish(out)
 
     def _report(self, events: tuple) -> None:
         for event in events:

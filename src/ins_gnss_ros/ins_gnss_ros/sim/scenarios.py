@@ -113,6 +113,10 @@ def _test_area(route: Route) -> None:
     route.hold(3.0)
 
 
+#: Speed of the car scenario's rolling start, m/s.
+ROLLING_START_SPEED = 10.0
+
+
 def car(duration: float = 600.0, seed: int = 0, rate: float = 200.0, static: float = 30.0,
         start=CAR_START, oversample: int = 4) -> Scenario:
     """Seed 004 Lab 1 car trial: town driving, circles and figure-eights, stops, shading.
@@ -125,7 +129,8 @@ def car(duration: float = 600.0, seed: int = 0, rate: float = 200.0, static: flo
     rate : float
         IMU rate, Hz.
     static : float
-        Initial standstill for alignment, s.
+        Initial standstill for alignment, s; 0: a rolling start (at ROLLING_START_SPEED from the
+        first sample, as a recording begun on the move).
     start : (lat, lon, h)
         Start position (rad, rad, m).
     oversample : int
@@ -136,7 +141,7 @@ def car(duration: float = 600.0, seed: int = 0, rate: float = 200.0, static: flo
     Scenario
     """
     rng = np.random.default_rng(seed)
-    route = Route(yaw0=rng.uniform(-np.pi, np.pi))
+    route = Route(yaw0=rng.uniform(-np.pi, np.pi), speed0=0.0 if static > 0 else ROLLING_START_SPEED)
     route.hold(static)
     for _ in range(3):
         _town_block(route, rng)

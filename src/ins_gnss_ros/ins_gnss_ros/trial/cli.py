@@ -51,6 +51,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--imu-rate", type=float, default=SimOptions.imu_rate, help="Hz")
     p.add_argument("--imu-stamp-jitter", type=float, default=0.0, metavar="S",
                    help="half-width of the uniform error of the IMU stamps (driver stamping), s")
+    p.add_argument("--imu-orientation", type=float, default=0.0, metavar="DEG",
+                   help="the IMU gives its own orientation (an AHRS), yaw to magnetic north "
+                   "with this 1-sigma error (default: none)")
+    p.add_argument("--static", type=float, default=None, metavar="S",
+                   help="car: standstill before the drive, s (0: rolling start; default 30)")
     p.add_argument("--gnss-rate", type=float, default=SimOptions.gnss_rate, help="Hz")
     p.add_argument("--no-gnss-vel", action="store_true", help="fixes only, no gnss/vel")
     p.add_argument("--no-gnss-cov", action="store_true", help="fixes without covariance")
@@ -166,6 +171,8 @@ def cmd_simulate(args) -> int:
     path = simulate(args.scenario, args.duration, args.seed, args.out,
                     SimOptions(imu_grade=args.imu_grade, imu_topic=args.imu,
                                imu_rate=args.imu_rate, imu_stamp_jitter=args.imu_stamp_jitter,
+                               imu_orientation_sigma=args.imu_orientation,
+                               start_static=args.static,
                                gnss_rate=args.gnss_rate, gnss_velocity=not args.no_gnss_vel,
                                gnss_covariance=not args.no_gnss_cov,
                                gnss_sigma_h=args.gnss_sigma_h, gnss_sigma_v=args.gnss_sigma_v,

@@ -23,11 +23,18 @@ def _header(t_ns, frame_id):
     return Header(stamp=ns_to_stamp(t_ns), frame_id=frame_id)
 
 
-def imu_msg(t_ns, gyro, accel, frame_id="imu_link"):
-    """sensor_msgs/Imu of raw rates (rad/s) and specific force (m/s^2), no orientation."""
+def imu_msg(t_ns, gyro, accel, frame_id="imu_link", orientation=None, orientation_cov=None):
+    """sensor_msgs/Imu of raw rates (rad/s) and specific force (m/s^2); with an orientation
+    (w, x, y, z: ENU <- sensor, an AHRS's) and the diagonal of its covariance (rad^2), or
+    without one (REP-145: covariance -1)."""
     msg = Imu(header=_header(t_ns, frame_id), angular_velocity=_vector3(gyro),
               linear_acceleration=_vector3(accel))
-    msg.orientation_covariance[0] = -1.0  # REP-145: orientation not provided
+    if orientation is None:
+        msg.orientation_covariance[0] = -1.0
+    else:
+        o = msg.orientation
+        o.w, o.x, o.y, o.z = (float(c) for c in orientation)
+        msg.orientation_covariance[0::4] = [float(v) for v in orientation_cov]
     return msg
 
 

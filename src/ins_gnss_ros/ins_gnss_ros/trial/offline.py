@@ -16,6 +16,7 @@ the nodes build them) and ``nav/status`` once a second with the updates since th
 from __future__ import annotations
 
 from collections import Counter
+from functools import partial
 
 import numpy as np
 
@@ -84,7 +85,7 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
         preprocessor = preprocessor_from_params(pre_p)
     except ParameterError as err:
         raise ProfileError(f"{profile.path}: imu_preprocessor: {err}") from None
-    feed = _Feeder(aiding, preprocessor, ekf_p, events)
+    feed = _Feeder(aiding, preprocessor, pre_p, ekf_p, events)
     counts = MessageCounts()
     for row in tqdm(rows, disable=not progress, unit="msg", desc="offline"):
         if row.topic.startswith(GNSS_PREFIX) and in_outage(row.t_ns, windows):
@@ -107,22 +108,25 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
 class _Feeder:
     """Bag messages -> the front end, as the nodes translate them."""
 
-    def __init__(self, aiding, preprocessor, ekf_p, events):
+    def __init__(self, aiding, preprocessor, pre_p, ekf_p, events):
         # Message modules load with the first offline run, not with the trial package.
-        from ins_gnss_msgs.msg import Heading
         from sensor_msgs.msg import NavSatFix
 
-        from ins_gnss_ros.nodes.convert import increment_of
+        from ins_gnss_ros.imu.preprocessor_params import orientation_headings_from_params
+        from ins_gnss_ros.nav.filter_config import HEADING_INPUTS
+        from ins_gnss_ros.nodes.convert import heading_of, increment_of
 
-        self.Heading, self.unknown_covariance = Heading, NavSatFix.COVARIANCE_TYPE_UNKNOWN
-        self.increment_of = increment_of
+        self.unknown_covariance = NavSatFix.COVARIANCE_TYPE_UNKNOWN
+        self.increment_of, self.heading_of = increment_of, heading_of
+        # imu/heading: the imu_preprocessor node's, from the raw samples' own orientation
+        self.orientation, self.declination = orientation_headings_from_params(
+            pre_p, preprocessor.calibration.c_bs) if ekf_p["use_imu_heading"] else (None, None)
         self.aiding, self.preprocessor, self.p, self.events = aiding, preprocessor, ekf_p, events
         self.handlers = {"/imu/delta": self.delta, "/imu/data_raw": self.raw,
                          "/gnss/fix": self.fix, "/gnss/vel": self.vel}
-        if ekf_p["use_heading"]:
-            self.handlers["/gnss/heading"] = self.heading
-        if ekf_p["use_magnetic_heading"]:
-            self.handlers["/mag/heading"] = self.heading
+        for topic, use in HEADING_INPUTS.items():
+            if ekf_p[use]:
+                self.handlers["/" + topic] = partial(self.heading, topic)
         if ekf_p["use_speed_log"]:
             self.handlers["/log/speed"] = self.log
         if ekf_p["use_wheel_odometry"]:
@@ -146,6 +150,13 @@ class _Feeder:
         for out in self.preprocessor.add(stamp, stamp, (w.x, w.y, w.z), (f.x, f.y, f.z)):
             if out.rates is None:
                 self.events[f"imu sample rejected: {out.reason}"] += 1
+            elif self.orientation is not None:
+                o = msg.orientation
+                heading = self.orientation.add(out.t_ns, (o.w, o.x, o.y, o.z),
+                                               msg.orientation_covariance)
+                if heading is not None:
+                    self.aiding.heading(out.t_ns * 1e-9, *heading, self.declination,
+                                        source="imu/heading")
             for inc in out.increments:
                 problem = increment_problem(tuple(inc.dtheta), tuple(inc.dv), inc.dt)
                 self.increment(problem, inc.t_ns * 1e-9, inc.dtheta, inc.dv, inc.dt)
@@ -160,15 +171,10 @@ class _Feeder:
         self.aiding.velocity(bagio.stamp_to_sec(msg.header.stamp), np.array([l.x, l.y, l.z]),
                              np.reshape(msg.twist.covariance, (6, 6))[:3, :3])
 
-    def heading(self, msg):
-        Heading = self.Heading
-        magnetic = msg.source == Heading.SOURCE_MAGNETIC
-        if msg.status == Heading.STATUS_NONE and not magnetic:
-            return
-        self.aiding.heading(bagio.stamp_to_sec(msg.header.stamp), msg.azimuth,
-                            msg.azimuth_variance,
-                            msg.declination if msg.reference == Heading.REFERENCE_MAGNETIC
-                            else None, magnetic=magnetic)
+    def heading(self, topic, msg):
+        reading = self.heading_of(msg)
+        if reading is not None:
+            self.aiding.heading(*reading, source=topic)
 
     def log(self, msg):
         self.aiding.speed_log(bagio.stamp_to_sec(msg.header.stamp), msg.twist.twist.linear.x,

@@ -32,6 +32,7 @@ from ins_gnss_ros import io as bag
 from ins_gnss_ros.magnetic.wmm import decimal_year, field_elements
 from ins_gnss_ros.nav.earth import radii
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
+from ins_gnss_ros.nav.rotations import quat_from_rotvec, quat_mul
 from ins_gnss_ros.nav.sensor_errors import GRADES
 from ins_gnss_ros.sim import scenarios
 from ins_gnss_ros.sim.imu_sim import ImuSpec, simulate_imu
@@ -62,6 +63,14 @@ class SimOptions:
     imu_stamp_jitter : float
         Half-width of the uniform error of the IMU message stamps, s: a USB/driver stamping the
         samples on arrival while the sensor samples on its own clock (the data stay uniform).
+    start_static : float or None
+        Car scenario: the standstill before the drive, s (0: a rolling start; None: the
+        scenario's 30 s).
+    imu_orientation_sigma : float
+        Write the IMU's own orientation into ``imu/data_raw`` (an AHRS), its yaw referred to
+        magnetic north (the WMM declination) and off by a constant error of this 1-sigma plus
+        white noise of a fifth of it, its roll and pitch by white noise of 0.5 deg; the
+        covariance says the yaw sigma, deg (0: no orientation).
     imu_topic : {"data_raw", "delta"}
         Write raw rates on ``imu/data_raw`` or increments on ``imu/delta``.
     gnss_rate : float
@@ -103,6 +112,8 @@ class SimOptions:
     imu_grade: str | None = None
     imu_rate: float = 200.0
     imu_stamp_jitter: float = 0.0
+    imu_orientation_sigma: float = 0.0
+    start_static: float | None = None
     imu_topic: str = "data_raw"
     gnss_rate: float = 5.0
     gnss_velocity: bool = True
@@ -158,8 +169,11 @@ def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions
     writer = bag.BagWriter(out)  # an existing output is refused before the work
     # Words of one SeedSequence: a fifth (the wheels) leaves the first four as they were.
     seeds = np.random.SeedSequence(seed).generate_state(5)
+    start = {} if options.start_static is None else {"static": options.start_static}
+    if start and scenario != "car":
+        raise ValueError("start_static is an option of the car scenario")
     sc = scenarios.SCENARIOS[scenario](duration=duration, seed=seed,
-                                       rate=trajectory_rate(options, scenario))
+                                       rate=trajectory_rate(options, scenario), **start)
     traj = sc.trajectory
     imu = _write_imu(writer, traj, ImuSpec(grade, rate=options.imu_rate), int(seeds[0]), options)
     _write_gnss(writer, traj, options, np.random.default_rng(seeds[1]))
@@ -204,10 +218,31 @@ def _write_imu(writer, traj, spec, seed, options):
     if options.imu_topic == "delta":
         writer.write_all("imu/delta", (msgs.delta_msg(t, a, v, imu.dt)
                                        for t, a, v in zip(t_ns, imu.dtheta, imu.dv)))
+    elif options.imu_orientation_sigma > 0.0:
+        q, cov = _ahrs_orientation(traj, imu, options.imu_orientation_sigma,
+                                   np.random.default_rng(seed + 2))
+        writer.write_all("imu/data_raw", (msgs.imu_msg(t, w, f, orientation=o,
+                                                       orientation_cov=cov)
+                                          for t, w, f, o in zip(t_ns, imu.gyro, imu.accel, q)))
     else:
         writer.write_all("imu/data_raw", (msgs.imu_msg(t, w, f)
                                           for t, w, f in zip(t_ns, imu.gyro, imu.accel)))
     return imu
+
+
+def _ahrs_orientation(traj, imu, sigma_deg, rng):
+    """An AHRS's orientation at the IMU samples (SimOptions.imu_orientation_sigma) and the
+    diagonal of its covariance, rad^2."""
+    k = np.minimum(np.arange(1, len(imu.t) + 1) * traj.decimation(1.0 / imu.dt), len(traj) - 1)
+    year = decimal_year(SIM_EPOCH_NS * 1e-9 + traj.t[0])
+    declination = field_elements(traj.lat[0], traj.lon[0], traj.h[0], year).declination
+    sigma = np.radians(sigma_deg)
+    # magnetic yaw = true yaw + declination (the azimuth is the yaw's complement)
+    yaw_error = declination + sigma * rng.standard_normal() + 0.2 * sigma * rng.standard_normal(len(k))
+    tilt = np.radians(0.5) * rng.standard_normal((len(k), 2))
+    errors = np.column_stack([tilt, yaw_error])
+    q = np.array([quat_mul(quat_from_rotvec(e), q) for e, q in zip(errors, traj.q_nb[k])])
+    return q, (np.radians(0.5) ** 2, np.radians(0.5) ** 2, sigma ** 2)
 
 
 def _write_gnss(writer, traj, options, rng):
