@@ -241,7 +241,12 @@ class Aiding:
             self.navigator.add_imu(*held_increments(t, dtheta, dv, dt, interval))
             return gap
         self.navigator.add_imu(t, dtheta, dv)
-        if self._rest.increment(t, dtheta, dv, dt) and "gnss/vel" not in self.inputs:
+        # Zero-velocity updates stand in for the receiver's speed while the filter aligns; once
+        # it navigates they would be a risk, not an aid: a moored vessel heaving slowly in
+        # waves passes the IMU's stillness test and its fixes do not move (the bundled vessel
+        # trial).
+        if self._rest.increment(t, dtheta, dv, dt) and "gnss/vel" not in self.inputs and \
+                not self.navigator.heading_known:
             self.navigator.add_measurement(ZeroVelocity(t))
         return None if gap == CONTIGUOUS else gap
 
