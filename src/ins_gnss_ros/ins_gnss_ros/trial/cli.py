@@ -75,6 +75,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pos-geoid-separation", type=float, default=0.0,
                    help="ubx: geoid height N (m) added to the .pos heights when they are above "
                         "the geoid (hMSL), making them ellipsoidal")
+    p.add_argument("--imu-csv", default=None,
+                   help="ubx: the IMU log recorded with the stream (.csv beside its .csv.tag), "
+                        "as imu/data_raw")
     p.add_argument("--out", required=True, help="new bag folder")
 
     p = sub.add_parser("replay", help="run the node graph of a profile over a bag")
@@ -180,8 +183,8 @@ def cmd_import(args) -> int:
     from ins_gnss_ros.trial.importers import IMPORTERS
 
     function = IMPORTERS[args.kind][0]
-    kwargs = ({"truth_pos": args.truth_pos, "geoid_separation": args.pos_geoid_separation}
-              if args.kind == "ubx" else {})
+    kwargs = ({"truth_pos": args.truth_pos, "geoid_separation": args.pos_geoid_separation,
+               "imu_csv": args.imu_csv} if args.kind == "ubx" else {})
     print(function(args.src, args.out, **kwargs))
     return 0
 
