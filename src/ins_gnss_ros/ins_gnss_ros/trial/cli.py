@@ -107,6 +107,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "the GNSS antenna of an RTK truth")
     p.add_argument("--truth-velocity-delay", type=float, default=0.0, metavar="S",
                    help="latency of the truth velocities, s")
+    p.add_argument("--remove-offset", action="store_true",
+                   help="take the mean position error out (a truth with a constant offset of "
+                        "its own, e.g. RTK against a base of unknown coordinates)")
 
     p = sub.add_parser("compare", help="are two replays' outputs identical, message by message")
     p.add_argument("a", help="replay output folder (or bag folder)")
@@ -226,7 +229,8 @@ def cmd_evaluate(args) -> int:
 
     evaluation, metrics = evaluate_run(args.out, args.truth, plots=not args.no_plots,
                                        skip_s=args.skip, truth_point=args.truth_point,
-                                       truth_velocity_delay=args.truth_velocity_delay)
+                                       truth_velocity_delay=args.truth_velocity_delay,
+                                       remove_offset=args.remove_offset)
     if args.json:
         print(json.dumps(metrics, sort_keys=True))
     else:
