@@ -4,8 +4,9 @@
     trial import {rtklib-drive,ubx,vessel-parquet} SRC --out bags/NAME
     trial replay bags/NAME --config config/PROFILE.yaml --out OUT [--outages LEN:PERIOD[:FIRST]]
                  [--init-from-truth] [--rate R --processes | --offline] [--faults FILE]
+                 [--satellites N:LEN:PERIOD[:FIRST]]
     trial evaluate OUT [--truth bags/NAME] [--json] [--skip S] [--truth-point X Y Z]
-                   [--truth-velocity-delay S]
+                   [--truth-velocity-delay S] [--remove-offset]
     trial compare OUT_A OUT_B [--with-diagnostics]
     trial batch --config PROFILE --out DIR (--scenario S --seeds N | --bags B ...) [--scheduler A]
     trial run --config config/PROFILE.yaml
@@ -94,6 +95,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--faults", default=None, metavar="FILE",
                    help="fault specification (YAML) applied to the bag's messages on their way "
                         "to the nodes (in-process replay only)")
+    p.add_argument("--satellites", default=None, metavar="N:LEN:PERIOD[:FIRST]",
+                   help="in these windows only the N highest satellites stay in "
+                        "gnss/observations, gnss/fix and gnss/vel are withheld (in-process "
+                        "replay only)")
 
     p = sub.add_parser("evaluate", help="error statistics, plots and report of a replay")
     p.add_argument("out", help="replay output folder")
@@ -203,9 +208,10 @@ def cmd_replay(args) -> int:
     if args.rate is not None and not args.processes:
         raise ValueError("--rate needs --processes (the in-process replay runs as fast as "
                          "possible)")
-    if args.faults is not None and (args.processes or args.offline):
-        raise ValueError("--faults works with the in-process replay only (not with "
-                         "--processes or --offline)")
+    for option, value in (("--faults", args.faults), ("--satellites", args.satellites)):
+        if value is not None and (args.processes or args.offline):
+            raise ValueError(f"{option} works with the in-process replay only (not with "
+                             "--processes or --offline)")
     if args.offline:
         if args.processes or args.init_from_truth:
             raise ValueError("--offline runs no nodes: it takes neither --processes nor "
@@ -214,7 +220,8 @@ def cmd_replay(args) -> int:
                                 progress=_progress(args))
     else:
         run = replay_processes if args.processes else replay
-        kwargs = {"rate": args.rate} if args.processes else {"faults": args.faults}
+        kwargs = {"rate": args.rate} if args.processes else {"faults": args.faults,
+                                                             "satellites": args.satellites}
         summary = run(args.bag, args.config, args.out, outages=args.outages,
                       progress=_progress(args), init_from_truth=args.init_from_truth, **kwargs)
     print(f"replayed {args.bag} ({summary['mode']}, {', '.join(summary['graph'])}):")

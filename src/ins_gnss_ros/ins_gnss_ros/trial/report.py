@@ -129,7 +129,11 @@ def load_run(out, truth_bag=None):
         raise ValueError(f"{output_bag}: no {STATE_TOPIC} with finite positions to evaluate")
     estimate = attach_odometry_covariance(
         estimate, [m for m in outputs if m.topic == ODOM_TOPIC], t0_ns)
-    windows_ns = np.asarray(summary.get("outage_windows_ns", []), dtype=np.int64).reshape(-1, 2)
+    # A satellite window (trial replay --satellites) is evaluated like an outage: the drift
+    # within it is what the reduced constellation lets through.
+    windows_ns = np.concatenate([np.asarray(summary.get(key, []), dtype=np.int64).reshape(-1, 2)
+                                 for key in ("outage_windows_ns", "satellite_windows_ns")])
+    windows_ns = windows_ns[np.argsort(windows_ns[:, 0])]
     return estimate, truth, (windows_ns - t0_ns) * 1e-9, summary
 
 
