@@ -195,7 +195,8 @@ def highest_satellites(messages, windows_ns, count):
     Returns
     -------
     list of list of (system, prn)
-        u-blox gnssId numbering, highest first, one list per window.
+        u-blox gnssId numbering, highest first, one list per window; empty (the window keeps
+        no satellite) when the messages have no observation epoch after its start or no fix.
     """
     from ins_gnss_ros.gnss.constants import UBX_GNSS_ID
     from ins_gnss_ros.gnss.ephemeris import elevation_azimuth, sat_position
