@@ -145,6 +145,21 @@ def test_ubx_observations_ephemeris_and_fix(tmp_path):
     assert len(_topic(messages, "/truth/state")) > 0
 
 
+def test_ubx_truth_with_the_rtk_float_epochs(tmp_path):
+    folder = shared_path("data", "walk_0827")
+    src = tmp_path / "walk.ubx"
+    src.write_bytes((folder / "gnss_1730.ubx").read_bytes()[:20_000])
+    pos = folder / "gnss_1730_sf.pos"
+    lines = [ln for ln in pos.read_text().splitlines() if ln and not ln.startswith("%")]
+    rtk = [ln for ln in lines if float(ln.split()[5]) in (1.0, 2.0)]
+    messages = bagio.read_bag(import_ubx(src, tmp_path / "walk", truth_pos=pos,
+                                         truth_float=True))
+    truth = _topic(messages, "/truth/state")
+    assert len(rtk) > sum(float(ln.split()[5]) == 1.0 for ln in lines) and len(truth) == len(rtk)
+    last = rtk[-1].split()
+    assert math.degrees(truth[-1].latitude) == pytest.approx(float(last[2]), abs=1e-9)
+
+
 def test_walk_imu_beside_the_ubx_stream(tmp_path):
     """The walk's IMU log (cut first line) goes into the u-blox bag in its own axes, stamped by
     its tag file; config/walk.yaml's mounting puts the still start's gravity on base_link z."""

@@ -76,6 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pos-geoid-separation", type=float, default=0.0,
                    help="ubx: geoid height N (m) added to the .pos heights when they are above "
                         "the geoid (hMSL), making them ellipsoidal")
+    p.add_argument("--truth-float", action="store_true",
+                   help="ubx: the .pos's RTK-float epochs are truth too (less accurate than "
+                        "the fixed ones)")
     p.add_argument("--imu-csv", default=None,
                    help="ubx: the IMU log recorded with the stream (.csv beside its .csv.tag), "
                         "as imu/data_raw")
@@ -192,7 +195,8 @@ def cmd_import(args) -> int:
 
     function = IMPORTERS[args.kind][0]
     kwargs = ({"truth_pos": args.truth_pos, "geoid_separation": args.pos_geoid_separation,
-               "imu_csv": args.imu_csv} if args.kind == "ubx" else {})
+               "imu_csv": args.imu_csv, "truth_float": args.truth_float}
+              if args.kind == "ubx" else {})
     print(function(args.src, args.out, **kwargs))
     return 0
 

@@ -112,10 +112,11 @@ def _write_imu_log(writer, csv_path):
 # ---------------------------------------------------------------------------------------------
 # u-blox stream (rtklibexplorer GNSS_IMU walk_0827)
 # ---------------------------------------------------------------------------------------------
-def import_ubx(path, out, truth_pos=None, geoid_separation=0.0, imu_csv=None):
+def import_ubx(path, out, truth_pos=None, geoid_separation=0.0, imu_csv=None, truth_float=False):
     """Convert a recorded u-blox byte stream (and optionally an RTKLIB .pos as truth, its heights
-    made ellipsoidal with ``geoid_separation``, see :func:`~ins_gnss_ros.trial.rtklib.read_pos`,
-    and the IMU log ``imu_csv`` recorded with it, see :func:`_write_imu_log`).
+    made ellipsoidal with ``geoid_separation``, see :func:`~ins_gnss_ros.trial.rtklib.read_pos`:
+    its RTK-fixed epochs, with ``truth_float`` its RTK-float ones too; and the IMU log
+    ``imu_csv`` recorded with it, see :func:`_write_imu_log`).
 
     The stream goes through the ``gnss_driver`` node itself (file source as fast as possible,
     on an in-process bus): the bag holds exactly what the driver publishes live.
@@ -142,17 +143,17 @@ def import_ubx(path, out, truth_pos=None, geoid_separation=0.0, imu_csv=None):
     finally:
         rclpy.shutdown(context=context)
     if truth_pos is not None:
-        _write_pos_truth(writer, truth_pos, geoid_separation)
+        _write_pos_truth(writer, truth_pos, geoid_separation, truth_float)
     if imu_csv is not None:
         _write_imu_log(writer, imu_csv)
     return writer.close()
 
 
-def _write_pos_truth(writer, pos_path, geoid_separation):
-    from ins_gnss_ros.trial.rtklib import Q_FIX, read_pos
+def _write_pos_truth(writer, pos_path, geoid_separation, with_float=False):
+    from ins_gnss_ros.trial.rtklib import Q_FIX, Q_FLOAT, read_pos
 
     pos = read_pos(pos_path, geoid_separation)
-    fixed = pos.select(pos.quality == Q_FIX)
+    fixed = pos.select(np.isin(pos.quality, (Q_FIX, Q_FLOAT) if with_float else (Q_FIX,)))
     for i, t in enumerate(gps_to_ns(fixed.time)):
         writer.write("truth/state", msgs.ins_state_msg(
             t, fixed.lat[i], fixed.lon[i], fixed.height[i],
