@@ -29,6 +29,7 @@ RUNS = {
     "vessel": ("bags/vessel_waves", "config/sea_demo.yaml", ["--outages", "10:60:60"]),
     "vessel_offline": ("bags/vessel_waves", "config/sea_demo.yaml", ["--offline"]),
     "walk": ("bags/walk_0827", "config/default.yaml", []),
+    "walk_tight": ("bags/walk_0827", "config/walk.yaml", ["--satellites", "3:20:40:30"]),
     "sim_car": ("SIM", "config/default.yaml", ["--outages", "10:30:20"]),
 }
 

@@ -19,8 +19,14 @@ equals the simulator's integer (DD of the true N of both antennas and both satel
 otherwise. Time to first fix counts from the first epoch (the receiver's half-cycle resolution
 included) and, separately, from the first epoch with valid carrier phases.
 
+With ``--independent`` the simulator is the independent one: its ionosphere, troposphere,
+orbits and clocks differ from the broadcast models (:mod:`ins_gnss_ros.gnss.broadcast_residuals`)
+and every run draws its multipath parameters (:func:`held_out_multipath`: σ0 of code and phase
+x 0.5-2, elevation scale 10-30 deg, correlation times 10-120 s) that the node's ``multipath.*``
+defaults (0.01 m, 20 deg, 30 s) do not know, on held-out seeds (1000 + the usual ones).
+
 Usage: ``.venv/bin/python bench/bench_phase_heading.py [--quick] [--ratio R]
-[--param NAME=VALUE ...] [--first-fix START:STOP] [--tilt-prior SIGMA_DEG]``
+[--param NAME=VALUE ...] [--first-fix START:STOP] [--tilt-prior SIGMA_DEG] [--independent]``
 """
 from __future__ import annotations
 
@@ -37,6 +43,8 @@ from ins_gnss_msgs.msg import InsState
 from rclpy.parameter import Parameter
 
 from ins_gnss_ros.gnss import ephemeris_data
+from ins_gnss_ros.gnss.broadcast_residuals import BroadcastResiduals
+from ins_gnss_ros.gnss.multipath import MultipathModel
 from ins_gnss_ros.gnss.simulator import GnssSimulator, SimulatorConfig, SlipEvent
 from ins_gnss_ros.io import sec_to_stamp
 from ins_gnss_ros.nav.conventions import seed_angles_from_quat, wrap_pi
@@ -72,17 +80,41 @@ class Trial:
     tilt_rejections: int = 0                         # fixes the node's max_tilt_deg check refused
 
 
+#: Seeds of the independent simulator's runs are these plus the usual ones (held out).
+HELD_OUT_SEEDS = 1000
+
+
+def held_out_multipath(seed):
+    """Multipath parameters of one independent run, drawn from its seed: σ0 of code and phase
+    scaled by 0.5-2 (log-uniform), elevation scale 10-30 deg, correlation times 10-120 s."""
+    rng = np.random.default_rng(20_000 + seed)
+    code_f, phase_f = np.exp(rng.uniform(math.log(0.5), math.log(2.0), 2))
+    code_tau, phase_tau = rng.uniform(10.0, 120.0, 2)
+    default = MultipathModel()
+    return MultipathModel(code_sigma0=float(default.code_sigma0 * code_f),
+                          phase_sigma0=float(default.phase_sigma0 * phase_f),
+                          elevation_scale=math.radians(rng.uniform(10.0, 30.0)),
+                          code_tau=float(code_tau), phase_tau=float(phase_tau))
+
+
 def run_trial(seed, duration, antennas, rate=5.0, slip_every=0.0, ratio=3.0, overrides=(),
-              until=math.inf, context=None, tilt_sigma=0.0):
+              until=math.inf, context=None, tilt_sigma=0.0, independent=False):
     """One simulated sea trial through the node (``overrides``: more node Parameters; ``context``:
     its rclpy context, the default one if None), fed up to trajectory time ``until`` (the
     scenario, its slips and satellites are still those of ``duration``: the start of a long run,
     reproduced quickly); with ``tilt_sigma`` > 0 (rad) an aligning ins/state with that tilt
-    error is published with every epoch (:class:`AligningIns`); returns a :class:`Trial`."""
+    error is published with every epoch (:class:`AligningIns`); ``independent``: the
+    independent simulator on held-out seed ``HELD_OUT_SEEDS + seed``; returns a
+    :class:`Trial`."""
+    if independent:
+        seed += HELD_OUT_SEEDS
     sc = scenarios.sea(duration=duration, seed=seed, rate=2 * rate, oversample=2)
     tr = sc.trajectory
     broadcast = ephemeris_data.load(tr.lon[0])
     config = SimulatorConfig(lever_arms=antennas, seed=seed)
+    if independent:
+        config = replace(config, residuals=BroadcastResiduals(),
+                         multipath=held_out_multipath(seed))
     sim = GnssSimulator(broadcast, config)
     if slip_every > 0:
         # Slips on antenna 1 every slip_every s, each on the satellite highest at the start (the
@@ -302,6 +334,9 @@ def main(argv=None) -> int:
     ap.add_argument("--tilt-prior", type=float, default=0.0, metavar="SIGMA_DEG",
                     help="publish an aligning ins/state (true tilt with this 1-sigma error, "
                          "heading wrong) with every epoch: the node's tilt prior")
+    ap.add_argument("--independent", action="store_true",
+                    help="independent simulator: broadcast-model residuals and multipath "
+                         "parameters drawn per run, on held-out seeds")
     args = ap.parse_args(argv)
     tilt = math.radians(args.tilt_prior)
     extra = [Parameter(name, value=float(value) if "." in value else int(value))
@@ -322,20 +357,21 @@ def main(argv=None) -> int:
         print(f"ratio_threshold {args.ratio}; sea scenario; GPS L1 + Galileo E1; 10 deg mask; "
               "2 mm + 2 mm/sin(E) phase noise + multipath; 5 Hz"
               + (f"; aligning ins/state, tilt error {args.tilt_prior} deg" if tilt > 0 else "")
+              + ("; independent simulator, held-out seeds" if args.independent else "")
               + "".join(f"; {item}" for item in args.param))
         summarise([run_trial(100 + i, ttff_s, TWO_ANTENNAS, ratio=args.ratio, overrides=extra,
-                             tilt_sigma=tilt)
+                             tilt_sigma=tilt, independent=args.independent)
                    for i in range(ttff_runs)],
                   f"time to first fix: {ttff_runs} runs x {ttff_s:.0f} s, 2 antennas, 1.5 m")
         runs = [run_trial(seed, long_s, TWO_ANTENNAS, slip_every=30.0, ratio=args.ratio,
-                          overrides=extra, tilt_sigma=tilt)
+                          overrides=extra, tilt_sigma=tilt, independent=args.independent)
                 for seed in (1, 2, 3, 4)]
         summarise(runs, f"2 antennas 1.5 m, 4 x {long_s:.0f} s, slips on antenna 1 every 30 s")
         print_slips(runs)
         n_ep = sum(len(r.t) for r in runs)
         print(f"node time per epoch: {1e3 * sum(r.seconds_node for r in runs) / n_ep:.2f} ms")
         runs4 = [run_trial(seed, long_s, FOUR_ANTENNAS, slip_every=30.0, ratio=args.ratio,
-                           overrides=extra, tilt_sigma=tilt)
+                           overrides=extra, tilt_sigma=tilt, independent=args.independent)
                  for seed in (5, 6)]
         summarise(runs4, f"4 antennas (1.5 m x 1.0 m), 2 x {long_s:.0f} s, slips every 30 s")
         print_slips(runs4)

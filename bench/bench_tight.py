@@ -21,11 +21,17 @@ and the navigator's own state at that epoch (:func:`ins_gnss_ros.gnss.ranges.sat
 With --nhc every case also gets the non-holonomic constraint of a wheeled vehicle (lateral
 0.2 m/s, vertical 0.5 m/s, every 0.1 s): "pure INS" then means INS + NHC.
 
+With --independent the simulator's ionosphere, troposphere, orbits and clocks differ from the
+broadcast models the receiver side corrects with (gnss/broadcast_residuals.py: Klobuchar
+removes half the ionosphere, 5 cm zenith troposphere, 1 m SISRE per satellite); the filter's
+ranges are configured as without (it does not know them).
+
 Horizontal error of the IMU position against the truth, over the window: RMS, max, at the end.
 
 Usage::
 
     .venv/bin/python bench/bench_tight.py [--seeds 3] [--sats 0 6 4 3 2] [--window 300] [--nhc]
+        [--independent]
 """
 from __future__ import annotations
 
@@ -36,6 +42,7 @@ import time
 import numpy as np
 
 from ins_gnss_ros.gnss import ephemeris_data
+from ins_gnss_ros.gnss.broadcast_residuals import BroadcastResiduals
 from ins_gnss_ros.gnss.ranges import RangeConfig, satellite_ranges
 from ins_gnss_ros.gnss.simulator import GnssSimulator, SimulatorConfig, solve_fix
 from ins_gnss_ros.nav.error_model import nav_error
@@ -59,13 +66,15 @@ def navigator_config(nhc):
                            nhc_sigma=(0.2, 0.5) if nhc else None)
 
 
-def simulate(seed, n_sats, t_open, window, gnss_rate):
-    """Truth, IMU, simulator and its epochs; n_sats 0 = open sky throughout."""
+def simulate(seed, n_sats, t_open, window, gnss_rate, residuals=None):
+    """Truth, IMU, simulator and its epochs; n_sats 0 = open sky throughout; ``residuals``
+    (BroadcastResiduals) set the simulator's truth apart from the broadcast models."""
     traj = car(duration=t_open + window, seed=seed, rate=IMU_RATE, static=30.0).trajectory
     imu = simulate_imu(traj, ImuSpec(MEMS_ADIS16405, rate=IMU_RATE), seed=seed)
     shading = (ShadingWindow(t_open, t_open + window, n_sats),) if n_sats else ()
     sim = GnssSimulator(ephemeris_data.load(traj.lon[0]),
-                        SimulatorConfig(lever_arms=(LEVER,), shading=shading, seed=seed))
+                        SimulatorConfig(lever_arms=(LEVER,), shading=shading, seed=seed,
+                                        residuals=residuals))
     epochs = [e[0] for e in sim.run(traj, gnss_rate)]
     return traj, imu, sim, epochs
 
@@ -138,16 +147,19 @@ def main():
     parser.add_argument("--rate", type=float, default=1.0, help="GNSS rate, Hz")
     parser.add_argument("--nhc", action="store_true",
                         help="non-holonomic constraint (0.2, 0.5) m/s in every case")
+    parser.add_argument("--independent", action="store_true",
+                        help="simulated truth apart from the broadcast models by real residuals")
     args = parser.parse_args()
+    residuals = BroadcastResiduals() if args.independent else None
     t0, t1 = args.open, args.open + args.window
     print(f"window {t0:g}-{t1:g} s, GNSS {args.rate:g} Hz, NHC {'on' if args.nhc else 'off'}, "
-          "horizontal error RMS / max / end (m)")
+          f"broadcast residuals {residuals}, horizontal error RMS / max / end (m)")
     rows = {}
     for seed in range(1, args.seeds + 1):
         ins_err = None
         for n in args.sats:
             wall = time.perf_counter()
-            traj, imu, sim, epochs = simulate(seed, n, t0, args.window, args.rate)
+            traj, imu, sim, epochs = simulate(seed, n, t0, args.window, args.rate, residuals)
             res = {}
             for mode in ("loose", "tight") + (("ins",) if ins_err is None else ()):
                 out, used = run(mode, imu, sim, epochs, args.switch, t0, args.nhc)

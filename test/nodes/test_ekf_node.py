@@ -164,10 +164,13 @@ def test_bad_measurements_are_counted_not_used(ros_context):
     node.destroy_node()
 
 
-def test_tight_coupling_with_three_satellites_through_the_nodes(ros_context):
+@pytest.mark.parametrize("own_fix", [False, True], ids=["receiver_fix", "align_on_observations"])
+def test_tight_coupling_with_three_satellites_through_the_nodes(ros_context, own_fix):
     """Raw GNSS from real orbits (the GNSS simulator): the ekf aligns on SPP fix + velocity, then
     with 3 satellites uses their pseudoranges and Dopplers. The strapdown's error stays at the
-    metre level where free inertial navigation drifts away."""
+    metre level where free inertial navigation drifts away. With tight.align_on_observations
+    the ekf forms that fix and velocity itself: the receiver's (here 50 m off, a reference in
+    another datum) is no input."""
     from ins_gnss_ros.gnss import ephemeris_data
     from ins_gnss_ros.gnss.simulator import GnssSimulator, SimulatorConfig, solve_fix
     from ins_gnss_ros.nodes.ekf_node import EkfNode
@@ -189,7 +192,9 @@ def test_tight_coupling_with_three_satellites_through_the_nodes(ros_context):
     strapdown = StrapdownNode(context=ros_context, bus=bus)
     ekf = EkfNode(context=ros_context, bus=bus, parameter_overrides=[
         Parameter("lever_arm", value=LEVER.tolist()), Parameter("layout", value="24"),
-        Parameter("bias_model", value="rw"), Parameter("coupling", value="auto"),
+        Parameter("bias_model", value="rw"),
+        Parameter("coupling", value="tight" if own_fix else "auto"),
+        Parameter("tight.align_on_observations", value=own_fix),
         Parameter("auto.min_satellites", value=5),
         Parameter("tight.code_sigma_m", value=[0.3, 0.32]),
         Parameter("tight.doppler_sigma_hz", value=[0.02, 0.02]),
@@ -207,7 +212,7 @@ def test_tight_coupling_with_three_satellites_through_the_nodes(ros_context):
     stamp = sec_to_stamp(t0 + epochs[0].t)
     for eph in sim.ephemerides.values():
         send("gnss/ephemeris", ephemeris_msg(eph, stamp, 18))
-    x0, i = None, 0
+    x0, i, sent_fixes = None, 0, []
     for ep in epochs:
         while i < len(imu.t) and imu.t[i] <= ep.t:
             delta = ImuDelta(dt=float(imu.dt))
@@ -222,17 +227,22 @@ def test_tight_coupling_with_three_satellites_through_the_nodes(ros_context):
         fix = solve_fix(ep, sim, x0)
         if fix is not None:  # an SPP needs 5 satellites (two systems): none after t_switch
             x0 = fix.xyz
-            fmsg = _fix_msg(ep.t, fix.lat, fix.lon, fix.h, np.zeros(3))
+            fmsg = _fix_msg(ep.t, fix.lat + own_fix * 50.0 / 6.4e6, fix.lon, fix.h, np.zeros(3))
             fmsg.header.stamp = stamp
             fmsg.position_covariance = np.asarray(fix.covariance_enu).flatten().tolist()
             vmsg = _vel_msg(ep.t, fix.vel_enu, np.zeros(3))
             vmsg.header.stamp = stamp
             send("gnss/fix", fmsg)
+            sent_fixes.append(fmsg)
             send("gnss/vel", vmsg)
     strapdown.destroy_node()
     ekf.destroy_node()
 
     assert any(s.coupling == FilterStatus.COUPLING_TIGHT for s in statuses)
+    # the datum is the first fix the filter used: the receiver's, or its own 50 m from it
+    datum_to_fix = (ekf.aiding.datum[0] - np.radians(sent_fixes[0].latitude)) * 6.4e6
+    assert abs(datum_to_fix) == (pytest.approx(50.0, abs=10.0) if own_fix
+                                 else pytest.approx(0.0, abs=1e-6))
     ranges = [u for s in statuses for u in s.updates if u.name == "pseudorange"]
     assert ranges and all(len(u.innovation) == 3 for u in ranges if u.stamp.sec >= t0 + t_switch)
     assert sum(u.accepted for u in ranges) >= 0.9 * len(ranges)

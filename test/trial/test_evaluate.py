@@ -127,6 +127,29 @@ def test_outage_drift():
     assert "| 2 | 55.0 | 15.0 |" in table and "RMS / max" in table
 
 
+def test_constant_offset_of_the_truth_is_removed_and_window_changes_measured():
+    """A truth 6 m off (an RTK base of unknown coordinates) and an estimate with a zero-mean
+    1 m east oscillation: without the offset the RMS is the oscillation's; the change of the
+    error within a window is the same with or without it (it does not see constant errors)."""
+    t = np.arange(0.0, 100.0, 0.25)
+    truth = _circle(t)
+    wiggle = np.sqrt(2.0) * np.sin(2 * np.pi * t / 10.0)  # RMS 1 m, mean 0 over whole periods
+    windows = np.array([[10.0, 12.5]])
+    estimate = _shift(truth, east=wiggle - 4.0, north=3.0, up=1.0)
+    result = evaluate(estimate, truth, windows=windows, remove_offset=True)
+    assert result.offset_enu == pytest.approx([-4.0, 3.0, 1.0], abs=1e-6)
+    assert result.stats["horizontal_m"].rms == pytest.approx(1.0, abs=1e-6)
+    assert result.stats["vertical_m"].max < 1e-6
+    inside = (t >= 10.0) & (t < 12.5)
+    change = np.abs(wiggle[inside] - wiggle[inside][0]).max()
+    for r in (result, evaluate(estimate, truth, windows=windows)):
+        assert r.outages[0].max_change_m == pytest.approx(change, abs=1e-6)
+    out = result.to_json()
+    assert out["removed_offset_enu_m"] == pytest.approx([-4.0, 3.0, 1.0], abs=1e-6)
+    assert out["outage_change_rms_m"] == pytest.approx(change, abs=1e-6)
+    assert "removed_offset_enu_m" not in evaluate(estimate, truth).to_json()
+
+
 def test_json_contract_keys():
     truth = _circle(np.arange(0.0, 20.0, 0.25))
     out = evaluate(_shift(truth, east=1.0), truth).to_json()

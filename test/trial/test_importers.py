@@ -10,7 +10,7 @@ import struct
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import shared_path
+from conftest import REPO, shared_path
 from scipy.spatial.transform import Rotation
 
 from ins_gnss_ros import io as bagio
@@ -143,3 +143,51 @@ def test_ubx_observations_ephemeris_and_fix(tmp_path):
     assert gps and all(5100 < e.sqrt_a < 5200 for e in gps)  # GPS orbit radius ~26560 km
     assert len(_topic(messages, "/gnss/fix")) > 150
     assert len(_topic(messages, "/truth/state")) > 0
+
+
+def test_ubx_truth_with_the_rtk_float_epochs(tmp_path):
+    folder = shared_path("data", "walk_0827")
+    src = tmp_path / "walk.ubx"
+    src.write_bytes((folder / "gnss_1730.ubx").read_bytes()[:20_000])
+    pos = folder / "gnss_1730_sf.pos"
+    lines = [ln for ln in pos.read_text().splitlines() if ln and not ln.startswith("%")]
+    rtk = [ln for ln in lines if float(ln.split()[5]) in (1.0, 2.0)]
+    messages = bagio.read_bag(import_ubx(src, tmp_path / "walk", truth_pos=pos,
+                                         truth_float=True))
+    truth = _topic(messages, "/truth/state")
+    assert len(rtk) > sum(float(ln.split()[5]) == 1.0 for ln in lines) and len(truth) == len(rtk)
+    last = rtk[-1].split()
+    assert math.degrees(truth[-1].latitude) == pytest.approx(float(last[2]), abs=1e-9)
+
+
+def test_walk_imu_beside_the_ubx_stream(tmp_path):
+    """The walk's IMU log (cut first line) goes into the u-blox bag in its own axes, stamped by
+    its tag file; config/walk.yaml's mounting puts the still start's gravity on base_link z."""
+    import yaml
+
+    folder = shared_path("data", "walk_0827")
+    src = tmp_path / "walk.ubx"
+    src.write_bytes((folder / "gnss_1730.ubx").read_bytes()[:20_000])  # a few GNSS epochs
+    messages = bagio.read_bag(import_ubx(src, tmp_path / "walk",
+                                         imu_csv=folder / "imu_1730.csv"))
+    imu = _topic(messages, "/imu/data_raw")
+    lines = (folder / "imu_1730.csv").read_text().splitlines()
+    whole = [ln for ln in lines if len(ln.split(",")) == 7]
+    assert len(lines[0].split(",")) < 7 and len(imu) == len(whole)  # the cut line left out
+    first = [float(v) for v in whole[0].split(",")]
+    assert imu[0].linear_acceleration.z == pytest.approx(first[2] * 9.80665)
+    assert imu[0].angular_velocity.x == pytest.approx(math.radians(first[3]))
+    assert imu[0].header.frame_id == "imu_link"
+    raw = (folder / "imu_1730.csv.tag").read_bytes()
+    _tick_f, time_time, time_sec = struct.unpack_from("<IId", raw, 60)
+    last_tick = struct.unpack_from("<I", raw, len(raw) - 8)[0]
+    t = np.array([m.t_ns for m in messages if m.topic == "/imu/data_raw"])
+    assert t[0] == pytest.approx((time_time + time_sec - 18) * 1e9, abs=1e3)  # no time offset
+    assert t[-1] == pytest.approx((time_time + time_sec + last_tick / 1e3 - 18) * 1e9, abs=1e3)
+    assert np.all(np.diff(t) > 0)
+    mounting = yaml.safe_load((REPO / "config" / "walk.yaml").read_text())[
+        "imu_preprocessor"]["ros__parameters"]["mounting_rpy_deg"]
+    f = np.mean([[m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z]
+                 for m in imu[:100]], axis=0)
+    f_base = Rotation.from_euler("ZYX", mounting[::-1], degrees=True).apply(f)
+    assert math.degrees(math.atan2(math.hypot(f_base[0], f_base[1]), f_base[2])) < 3.0

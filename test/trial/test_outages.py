@@ -1,10 +1,12 @@
 """The LEN:PERIOD[:FIRST] GNSS outage protocol."""
 import numpy as np
 import pytest
-from conftest import shared_path
+from conftest import REPO, shared_path
 
-from ins_gnss_ros.trial.outages import (OutageSpec, gnss_mask, in_outage, outage_windows,
-                                        parse_outage_spec)
+from ins_gnss_ros.trial.outages import (OBSERVATIONS_TOPIC, OutageSpec, SatelliteSpec,
+                                        gnss_mask, gnss_windows, highest_satellites, in_outage,
+                                        outage_windows, parse_outage_spec, parse_satellite_spec,
+                                        reduce_constellation)
 from ins_gnss_ros.trial.rtklib import read_pos
 
 
@@ -52,3 +54,63 @@ def test_car_drive_protocol():
     assert windows[-1, 0] <= sol.time[-1] - 30.0
     # 4 Hz epochs: 60 per 15 s window are withheld.
     assert np.sum(~gnss_mask(sol.time, windows)) == 11 * 60
+
+
+# -- reduced constellations (trial replay --satellites) ---------------------------------------
+WALK_BAG = REPO / "bags" / "walk_0827"
+
+
+@pytest.fixture(scope="module")
+def walk_gnss():
+    from ins_gnss_ros.trial.inputs import read_inputs
+
+    return [m for m in read_inputs(WALK_BAG) if m.topic.startswith("/gnss/")]
+
+
+def test_parse_satellite_spec():
+    assert parse_satellite_spec("3:20:40:30") == SatelliteSpec(3, OutageSpec(20.0, 40.0, 30.0))
+    assert str(parse_satellite_spec(" 0:10:60")) == "0:10:60:50"
+    for spec, message in (("x:20:40", "whole number"), ("-1:20:40", ">= 0"),
+                          ("3:20", "LEN:PERIOD"), ("3:50:40", "PERIOD must")):
+        with pytest.raises(ValueError, match=message):
+            parse_satellite_spec(spec)
+
+
+def test_the_highest_satellites_stay_and_the_receiver_solution_is_withheld(walk_gnss):
+    """On the real walk: the kept satellites are the N highest GPS/Galileo ones with an
+    ephemeris (elevations from pymap3d at the receiver's fix), every epoch inside a window
+    has only them, its fixes and velocities are withheld, everything outside is untouched."""
+    import pymap3d
+
+    from ins_gnss_ros.gnss.ephemeris import sat_position
+    from ins_gnss_ros.nodes.gnss_messages import kepler_from_msg
+
+    windows = gnss_windows(walk_gnss, "20:40:30")
+    kept = highest_satellites(walk_gnss, windows, 3)
+    assert len(windows) == len(kept) == 2 and all(len(k) == 3 for k in kept)
+    start = windows[0][0]
+    epoch = next(m.msg for m in walk_gnss if m.topic == OBSERVATIONS_TOPIC and m.t_ns >= start)
+    fix = [m.msg for m in walk_gnss if m.topic == "/gnss/fix" and m.t_ns <= start][-1]
+    t_gps = epoch.gps_week * 604800.0 + epoch.time_of_week
+    ephemerides = {(m.msg.system, m.msg.prn): m.msg for m in walk_gnss
+                   if m.topic == "/gnss/ephemeris" and m.t_ns <= start}
+    elevation = {}
+    for sat in set(zip(epoch.system, epoch.prn)) & set(ephemerides):
+        if sat[0] in (0, 2):  # GPS, Galileo
+            xyz = sat_position(kepler_from_msg(ephemerides[sat], t_gps), t_gps)[0]
+            elevation[sat] = pymap3d.ecef2aer(*xyz, fix.latitude, fix.longitude, fix.altitude)[1]
+    assert kept[0] == sorted(elevation, key=elevation.get, reverse=True)[:3]
+
+    played, withheld = reduce_constellation(walk_gnss, windows, kept)
+    inside = [in_outage(m.t_ns, windows) for m in walk_gnss]
+    assert withheld == {t: sum(m.topic == t and i for m, i in zip(walk_gnss, inside))
+                        for t in ("/gnss/fix", "/gnss/vel")}
+    assert all(m.topic not in ("/gnss/fix", "/gnss/vel") for m in played
+               if in_outage(m.t_ns, windows))
+    for m in played:
+        k = np.searchsorted(windows[:, 0], m.t_ns, side="right") - 1
+        if m.topic == OBSERVATIONS_TOPIC and in_outage(m.t_ns, windows):
+            assert set(zip(m.msg.system, m.msg.prn)) <= set(kept[k])
+            assert len(m.msg.pseudorange) == len(m.msg.system) == len(m.msg.cn0)
+    untouched = [m for m, i in zip(walk_gnss, inside) if not i]
+    assert [m for m in played if not in_outage(m.t_ns, windows)] == untouched

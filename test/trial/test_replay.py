@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import REPO
 
 from ins_gnss_ros import io as bagio
 from ins_gnss_ros.io import messages_equal
@@ -17,7 +18,7 @@ from ins_gnss_ros.trial import contract_messages as msgs
 from ins_gnss_ros.trial.cli import main
 from ins_gnss_ros.trial.inputs import InputTopicsError
 from ins_gnss_ros.trial.offline import replay_offline
-from ins_gnss_ros.trial.outages import gnss_windows
+from ins_gnss_ros.trial.outages import gnss_windows, in_outage
 from ins_gnss_ros.trial.processes import replay_processes
 from ins_gnss_ros.trial.profile import ProfileError, load_profile, profile_with_truth_init
 from ins_gnss_ros.trial.replay import replay
@@ -164,6 +165,31 @@ def test_outages_withhold_gnss_and_are_recorded(tmp_path, profile):
     assert outputs == {m.topic for m in recorded} == {"/ins/state", "/diagnostics"}
     assert all(counts[t]["out"] == sum(m.topic == t for m in recorded) for t in outputs)
     assert counts["/diagnostics"]["out"] == 60  # once per second of bag time
+
+
+def test_satellite_windows_are_recorded_with_the_satellites_kept(tmp_path, profile):
+    """The bundled walk's GNSS beside synthetic increments: --satellites 3:20:40:30 withholds
+    the receiver's fixes and velocities in the windows (test_outages.py checks the thinning)
+    and records the windows and the satellites kept in replay.json."""
+    from ins_gnss_ros.trial.inputs import read_inputs
+
+    gnss = [m for m in read_inputs(REPO / "bags" / "walk_0827") if m.topic.startswith("/gnss/")]
+    with bagio.BagWriter(tmp_path / "bag") as writer:
+        for m in gnss:
+            writer.write(m.topic, m.msg, m.t_ns)
+        for t in range(gnss[0].t_ns, gnss[-1].t_ns, 10**8):
+            writer.write("imu/delta", msgs.delta_msg(t, [0, 0, 0], [0, 0, 0.981], 0.1))
+    summary = replay(tmp_path / "bag", profile, tmp_path / "out", satellites="3:20:40:30")
+    windows = gnss_windows(gnss, "20:40:30")
+    saved = json.loads((tmp_path / "out" / "replay.json").read_text())
+    assert saved["satellites"] == "3:20:40:30" and saved["outage_windows_ns"] == []
+    assert saved["satellite_windows_ns"] == windows.tolist()
+    assert np.allclose(saved["satellite_windows_s"], windows * 1e-9)
+    assert [len(k) for k in saved["satellites_kept"]] == [3, 3]
+    assert all(s[0] in "GE" for k in saved["satellites_kept"] for s in k)
+    inside = sum(m.topic == "/gnss/fix" and bool(in_outage(m.t_ns, windows)) for m in gnss)
+    assert saved["messages"]["/gnss/fix"]["withheld"] == inside > 0
+    assert summary["gnss_withheld"] == 2 * inside  # with as many velocities
 
 
 def test_relative_topic_names_replay_like_absolute_ones(first_run, car_bag, profile, tmp_path,

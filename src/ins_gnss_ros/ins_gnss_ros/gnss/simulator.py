@@ -20,6 +20,10 @@ RINEX signs: phase grows with range, Doppler positive when the satellite approac
 * I: Klobuchar ionosphere at the signal's frequency (IS-GPS-200 §20.3.3.5.2.5), a delay on the
   code and an advance on the phase; T: Saastamoinen troposphere (:mod:`atmosphere`); their
   rates in D by central differences over ±0.5 s of geometry.
+* with ``SimulatorConfig.residuals`` the truth is not the broadcast models: the ionosphere and
+  troposphere differ from Klobuchar and Saastamoinen and each satellite's range carries an
+  orbit + clock error (SISRE) the broadcast ephemeris does not have, by the residuals real
+  receivers see (:mod:`broadcast_residuals`); without it the receiver's models are exact.
 * m: multipath (:mod:`multipath`); ε: white noise of σ² = a² + b²/sin²E
   (:func:`ins_gnss_ros.gnss.differences.elevation_sigma`), code, phase and Doppler.
 * N: integer ambiguity per antenna and satellite, drawn at each (re)acquisition and changed by
@@ -61,6 +65,7 @@ import numpy as np
 from ..nav.earth import ecef_to_enu_matrix, geodetic_to_ecef
 from ..nav.lever_arm import lever_arm_position, lever_arm_velocity
 from .atmosphere import klobuchar_delay, tropo_delay
+from .broadcast_residuals import BroadcastResiduals, ResidualDraw
 from .clock_model import TCXO, OscillatorSpec, ReceiverClock
 from .constants import C_LIGHT, FREQ_E1, FREQ_L1, GALILEO, GPS, OMEGA_E
 from .differences import NoiseModel, elevation_sigma
@@ -133,6 +138,8 @@ class SimulatorConfig:
     multipath : MultipathModel or None
     ionosphere, troposphere : bool
         Apply the delays (for closed-loop checks).
+    residuals : BroadcastResiduals or None
+        How far the truth is from the broadcast models the receiver uses (None: not at all).
     oscillator : OscillatorSpec
     cn0_zenith, cn0_horizon : float
         C/N0 at 90 and 0 deg elevation [dB-Hz], linear in sin E in between.
@@ -158,6 +165,7 @@ class SimulatorConfig:
     multipath: MultipathModel | None = MultipathModel()
     ionosphere: bool = True
     troposphere: bool = True
+    residuals: BroadcastResiduals | None = None
     oscillator: OscillatorSpec = TCXO
     cn0_zenith: float = 48.0
     cn0_horizon: float = 34.0
@@ -184,7 +192,8 @@ class AntennaTruth:
 class SignalTruth:
     """The terms of every simulated signal of one epoch, aligned with ``RawEpoch.obs``.
 
-    All arrays shape (n,): range (ρ incl. Sagnac) [m], range_rate [m/s], sat_clock (c δt^i) [m],
+    All arrays shape (n,): range (ρ incl. Sagnac) [m], range_rate [m/s], sat_clock (c δt^i, the
+    true one: minus the orbit + clock residual of ``SimulatorConfig.residuals``) [m],
     group_delay (c T_GD) [m], iono, tropo [m] (at the signal's frequency), multipath_code,
     multipath_phase, noise_code, noise_phase [m], ambiguity (N + h) [cycles], elevation,
     azimuth [rad], los_enu (n, 3) unit line of sight antenna -> satellite.
@@ -326,7 +335,7 @@ class GnssSimulator:
                             if not e.health and e.system in config.systems}
         self.start_gps = default_start(broadcast) if start_gps is None else start_gps
         self.t0 = t0
-        seeds = np.random.SeedSequence(config.seed).spawn(4)
+        seeds = np.random.SeedSequence(config.seed).spawn(5)  # the first 4 as with spawn(4)
         n_clocks = 1 if config.shared_clock else len(config.lever_arms)
         self.clocks = [ReceiverClock(config.oscillator, np.random.default_rng(s))
                        for s in seeds[0].spawn(n_clocks)]
@@ -334,6 +343,8 @@ class GnssSimulator:
         self.rng_ambiguity = np.random.default_rng(seeds[2])
         self.multipath = (MultipathProcess(config.multipath, np.random.default_rng(seeds[3]))
                           if config.multipath is not None else None)
+        self.residuals = (ResidualDraw(config.residuals, np.random.default_rng(seeds[4]))
+                          if config.residuals is not None else None)
         self.channels: dict = {}
         self._shade = {}       # index of the shading window -> kept sat_ids
         self.t_prev = None
@@ -433,12 +444,16 @@ class GnssSimulator:
             ch.slipped = True
         return ch
 
-    def _atmosphere(self, t_gps, ant: AntennaTruth, sat_xyz, freq):
-        """(ionosphere, troposphere) delays [m] for a satellite at ``sat_xyz``."""
+    def _atmosphere(self, t_gps, ant: AntennaTruth, sat_id, sat_xyz, freq):
+        """(ionosphere, troposphere) delays [m] for satellite ``sat_id`` at ``sat_xyz``."""
         el, az = elevation_azimuth(ant.xyz, sat_xyz)
         iono = (klobuchar_delay(t_gps, ant.lat, ant.lon, el, az, *self.broadcast.klobuchar, freq)
                 if self.config.ionosphere else 0.0)
         tropo = tropo_delay(ant.lat, ant.h, el) if self.config.troposphere else 0.0
+        if self.residuals is not None:
+            iono = self.residuals.ionosphere(sat_id, iono)
+            # (a disabled troposphere stays 0: the residual scales the model's delay)
+            tropo = self.residuals.troposphere(tropo, tropo_delay(ant.lat, ant.h, math.pi / 2))
         return iono, tropo
 
     def _antenna_epoch(self, t, t_gps, a, ant, clock, sat_ids, ref) -> SimEpoch:
@@ -455,10 +470,10 @@ class GnssSimulator:
             rho = C_LIGHT * tau
             rho_dot = range_rate(sat, sat_vel, ant.xyz, ant.vel)
             el, az = elevation_azimuth(ant.xyz, sat)
-            iono, tropo = self._atmosphere(t_gps, ant, sat, freq)
+            iono, tropo = self._atmosphere(t_gps, ant, sat_id, sat, freq)
             step = _ATMOSPHERE_RATE_STEP
-            after = self._atmosphere(t_gps + step, ant, sat + sat_vel * step, freq)
-            before = self._atmosphere(t_gps - step, ant, sat - sat_vel * step, freq)
+            after = self._atmosphere(t_gps + step, ant, sat_id, sat + sat_vel * step, freq)
+            before = self._atmosphere(t_gps - step, ant, sat_id, sat - sat_vel * step, freq)
             iono_rate, tropo_rate = (np.subtract(after, before) / (2 * step)).tolist()
             gd = C_LIGHT * group_delay(eph, freq)
             key = (a, sat_id)
@@ -473,10 +488,16 @@ class GnssSimulator:
             lock = t - ch.lock_t
             resolved = t - ch.acquired_t >= self._half_cycle_resolve_s(signal)
             ambiguity = ch.ambiguity + (0.0 if resolved else ch.half)
-            common = rho + clock[0] - C_LIGHT * sat_clock + tropo
+            # what the broadcast orbit and clock miss, as a true satellite clock (the same on
+            # code and phase)
+            orbit, orbit_rate = (self.residuals.orbit_clock(sat_id, t_gps)
+                                 if self.residuals is not None else (0.0, 0.0))
+            sat_clock_m = C_LIGHT * sat_clock - orbit
+            sat_drift_mps = C_LIGHT * sat_drift - orbit_rate
+            common = rho + clock[0] - sat_clock_m + tropo
             pseudorange = common + gd + iono + mp_code + e_code
             phase = (common - iono + mp_phase + e_phase) / lam + ambiguity
-            doppler = (-(rho_dot + clock[1] - C_LIGHT * sat_drift - iono_rate + tropo_rate) / lam
+            doppler = (-(rho_dot + clock[1] - sat_drift_mps - iono_rate + tropo_rate) / lam
                        + e_dop)
             mp_sigma = (cfg.multipath.sigma(el) if cfg.multipath is not None else (0.0, 0.0))
             cn0 = cfg.cn0_horizon + (cfg.cn0_zenith - cfg.cn0_horizon) * max(math.sin(el), 0.0)
@@ -488,7 +509,7 @@ class GnssSimulator:
                 half_cycle_subtracted=bool(resolved and ch.half)))
             lol.append(ch.slipped)
             los = rot @ (sat - ant.xyz)
-            rows.append((rho, rho_dot, C_LIGHT * sat_clock, gd, iono, tropo, mp_code, mp_phase,
+            rows.append((rho, rho_dot, sat_clock_m, gd, iono, tropo, mp_code, mp_phase,
                          e_code, e_phase, ambiguity, el, az, *(los / np.linalg.norm(los))))
         cols = np.array(rows, float).reshape(len(rows), 16).T
         truth = SignalTruth(*cols[:13], los_enu=cols[13:].T.copy())

@@ -60,6 +60,9 @@ PARAMS = (
           "units: s, s/semicircle^n); all zero: no ionosphere correction", -1e7, 1e7, length=8),
     Param("tight.elevation_mask_deg", 10.0, "satellites below this elevation are not used, deg",
           0.0, 60.0),
+    Param("tight.align_on_observations", False, "tight coupling: align on the single-point "
+          "fix and Doppler velocity of gnss/observations, and subscribe neither gnss/fix nor "
+          "gnss/vel (a receiver whose own fix is no input, e.g. the RTK reference of a trial)"),
     Param("use_heading", True, "use gnss/heading (phase-difference or receiver azimuth)"),
     Param("use_magnetic_heading", False, "use mag/heading as backup heading aiding"),
     Param("use_imu_heading", True, "use imu/heading (the IMU's own orientation where its "

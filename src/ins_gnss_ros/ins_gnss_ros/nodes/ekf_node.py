@@ -13,7 +13,11 @@ Dopplers of ``gnss/observations`` with the broadcast orbits of ``gnss/ephemeris`
 states, usable with fewer than four satellites, seed 004 section 2.1) once the filter has aligned
 on fix and velocity; ``auto`` switches to tight whenever an epoch has fewer than
 ``auto.min_satellites`` usable satellites, as seed 004 describes. Fix/velocity and ranges of the
-same epochs are never both used (the same data would count twice).
+same epochs are never both used (the same data would count twice). With
+``tight.align_on_observations`` the fix and velocity of the alignment are the node's own
+single-point solution of each observation epoch (:mod:`ins_gnss_ros.gnss.spp`) and
+``gnss/fix`` / ``gnss/vel`` are not subscribed: a receiver whose fix is not an input (the RTK
+reference of a trial, or a receiver not trusted for one).
 
 Outputs: ``nav/odom`` (ENU ``map`` frame around a datum, covariance from the filter),
 ``nav/fix`` (``STATUS_NO_FIX`` unless the filter is NAVIGATING: aligning or dead reckoning is
@@ -59,6 +63,7 @@ from tf2_msgs.msg import TFMessage
 
 from ..gnss.constants import GALILEO, GPS, UBX_GNSS_ID
 from ..gnss.ranges import RangeConfig, ephemeris_valid, satellite_ranges
+from ..gnss.spp import DEFAULT_SIGNALS, SppConfig, solve_position, solve_velocity
 from ..io import new, ns_to_stamp, stamp_to_ns, stamp_to_sec
 from ..nav import NAVIGATING, Navigator
 from ..nav.aiding import Aiding, AidingPolicy
@@ -93,6 +98,13 @@ class EkfNode(NavNode):
             doppler_sigma=tuple(p["tight.doppler_sigma_hz"]),
             klobuchar=(tuple(p["tight.klobuchar"][:4]), tuple(p["tight.klobuchar"][4:]))
             if any(p["tight.klobuchar"]) else None)
+        # Single-point solutions that align the filter when the receiver's fix is no input.
+        self.spp = SppConfig(elevation_mask=self.ranges.elevation_mask, iono_free=False,
+                             klobuchar=self.ranges.klobuchar,
+                             sigma0=float(np.hypot(*self.ranges.code_sigma)),
+                             signals={s: DEFAULT_SIGNALS[s] for s in self.ranges.signals}) \
+            if p["coupling"] != "loose" and p["tight.align_on_observations"] else None
+        self.spp_x0 = None  # the last single-point position, ECEF m: the next one starts there
         self.ephemeris_msgs: dict[str, GnssEphemeris] = {}
         self.config = navigator_config(p)
         self.navigator = Navigator(self.config)
@@ -129,11 +141,12 @@ class EkfNode(NavNode):
         self.service(FromLL, "~/from_ll", self.on_from_ll)
         self.subscribe(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS)
         self.subscribe(InsState, "ins/state", self.on_ins_state, SENSOR_QOS)
-        self.subscribe(NavSatFix, "gnss/fix", self.on_fix, DRIVER_QOS)
+        if self.spp is None:
+            self.subscribe(NavSatFix, "gnss/fix", self.on_fix, DRIVER_QOS)
+            self.subscribe(TwistWithCovarianceStamped, "gnss/vel", self.on_vel, DRIVER_QOS)
         if p["coupling"] != "loose":
             self.subscribe(GnssObservations, "gnss/observations", self.on_observations, SENSOR_QOS)
             self.subscribe(GnssEphemeris, "gnss/ephemeris", self.on_ephemeris, STATE_QOS)
-        self.subscribe(TwistWithCovarianceStamped, "gnss/vel", self.on_vel, DRIVER_QOS)
         for topic, use in HEADING_INPUTS.items():
             if p[use]:
                 self.subscribe(Heading, topic, partial(self.on_heading, topic), SENSOR_QOS)
@@ -188,11 +201,30 @@ class EkfNode(NavNode):
                 eph = kepler_from_msg(self.ephemeris_msgs[sat], raw.t_gps)
                 if ephemeris_valid(eph, raw.t_gps):
                     ephemerides[sat] = eph
-        if not self.aiding.choose_ranges(len(ephemerides)):
-            return
         nav, t = self.navigator, stamp_to_sec(msg.header.stamp)
+        if not self.aiding.choose_ranges(len(ephemerides)):
+            if self.spp is not None:
+                self.align_on_single_point(raw, ephemerides, t, msg.header.stamp)
+            return
         if self.aiding.ranges(satellite_ranges(raw, ephemerides, t, nav.state_at(t), nav.lever_arm_b,
                                                self.ranges)):
+            self.after_filter()
+
+    def align_on_single_point(self, raw, ephemerides, t, stamp) -> None:
+        """Until ranges can aid (they need the heading), the epoch's single-point fix and
+        Doppler velocity (gnss/spp.py) stand in for gnss/fix and gnss/vel."""
+        sol = solve_position(raw, ephemerides, self.spp, self.spp_x0)
+        if sol is None or not sol.valid:
+            self.diag.count("observation epoch without a single-point solution", log=False)
+            return
+        self.spp_x0 = sol.xyz
+        vel = solve_velocity(raw, ephemerides, sol, self.spp,
+                             float(np.hypot(*self.ranges.doppler_sigma)))
+        fixed = self.aiding.fix(t, np.degrees(sol.lat), np.degrees(sol.lon), sol.h,
+                                sol.covariance_enu, NavSatStatus.STATUS_FIX, True)
+        if fixed:
+            self.note_datum(stamp)
+        if (vel is not None and self.aiding.velocity(t, vel[0], vel[2])) or fixed:
             self.after_filter()
 
     def on_heading(self, topic: str, msg: Heading) -> None:

@@ -4,8 +4,9 @@
     trial import {rtklib-drive,ubx,vessel-parquet} SRC --out bags/NAME
     trial replay bags/NAME --config config/PROFILE.yaml --out OUT [--outages LEN:PERIOD[:FIRST]]
                  [--init-from-truth] [--rate R --processes | --offline] [--faults FILE]
+                 [--satellites N:LEN:PERIOD[:FIRST]]
     trial evaluate OUT [--truth bags/NAME] [--json] [--skip S] [--truth-point X Y Z]
-                   [--truth-velocity-delay S]
+                   [--truth-velocity-delay S] [--remove-offset]
     trial compare OUT_A OUT_B [--with-diagnostics]
     trial batch --config PROFILE --out DIR (--scenario S --seeds N | --bags B ...) [--scheduler A]
     trial run --config config/PROFILE.yaml
@@ -80,6 +81,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pos-geoid-separation", type=float, default=0.0,
                    help="ubx: geoid height N (m) added to the .pos heights when they are above "
                         "the geoid (hMSL), making them ellipsoidal")
+    p.add_argument("--truth-float", action="store_true",
+                   help="ubx: the .pos's RTK-float epochs are truth too (less accurate than "
+                        "the fixed ones)")
+    p.add_argument("--imu-csv", default=None,
+                   help="ubx: the IMU log recorded with the stream (.csv beside its .csv.tag), "
+                        "as imu/data_raw")
     p.add_argument("--out", required=True, help="new bag folder")
 
     p = sub.add_parser("replay", help="run the node graph of a profile over a bag")
@@ -96,6 +103,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--faults", default=None, metavar="FILE",
                    help="fault specification (YAML) applied to the bag's messages on their way "
                         "to the nodes (in-process replay only)")
+    p.add_argument("--satellites", default=None, metavar="N:LEN:PERIOD[:FIRST]",
+                   help="in these windows only the N highest satellites stay in "
+                        "gnss/observations, gnss/fix and gnss/vel are withheld (in-process "
+                        "replay only)")
 
     p = sub.add_parser("evaluate", help="error statistics, plots and report of a replay")
     p.add_argument("out", help="replay output folder")
@@ -109,6 +120,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "the GNSS antenna of an RTK truth")
     p.add_argument("--truth-velocity-delay", type=float, default=0.0, metavar="S",
                    help="latency of the truth velocities, s")
+    p.add_argument("--remove-offset", action="store_true",
+                   help="take the mean position error out (a truth with a constant offset of "
+                        "its own, e.g. RTK against a base of unknown coordinates)")
 
     p = sub.add_parser("compare", help="are two replays' outputs identical, message by message")
     p.add_argument("a", help="replay output folder (or bag folder)")
@@ -187,7 +201,8 @@ def cmd_import(args) -> int:
     from ins_gnss_ros.trial.importers import IMPORTERS
 
     function = IMPORTERS[args.kind][0]
-    kwargs = ({"truth_pos": args.truth_pos, "geoid_separation": args.pos_geoid_separation}
+    kwargs = ({"truth_pos": args.truth_pos, "geoid_separation": args.pos_geoid_separation,
+               "imu_csv": args.imu_csv, "truth_float": args.truth_float}
               if args.kind == "ubx" else {})
     print(function(args.src, args.out, **kwargs))
     return 0
@@ -204,9 +219,10 @@ def cmd_replay(args) -> int:
     if args.rate is not None and not args.processes:
         raise ValueError("--rate needs --processes (the in-process replay runs as fast as "
                          "possible)")
-    if args.faults is not None and (args.processes or args.offline):
-        raise ValueError("--faults works with the in-process replay only (not with "
-                         "--processes or --offline)")
+    for option, value in (("--faults", args.faults), ("--satellites", args.satellites)):
+        if value is not None and (args.processes or args.offline):
+            raise ValueError(f"{option} works with the in-process replay only (not with "
+                             "--processes or --offline)")
     if args.offline:
         if args.processes or args.init_from_truth:
             raise ValueError("--offline runs no nodes: it takes neither --processes nor "
@@ -215,7 +231,8 @@ def cmd_replay(args) -> int:
                                 progress=_progress(args))
     else:
         run = replay_processes if args.processes else replay
-        kwargs = {"rate": args.rate} if args.processes else {"faults": args.faults}
+        kwargs = {"rate": args.rate} if args.processes else {"faults": args.faults,
+                                                             "satellites": args.satellites}
         summary = run(args.bag, args.config, args.out, outages=args.outages,
                       progress=_progress(args), init_from_truth=args.init_from_truth, **kwargs)
     print(f"replayed {args.bag} ({summary['mode']}, {', '.join(summary['graph'])}):")
@@ -230,7 +247,8 @@ def cmd_evaluate(args) -> int:
 
     evaluation, metrics = evaluate_run(args.out, args.truth, plots=not args.no_plots,
                                        skip_s=args.skip, truth_point=args.truth_point,
-                                       truth_velocity_delay=args.truth_velocity_delay)
+                                       truth_velocity_delay=args.truth_velocity_delay,
+                                       remove_offset=args.remove_offset)
     if args.json:
         print(json.dumps(metrics, sort_keys=True))
     else:

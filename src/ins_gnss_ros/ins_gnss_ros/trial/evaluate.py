@@ -17,7 +17,7 @@ NEES (normalised estimation error squared, Bar-Shalom, Li and Kirubarajan, "Esti
 Applications to Tracking and Navigation", section 5.4.2) is e^T P^-1 e per epoch; a consistent
 filter has mean NEES equal to the dimension (3).
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -131,7 +131,9 @@ class OutageDrift:
     `max_horizontal_m` is the largest horizontal error at evaluated epochs inside the window,
     `end_horizontal_m` the error at the last evaluated epoch inside it (NaN without epochs),
     `distance_m` the path length of the truth over those epochs (dead-reckoning drift is
-    quoted per distance driven).
+    quoted per distance driven), `max_change_m` the largest horizontal distance of the error
+    from its value at the window's first evaluated epoch (what the window adds to an error
+    that was not zero when it began, e.g. an absolute solution against a relative truth).
     """
 
     start: float
@@ -139,6 +141,7 @@ class OutageDrift:
     max_horizontal_m: float
     end_horizontal_m: float
     distance_m: float = np.nan
+    max_change_m: float = np.nan
 
 
 @dataclass(frozen=True)
@@ -156,12 +159,15 @@ class Evaluation:
     outages : tuple of OutageDrift
     nees : dict of str to float
         Mean NEES of ``position``, ``velocity``, ``attitude`` (NaN without covariances).
+    offset_enu : ndarray, shape (3,) or None
+        The mean position error taken out of `errors` (``remove_offset``), m.
     """
 
     errors: ErrorSeries
     stats: dict
     outages: tuple
     nees: dict
+    offset_enu: np.ndarray | None = None
 
     def outage_drift(self):
         """(RMS, max) over outages of the maximum horizontal error within each window, m."""
@@ -177,6 +183,10 @@ class Evaluation:
         """(RMS, max) over outages of the horizontal error at the end of each window, m."""
         return _rms_max([o.end_horizontal_m for o in self.outages])
 
+    def outage_change(self):
+        """(RMS, max) over outages of the largest change of the error within each window, m."""
+        return _rms_max([o.max_change_m for o in self.outages])
+
     def to_json(self):
         """Flat dict of the statistics for ``trial evaluate --json`` (CONTRACT.md).
 
@@ -184,10 +194,14 @@ class Evaluation:
         entry of `stats` (so ``horizontal_rms_m``, ``vertical_rms_m``, ``roll_rms_deg``,
         ``pitch_rms_deg``, ``heading_rms_deg`` ...), ``nees_<name>_mean``, ``epochs``; with
         outage windows also ``outage_drift_rms_m`` / ``outage_drift_max_m`` (maximum error
-        within each window), ``outage_end_rms_m`` / ``outage_end_max_m`` and the list
-        ``outages``. Values that cannot be computed are None (JSON null).
+        within each window), ``outage_end_rms_m`` / ``outage_end_max_m``,
+        ``outage_change_rms_m`` / ``outage_change_max_m`` (largest change of the error within
+        each window) and the list ``outages``; with a removed offset ``removed_offset_enu_m``.
+        Values that cannot be computed are None (JSON null).
         """
         out = {"epochs": int(len(self.errors.time))}
+        if self.offset_enu is not None:
+            out["removed_offset_enu_m"] = [float(x) for x in self.offset_enu]
         for key, stat in self.stats.items():
             name, unit = key.rsplit("_", 1)
             for field in ("rms", "p95", "max"):
@@ -196,14 +210,16 @@ class Evaluation:
             out[f"nees_{name}_mean"] = _finite_or_none(value)
         if self.outages:
             for prefix, (rms, peak) in (("outage_drift", self.outage_drift()),
-                                        ("outage_end", self.outage_end_drift())):
+                                        ("outage_end", self.outage_end_drift()),
+                                        ("outage_change", self.outage_change())):
                 out[f"{prefix}_rms_m"] = _finite_or_none(rms)
                 out[f"{prefix}_max_m"] = _finite_or_none(peak)
             out["outage_drift_rms_percent"] = _finite_or_none(self.outage_drift_percent())
             out["outages"] = [{"start": o.start, "end": o.end,
                                "max_horizontal_m": _finite_or_none(o.max_horizontal_m),
                                "end_horizontal_m": _finite_or_none(o.end_horizontal_m),
-                               "distance_m": _finite_or_none(o.distance_m)}
+                               "distance_m": _finite_or_none(o.distance_m),
+                               "max_change_m": _finite_or_none(o.max_change_m)}
                               for o in self.outages]
         return out
 
@@ -249,7 +265,7 @@ def interpolate(trajectory, t):
                       att_cov=linear(trajectory.att_cov))
 
 
-def evaluate(estimate, truth, windows=None, max_gap=DEFAULT_MAX_GAP_S):
+def evaluate(estimate, truth, windows=None, max_gap=DEFAULT_MAX_GAP_S, remove_offset=False):
     """Compare an estimated trajectory with truth.
 
     Parameters
@@ -262,6 +278,10 @@ def evaluate(estimate, truth, windows=None, max_gap=DEFAULT_MAX_GAP_S):
     max_gap : float
         Truth epochs are evaluated only where the neighbouring estimate samples are at most this
         far apart, s.
+    remove_offset : bool
+        Take the mean position error out of the errors (and their statistics and NEES): a
+        truth with a constant offset of its own, such as an RTK solution against a base of
+        unknown coordinates, compared with an absolute (single-point-like) estimate.
 
     Returns
     -------
@@ -275,6 +295,11 @@ def evaluate(estimate, truth, windows=None, max_gap=DEFAULT_MAX_GAP_S):
     true = _subset(truth, keep)
     est = interpolate(estimate, true.time)
     errors = _error_series(est, true)
+    offset = None
+    if remove_offset:
+        offset = errors.pos_enu.mean(axis=0)
+        pos = errors.pos_enu - offset
+        errors = replace(errors, pos_enu=pos, nees_pos=_nees(pos, est.pos_cov_enu))
     stats = {
         "horizontal_m": Statistic.of(errors.horizontal),
         "vertical_m": Statistic.of(errors.pos_enu[:, 2]),
@@ -289,7 +314,7 @@ def evaluate(estimate, truth, windows=None, max_gap=DEFAULT_MAX_GAP_S):
             else np.nan
             for name, values in (("position", errors.nees_pos), ("velocity", errors.nees_vel),
                                  ("attitude", errors.nees_att))}
-    return Evaluation(errors=errors, stats=stats, nees=nees,
+    return Evaluation(errors=errors, stats=stats, nees=nees, offset_enu=offset,
                       outages=outage_drifts(errors, windows, true) if windows is not None else ())
 
 
@@ -318,8 +343,10 @@ def outage_drifts(errors, windows, truth=None):
                 r = geodetic_to_ecef(truth.lat[inside], truth.lon[inside], truth.height[inside])
                 distance = float(np.sum(np.linalg.norm(np.diff(np.reshape(r, (-1, 3)), axis=0),
                                                        axis=1)))
+            change = errors.pos_enu[inside, :2] - errors.pos_enu[inside][0, :2]
             drifts.append(OutageDrift(float(start), float(end), float(horizontal[inside].max()),
-                                      float(horizontal[inside][-1]), distance))
+                                      float(horizontal[inside][-1]), distance,
+                                      float(np.hypot(change[:, 0], change[:, 1]).max())))
         else:
             drifts.append(OutageDrift(float(start), float(end), np.nan, np.nan))
     return tuple(drifts)
@@ -343,14 +370,17 @@ def markdown_table(evaluation):
     if evaluation.outages:
         t0 = evaluation.errors.time[0]
         lines += ["", "| outage | start (s from first epoch) | length (s) | max horizontal (m) "
-                  "| at end (m) | distance (m) |", "|---:|---:|---:|---:|---:|---:|"]
+                  "| at end (m) | distance (m) | largest change (m) |",
+                  "|---:|---:|---:|---:|---:|---:|---:|"]
         for number, o in enumerate(evaluation.outages, start=1):
             lines.append(f"| {number} | {o.start - t0:.1f} | {o.end - o.start:.1f} | "
                          f"{o.max_horizontal_m:.3f} | {o.end_horizontal_m:.3f} | "
-                         f"{o.distance_m:.1f} |")
+                         f"{o.distance_m:.1f} | {o.max_change_m:.3f} |")
         (rms, peak), (end_rms, end_peak) = evaluation.outage_drift(), evaluation.outage_end_drift()
+        change_rms, change_peak = evaluation.outage_change()
         lines.append(f"| RMS / max | | | {rms:.3f} / {peak:.3f} | {end_rms:.3f} / {end_peak:.3f} "
-                     f"| max per distance RMS {evaluation.outage_drift_percent():.2f} % |")
+                     f"| max per distance RMS {evaluation.outage_drift_percent():.2f} % "
+                     f"| {change_rms:.3f} / {change_peak:.3f} |")
     return "\n".join(lines)
 
 

@@ -65,19 +65,13 @@ def import_rtklib_drive(folder, out):
     """Convert the car trial folder (imu_1934.csv, .tag, gnss_1934_sf.pos) into a bag."""
     from sensor_msgs.msg import NavSatStatus
 
-    from ins_gnss_ros.trial.car_drive import STANDARD_GRAVITY, load_car_drive, read_imu_csv
+    from ins_gnss_ros.trial.car_drive import load_car_drive
     from ins_gnss_ros.trial.rtklib import Q_FIX, Q_FLOAT
 
     folder = Path(folder)
     drive = load_car_drive(folder)
-    # Raw axes and units of the sensor: the reader's FLU values are not used on purpose.
-    values, _ = read_imu_csv(folder / "imu_1934.csv")
     writer = bag.BagWriter(out)
-    t_imu = gps_to_ns(drive.imu_time)
-    accel = STANDARD_GRAVITY * values[:, :3]
-    gyro = np.radians(values[:, 3:])
-    writer.write_all("imu/data_raw", (msgs.imu_msg(t, w, f)
-                                      for t, w, f in zip(t_imu, gyro, accel)))
+    _write_imu_log(writer, folder / "imu_1934.csv")
     gnss = drive.gnss
     t_gnss = gps_to_ns(gnss.time)
     for i, t in enumerate(t_gnss):
@@ -98,12 +92,31 @@ def import_rtklib_drive(folder, out):
     return writer.close()
 
 
+def _write_imu_log(writer, csv_path):
+    """``imu/data_raw`` from an rtklibexplorer IMU log (``.csv`` + ``.csv.tag``): the sensor's
+    own axes and SI units (frame ``imu_link``: the mounting is the imu_preprocessor's
+    ``mounting_rpy_deg``), stamped by the tag file's mapping with no clock offset applied (it is
+    the imu_preprocessor's ``time_offset_s``)."""
+    from ins_gnss_ros.trial.car_drive import STANDARD_GRAVITY, imu_times, read_imu_csv
+    from ins_gnss_ros.trial.rtklib import read_time_tag
+
+    csv_path = Path(csv_path)
+    values, tick_ms = read_imu_csv(csv_path)
+    t_imu = gps_to_ns(imu_times(tick_ms, read_time_tag(csv_path.with_name(csv_path.name + ".tag"))))
+    accel = STANDARD_GRAVITY * values[:, :3]
+    gyro = np.radians(values[:, 3:])
+    writer.write_all("imu/data_raw", (msgs.imu_msg(t, w, f)
+                                      for t, w, f in zip(t_imu, gyro, accel)))
+
+
 # ---------------------------------------------------------------------------------------------
 # u-blox stream (rtklibexplorer GNSS_IMU walk_0827)
 # ---------------------------------------------------------------------------------------------
-def import_ubx(path, out, truth_pos=None, geoid_separation=0.0):
+def import_ubx(path, out, truth_pos=None, geoid_separation=0.0, imu_csv=None, truth_float=False):
     """Convert a recorded u-blox byte stream (and optionally an RTKLIB .pos as truth, its heights
-    made ellipsoidal with ``geoid_separation``, see :func:`~ins_gnss_ros.trial.rtklib.read_pos`).
+    made ellipsoidal with ``geoid_separation``, see :func:`~ins_gnss_ros.trial.rtklib.read_pos`:
+    its RTK-fixed epochs, with ``truth_float`` its RTK-float ones too; and the IMU log
+    ``imu_csv`` recorded with it, see :func:`_write_imu_log`).
 
     The stream goes through the ``gnss_driver`` node itself (file source as fast as possible,
     on an in-process bus): the bag holds exactly what the driver publishes live.
@@ -130,15 +143,17 @@ def import_ubx(path, out, truth_pos=None, geoid_separation=0.0):
     finally:
         rclpy.shutdown(context=context)
     if truth_pos is not None:
-        _write_pos_truth(writer, truth_pos, geoid_separation)
+        _write_pos_truth(writer, truth_pos, geoid_separation, truth_float)
+    if imu_csv is not None:
+        _write_imu_log(writer, imu_csv)
     return writer.close()
 
 
-def _write_pos_truth(writer, pos_path, geoid_separation):
-    from ins_gnss_ros.trial.rtklib import Q_FIX, read_pos
+def _write_pos_truth(writer, pos_path, geoid_separation, with_float=False):
+    from ins_gnss_ros.trial.rtklib import Q_FIX, Q_FLOAT, read_pos
 
     pos = read_pos(pos_path, geoid_separation)
-    fixed = pos.select(pos.quality == Q_FIX)
+    fixed = pos.select(np.isin(pos.quality, (Q_FIX, Q_FLOAT) if with_float else (Q_FIX,)))
     for i, t in enumerate(gps_to_ns(fixed.time)):
         writer.write("truth/state", msgs.ins_state_msg(
             t, fixed.lat[i], fixed.lon[i], fixed.height[i],
@@ -181,6 +196,7 @@ def import_vessel_parquet(path, out):
 IMPORTERS = {
     "rtklib-drive": (import_rtklib_drive,
                      "car trial folder: imu_1934.csv(.tag) + gnss_1934_sf.pos"),
-    "ubx": (import_ubx, "u-blox byte stream (.ubx), optional --truth-pos RTKLIB .pos"),
+    "ubx": (import_ubx, "u-blox byte stream (.ubx), optional --truth-pos RTKLIB .pos and "
+                        "--imu-csv IMU log (.csv + .csv.tag)"),
     "vessel-parquet": (import_vessel_parquet, "smsfusion ains_ahrs_imu.parquet"),
 }

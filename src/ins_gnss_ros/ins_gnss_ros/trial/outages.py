@@ -1,9 +1,12 @@
-"""Simulated GNSS outages: the ``LEN:PERIOD[:FIRST]`` protocol of the trial CLI.
+"""Simulated GNSS outages: the ``LEN:PERIOD[:FIRST]`` protocol of the trial CLI, and reduced
+constellations in the same windows (``N:LEN:PERIOD[:FIRST]``, ``trial replay --satellites``).
 
 Published INS benchmarks test dead reckoning by withholding GNSS periodically (e.g. the 15 s
 outages every 45 s, the first 40 s into the run, of the rtklibexplorer GNSS_IMU car trial): the
 filter is aided between outages and coasts on the IMU during them, and the position drift at the
-end of each outage measures the inertial quality.
+end of each outage measures the inertial quality. A reduced constellation tests what tight
+coupling keeps where a receiver has too few satellites for its own fix (seed 004 section 2.13:
+the constellation ablation): the N highest satellites stay, the receiver's solution goes.
 """
 from dataclasses import dataclass
 
@@ -136,3 +139,132 @@ def gnss_windows(messages, spec) -> np.ndarray:
     windows = outage_windows(parse_outage_spec(spec), 0.0, (t[-1] - t0) * 1e-9)
     return t0 + np.round(windows * 1e9).astype(np.int64)
 
+
+
+# ---------------------------------------------------------------------------------------------
+# Reduced constellations: the N:LEN:PERIOD[:FIRST] protocol of trial replay --satellites
+# ---------------------------------------------------------------------------------------------
+#: Topics withheld in a satellite window: the receiver's own solution, which a receiver with
+#: too few satellites does not have (the observations are thinned, the ephemerides flow on).
+SOLUTION_TOPICS = ("/gnss/fix", "/gnss/vel")
+OBSERVATIONS_TOPIC = "/gnss/observations"
+#: Per-satellite arrays of ins_gnss_msgs/GnssObservations.
+_OBSERVATION_ARRAYS = ("system", "prn", "frequency_slot", "signal", "pseudorange", "doppler",
+                       "carrier_phase", "cn0", "lock_time", "loss_of_lock", "pseudorange_std",
+                       "carrier_phase_std")
+
+
+@dataclass(frozen=True)
+class SatelliteSpec:
+    """Reduced-constellation protocol: only the `count` highest satellites (at each window's
+    start) stay in the observations during the windows of `windows`."""
+
+    count: int
+    windows: OutageSpec
+
+    def __str__(self):
+        return f"{self.count}:{self.windows}"
+
+
+def parse_satellite_spec(spec):
+    """Parse ``"N:LEN:PERIOD[:FIRST]"`` (N satellites, the windows as `parse_outage_spec`).
+
+    Raises
+    ------
+    ValueError
+        With the offending spec in the message.
+    """
+    count, _, windows = str(spec).strip().partition(":")
+    try:
+        n = int(count)
+    except ValueError:
+        raise ValueError(f"satellite spec {spec!r}: expected N:LEN:PERIOD[:FIRST], N a whole "
+                         "number of satellites, e.g. '3:20:40:30'") from None
+    if n < 0:
+        raise ValueError(f"satellite spec {spec!r}: N must be >= 0")
+    return SatelliteSpec(n, parse_outage_spec(windows))
+
+
+def highest_satellites(messages, windows_ns, count):
+    """The `count` highest satellites at the start of each window: of those in the first
+    observation epoch at or after the start, of the systems tight coupling ranges by default
+    (:class:`~ins_gnss_ros.gnss.ranges.RangeConfig`: GPS and Galileo, one receiver clock), with
+    a valid broadcast ephemeris by then; by elevation at the receiver's last ``gnss/fix``
+    before the start (its first when none is before).
+
+    Returns
+    -------
+    list of list of (system, prn)
+        u-blox gnssId numbering, highest first, one list per window; empty (the window keeps
+        no satellite) when the messages have no observation epoch after its start or no fix.
+    """
+    from ins_gnss_ros.gnss.constants import UBX_GNSS_ID
+    from ins_gnss_ros.gnss.ephemeris import elevation_azimuth, sat_position
+    from ins_gnss_ros.gnss.ranges import RangeConfig, ephemeris_valid
+    from ins_gnss_ros.nav.earth import geodetic_to_ecef
+    from ins_gnss_ros.nodes.gnss_messages import kepler_from_msg
+
+    systems = set(RangeConfig().signals)
+    fixes = [m for m in messages if m.topic == "/gnss/fix" and m.msg.status.status >= 0]
+    chosen = []
+    for start, _ in windows_ns:
+        epoch = next((m.msg for m in messages
+                      if m.topic == OBSERVATIONS_TOPIC and m.t_ns >= start), None)
+        if epoch is None or not fixes:
+            chosen.append([])
+            continue
+        fix = max((m for m in fixes if m.t_ns <= start), key=lambda m: m.t_ns,
+                  default=fixes[0]).msg
+        rx = geodetic_to_ecef(np.radians(fix.latitude), np.radians(fix.longitude), fix.altitude)
+        t_gps = epoch.gps_week * 604800.0 + epoch.time_of_week
+        ephemerides = {(m.msg.system, m.msg.prn): m.msg for m in messages
+                       if m.topic == "/gnss/ephemeris" and m.t_ns <= start}
+        elevation = {}
+        for sat in set(zip(epoch.system, epoch.prn)):
+            if sat not in ephemerides or UBX_GNSS_ID.get(sat[0]) not in systems:
+                continue
+            eph = kepler_from_msg(ephemerides[sat], t_gps)
+            if ephemeris_valid(eph, t_gps):
+                elevation[sat] = elevation_azimuth(rx, sat_position(eph, t_gps)[0])[0]
+        chosen.append(sorted(elevation, key=elevation.get, reverse=True)[:count])
+    return chosen
+
+
+def thin_observations(msg, keep):
+    """A copy of a GnssObservations message with only the satellites in `keep` ((system, prn))."""
+    import copy
+
+    out = copy.copy(msg)
+    mask = [(s, p) in keep for s, p in zip(msg.system, msg.prn)]
+    for name in _OBSERVATION_ARRAYS:
+        values = getattr(msg, name)
+        setattr(out, name, [v for v, m in zip(values, mask) if m])
+    return out
+
+
+def reduce_constellation(messages, windows_ns, chosen):
+    """The messages a replay plays with satellite windows: in window k, ``gnss/observations``
+    thinned to ``chosen[k]`` and ``gnss/fix`` / ``gnss/vel`` left out; the rest unchanged.
+
+    Returns
+    -------
+    played : list of BagMessage
+    withheld : collections.Counter
+        Messages left out, by topic.
+    """
+    from collections import Counter
+
+    from ins_gnss_ros.io import BagMessage
+
+    played, withheld = [], Counter()
+    window = np.searchsorted(np.asarray(windows_ns)[:, 0], [m.t_ns for m in messages],
+                             side="right") - 1 if len(windows_ns) else np.full(len(messages), -1)
+    for m, k in zip(messages, window):
+        inside = k >= 0 and m.t_ns < windows_ns[k][1]
+        if inside and m.topic in SOLUTION_TOPICS:
+            withheld[m.topic] += 1
+        elif inside and m.topic == OBSERVATIONS_TOPIC:
+            played.append(BagMessage(m.topic, m.t_ns, thin_observations(m.msg, set(chosen[k]))))
+        else:
+            played.append(m)
+    return played, withheld

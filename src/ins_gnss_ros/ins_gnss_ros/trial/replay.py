@@ -16,8 +16,9 @@ Three ways to run it:
   no ROS graph.
 
 GNSS outages (:mod:`ins_gnss_ros.trial.outages`) withhold every ``gnss/*`` message whose stamp
-falls in a window; the windows are written to ``OUT/replay.json`` with the run's other facts
-(:mod:`ins_gnss_ros.trial.run_folder`).
+falls in a window; satellite windows (``--satellites``, in-process only) keep the N highest
+satellites in ``gnss/observations`` and withhold ``gnss/fix`` / ``gnss/vel``; the windows are
+written to ``OUT/replay.json`` with the run's other facts (:mod:`ins_gnss_ros.trial.run_folder`).
 A fault specification (:mod:`ins_gnss_ros.faults`, in-process :func:`replay` only) passes the
 bag's messages through a :class:`~ins_gnss_ros.faults.inject.FaultInjector` before they reach
 the nodes; what each fault did goes into ``replay.json`` under ``faults``.
@@ -27,9 +28,11 @@ from __future__ import annotations
 from collections import Counter
 
 from ins_gnss_ros import io as bagio
+from ins_gnss_ros.gnss.constants import UBX_GNSS_ID
 from ins_gnss_ros.nodes import registry
 from ins_gnss_ros.trial.inputs import check_inputs, read_inputs
-from ins_gnss_ros.trial.outages import gnss_windows, in_gnss_outage
+from ins_gnss_ros.trial.outages import gnss_windows, highest_satellites, in_gnss_outage, \
+    parse_satellite_spec, reduce_constellation
 from ins_gnss_ros.trial.profile import ProfileError, load_profile, profile_with_truth_init
 from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_summary
 
@@ -38,7 +41,7 @@ DIAGNOSTICS_PERIOD_NS = 1_000_000_000
 
 
 def replay(bag_path, profile_path, out, outages=None, progress=False,
-           init_from_truth=False, faults=None) -> dict:
+           init_from_truth=False, faults=None, satellites=None) -> dict:
     """Run the profile's graph in-process over a bag as fast as possible (see module doc).
 
     Parameters
@@ -60,6 +63,10 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
         Fault specification (YAML, :mod:`ins_gnss_ros.faults.spec`) applied to the bag's
         messages on their way to the nodes (after the outages are decided on the original
         stream).
+    satellites : str, optional
+        ``N:LEN:PERIOD[:FIRST]``: in those windows only the N highest satellites stay in
+        ``gnss/observations`` and ``gnss/fix`` / ``gnss/vel`` are withheld
+        (:func:`~ins_gnss_ros.trial.outages.reduce_constellation`).
 
     Returns
     -------
@@ -91,6 +98,16 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
     windows = gnss_windows(messages, outages)
     counts = MessageCounts(withheld=Counter(
         m.topic for m in messages if in_gnss_outage(m.topic, m.t_ns, windows)))
+    reduced = None
+    if satellites is not None:
+        spec = parse_satellite_spec(satellites)
+        sat_windows = gnss_windows(messages, str(spec.windows))
+        kept = highest_satellites(messages, sat_windows, spec.count)
+        messages, thinned = reduce_constellation(messages, sat_windows, kept)
+        counts.withheld.update(thinned)
+        reduced = {"satellites": satellites, "satellite_windows_s": (sat_windows * 1e-9).tolist(),
+                   "satellite_windows_ns": sat_windows.tolist(),
+                   "satellites_kept": [[f"{UBX_GNSS_ID[s]}{p:02d}" for s, p in k] for k in kept]}
     stream = messages
     if injector is not None:
         # Outages are decided on the bag's own time; faults act on what is left.
@@ -151,7 +168,8 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
         context.try_shutdown()
     writer.close()
     return write_summary(out, bag_path, profile, outages, windows, counts, "in-process", 0.0,
-                         faults=None if injector is None else injector.summary())
+                         faults=None if injector is None else injector.summary(),
+                         satellites=reduced)
 
 
 def _bus():

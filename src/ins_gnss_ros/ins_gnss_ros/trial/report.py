@@ -129,7 +129,11 @@ def load_run(out, truth_bag=None):
         raise ValueError(f"{output_bag}: no {STATE_TOPIC} with finite positions to evaluate")
     estimate = attach_odometry_covariance(
         estimate, [m for m in outputs if m.topic == ODOM_TOPIC], t0_ns)
-    windows_ns = np.asarray(summary.get("outage_windows_ns", []), dtype=np.int64).reshape(-1, 2)
+    # A satellite window (trial replay --satellites) is evaluated like an outage: the drift
+    # within it is what the reduced constellation lets through.
+    windows_ns = np.concatenate([np.asarray(summary.get(key, []), dtype=np.int64).reshape(-1, 2)
+                                 for key in ("outage_windows_ns", "satellite_windows_ns")])
+    windows_ns = windows_ns[np.argsort(windows_ns[:, 0])]
     return estimate, truth, (windows_ns - t0_ns) * 1e-9, summary
 
 
@@ -161,7 +165,7 @@ def referred_to_truth(estimate: Trajectory, truth: Trajectory, truth_point=None,
 
 
 def evaluate_run(out, truth_bag=None, plots=True, skip_s=0.0, truth_point=None,
-                 truth_velocity_delay=0.0):
+                 truth_velocity_delay=0.0, remove_offset=False):
     """Evaluate a replay output folder; write ``report.md`` (and PNG plots) into it.
 
     Parameters
@@ -177,6 +181,9 @@ def evaluate_run(out, truth_bag=None, plots=True, skip_s=0.0, truth_point=None,
         out of the statistics; the report says so.
     truth_point, truth_velocity_delay
         Where and when the truth refers to (:func:`referred_to_truth`); the report says so.
+    remove_offset : bool
+        Take the truth's constant position offset (the mean error) out of the statistics
+        (:func:`~ins_gnss_ros.trial.evaluate.evaluate`); the report gives it.
 
     Returns
     -------
@@ -195,12 +202,15 @@ def evaluate_run(out, truth_bag=None, plots=True, skip_s=0.0, truth_point=None,
     if not keep.any():
         raise ValueError(f"no truth epoch after the first {skip_s:g} s of the estimate")
     truth = _subset(truth, keep)
-    evaluation = evaluate(estimate, truth, windows if len(windows) else None)
+    evaluation = evaluate(estimate, truth, windows if len(windows) else None,
+                          remove_offset=remove_offset)
     images = write_plots(evaluation, estimate, truth, out / "plots",
                          windows if len(windows) else None) if plots else []
     report = out / "report.md"
     referred = {"truth point (FLU, m)": None if truth_point is None else list(truth_point),
-                "truth velocity delay (s)": truth_velocity_delay or None}
+                "truth velocity delay (s)": truth_velocity_delay or None,
+                "removed truth offset ENU (m)": None if evaluation.offset_enu is None
+                else [round(float(x), 3) for x in evaluation.offset_enu]}
     report.write_text(markdown_report(evaluation, summary, truth_bag, images, out, skip_s,
                                       referred))
     metrics = evaluation.to_json()

@@ -66,7 +66,7 @@ def new_run_folder(out) -> Path:
 
 
 def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
-                  graph=None, faults=None) -> dict:
+                  graph=None, faults=None, satellites=None) -> dict:
     """Write ``OUT/replay.json``, the facts of a replay, and return them.
 
     Parameters
@@ -90,6 +90,9 @@ def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
         What ran, when not the profile's graph (the offline navigator).
     faults : dict, optional
         What the fault injector did.
+    satellites : dict, optional
+        The reduced-constellation windows (``satellites``, ``satellite_windows_s`` and
+        ``_ns``, ``satellites_kept``: the satellites left in each window).
     """
     summary = {
         "input_bag": str(Path(bag_path).resolve()),
@@ -111,6 +114,8 @@ def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
     }
     if faults is not None:
         summary["faults"] = faults
+    if satellites is not None:
+        summary.update(satellites)
     (out / "replay.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
 
