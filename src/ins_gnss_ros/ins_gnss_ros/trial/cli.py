@@ -4,6 +4,9 @@
     trial import {rtklib-drive,ubx,vessel-parquet} SRC --out bags/NAME
     trial replay bags/NAME --config config/PROFILE.yaml --out OUT [--outages LEN:PERIOD[:FIRST]]
                  [--init-from-truth] [--rate R --processes | --offline] [--faults FILE]
+    trial smooth bags/NAME --config config/PROFILE.yaml --out OUT [--outages LEN:PERIOD[:FIRST]]
+                 [--point X,Y,Z] [--export csv,kml,pos]
+    trial export OUT [--formats csv,kml,pos]
     trial evaluate OUT [--truth bags/NAME] [--json] [--skip S] [--truth-point X Y Z]
                    [--truth-velocity-delay S]
     trial compare OUT_A OUT_B [--with-diagnostics]
@@ -84,6 +87,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--faults", default=None, metavar="FILE",
                    help="fault specification (YAML) applied to the bag's messages on their way "
                         "to the nodes (in-process replay only)")
+
+    p = sub.add_parser("smooth", help="post-process a bag: the profile's forward filter, then "
+                       "the RTS smoother")
+    p.add_argument("bag")
+    p.add_argument("--config", required=True, help="params file (config/PROFILE.yaml)")
+    p.add_argument("--out", required=True, help="new output folder")
+    p.add_argument("--outages", default=None, help="LEN:PERIOD[:FIRST] s of GNSS withheld")
+    p.add_argument("--point", default=None, metavar="X,Y,Z",
+                   help="also record the solution of this body point (base_link FLU, m; an "
+                        "antenna, a camera) at the IMU rate: point/state")
+    p.add_argument("--export", default="", metavar="FORMATS",
+                   help="also export the solutions: comma-separated csv, kml, pos")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar (default: when stderr is a terminal)")
+
+    p = sub.add_parser("export", help="write a run's solutions as CSV, KML, RTKLIB .pos")
+    p.add_argument("out", help="replay or smooth output folder")
+    p.add_argument("--formats", default="csv,kml,pos", help="comma-separated csv, kml, pos")
 
     p = sub.add_parser("evaluate", help="error statistics, plots and report of a replay")
     p.add_argument("out", help="replay output folder")
@@ -207,6 +228,37 @@ def cmd_replay(args) -> int:
     return 0
 
 
+def cmd_smooth(args) -> int:
+    from ins_gnss_ros.trial.run_folder import counts_table
+    from ins_gnss_ros.trial.smooth import smooth
+
+    point = None
+    if args.point is not None:
+        try:
+            point = [float(x) for x in args.point.split(",")]
+        except ValueError:
+            point = []
+        if len(point) != 3:
+            raise ValueError(f"--point takes X,Y,Z in metres, got {args.point!r}")
+    summary = smooth(args.bag, args.config, args.out, outages=args.outages, point=point,
+                     exports=args.export, progress=_progress(args))
+    print(f"smoothed {args.bag} ({', '.join(summary['graph'])}):")
+    print("\n".join("  " + line for line in counts_table(summary["messages"])))
+    print("  " + ", ".join(f"{k} {v:.1f} s" for k, v in summary["timing_s"].items()))
+    print(f"recorded {', '.join(summary['topics'])} into {args.out}")
+    for path in summary["exports"]:
+        print(f"exported {path}")
+    return 0
+
+
+def cmd_export(args) -> int:
+    from ins_gnss_ros.trial.export import export_run
+
+    for path in export_run(args.out, args.formats):
+        print(path)
+    return 0
+
+
 def cmd_evaluate(args) -> int:
     from ins_gnss_ros.trial.evaluate import markdown_table
     from ins_gnss_ros.trial.report import evaluate_run
@@ -252,7 +304,7 @@ def cmd_run(args) -> int:
 
 
 COMMANDS = {"simulate": cmd_simulate, "import": cmd_import, "replay": cmd_replay,
-            "evaluate": cmd_evaluate, "compare": cmd_compare, "batch": cmd_batch, "run": cmd_run}
+            "smooth": cmd_smooth, "export": cmd_export, "evaluate": cmd_evaluate, "compare": cmd_compare, "batch": cmd_batch, "run": cmd_run}
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -15,6 +15,8 @@ updates since the last. Deterministic like :func:`ins_gnss_ros.trial.replay.repl
 from __future__ import annotations
 
 from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -57,6 +59,60 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
     Parameters as :func:`ins_gnss_ros.trial.replay.replay` (``gnss/*`` withheld in the outage
     windows). Returns the summary written to ``OUT/replay.json``.
     """
+    run = forward_pass(bag_path, profile_path, outages, progress, out=out)
+    out = Path(out)
+    writer = bagio.BagWriter(out / "bag")
+    run.counts.recorded.update(write_outputs(writer, run.navigator.output(), run.navigator,
+                                             run.datum))
+    writer.close()
+    return run.summary(out, bag_path, outages, "offline")
+
+
+@dataclass
+class ForwardPass:
+    """The filter of a profile run over a bag (:func:`forward_pass`).
+
+    Attributes
+    ----------
+    navigator : Navigator
+        After ``flush``, its record (``output()``) holds the whole pass with covariances.
+    datum : tuple or None
+        ``map`` origin (lat rad, lon rad, h m) of ``nav/odom``; None without a fix.
+    profile : Profile
+    windows : (k, 2) int ndarray
+        GNSS outage windows, ns.
+    counts : MessageCounts
+        Played and withheld so far (the caller adds what it records).
+    events : Counter
+        What the front end reported, by text.
+    """
+
+    navigator: object
+    datum: tuple | None
+    profile: object
+    windows: np.ndarray
+    counts: MessageCounts
+    events: Counter
+
+    def summary(self, out, bag_path, outages, mode, graph=("imu_preprocessor",
+                                                           "ekf (filter only)")) -> dict:
+        """Write ``OUT/replay.json`` (run_folder.write_summary) with the front end's events."""
+        summary = write_summary(out, bag_path, self.profile, outages, self.windows, self.counts,
+                                mode, 0.0, graph=list(graph))
+        summary["events"] = dict(sorted(self.events.items()))
+        return summary
+
+
+def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
+                 navigator_type=None) -> ForwardPass:
+    """The profile's imu_preprocessor and ekf cores over a bag, recorded (``record=True``: the
+    per-epoch solution, covariance, transition and corrections the smoother needs).
+
+    ``out``: the run folder to create (run_folder.new_run_folder) once the profile and the bag
+    are checked, before the work.
+    ``navigator_type`` (default :class:`~ins_gnss_ros.nav.navigator.Navigator`) lets a caller
+    observe the filter's input, e.g. keep the increments (trial/smooth.py).
+    """
     from tqdm import tqdm
 
     from ins_gnss_ros.imu.preprocessor_params import preprocessor_from_params
@@ -69,8 +125,9 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
     check_inputs(bag_path, OFFLINE_TOPICS)
     rows = input_rows(bag_path)
     windows = gnss_windows(rows, outages)
-    out = new_run_folder(out)
-    navigator = Navigator(navigator_config(ekf_p, record=True))
+    if out is not None:
+        new_run_folder(out)
+    navigator = (navigator_type or Navigator)(navigator_config(ekf_p, record=True))
     events = Counter()
     aiding = Aiding(navigator, AidingPolicy.from_params(ekf_p),
                     lambda text, log=True: events.update([text]))
@@ -83,7 +140,7 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
         raise ProfileError(f"{profile.path}: imu_preprocessor: {err}") from None
     feed = _Feeder(aiding, preprocessor, ekf_p, events)
     counts = MessageCounts()
-    for row in tqdm(rows, disable=not progress, unit="msg", desc="offline"):
+    for row in tqdm(rows, disable=not progress, unit="msg", desc="forward"):
         if row.topic.startswith(GNSS_PREFIX) and in_outage(row.t_ns, windows):
             counts.withheld[row.topic] += 1
             continue
@@ -92,12 +149,7 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
         if handler is not None:
             handler(bagio.decode_message(row, bag_path))
     navigator.flush()
-    recorded = _write_outputs(out / "bag", navigator, aiding.datum, ekf_p)
-    counts.recorded.update(recorded)
-    summary = write_summary(out, bag_path, profile, outages, windows, counts, "offline", 0.0,
-                            graph=["imu_preprocessor", "ekf (filter only)"])
-    summary["events"] = dict(sorted(events.items()))
-    return summary
+    return ForwardPass(navigator, aiding.datum, profile, windows, counts, events)
 
 
 class _Feeder:
@@ -169,25 +221,39 @@ class _Feeder:
                               msg.twist.covariance[0])
 
 
-def _write_outputs(path, navigator, datum, ekf_p) -> Counter:
-    """ins/state, nav/odom, nav/fix at every recorded epoch of the filter and nav/status once
-    a second; returns the counts per topic."""
+def write_outputs(writer, result, navigator, datum, prefix="", sensor_errors=False) -> Counter:
+    """ins/state, nav/odom, nav/fix at every epoch of a recorded pass and nav/status once a
+    second; returns the counts per topic.
+
+    Parameters
+    ----------
+    writer : BagWriter
+    result : NavigatorOutput
+        The forward pass (``navigator.output()``) or another solution at its epochs with its
+        covariance (the smoothed one, trial/smooth.py).
+    navigator : Navigator
+        Its state space, configuration and update results (those since the last status go
+        into each nav/status).
+    datum : tuple or None
+        ``map`` origin of nav/odom (none written without it).
+    prefix : str
+        Put before every topic name (``forward/``).
+    sensor_errors : bool
+        Fill the sensor-error fields of ins/state from ``result.estimates``.
+    """
     from geometry_msgs.msg import Vector3
     from ins_gnss_msgs.msg import InsState
 
     from ins_gnss_ros.io import ns_to_stamp, sec_to_ns
     from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, NAVIGATING, NavState
-    from ins_gnss_ros.nodes.convert import fill_ins_state
+    from ins_gnss_ros.nav.increments import SensorErrors
+    from ins_gnss_ros.nodes.convert import fill_ins_state, set_vector3
     from ins_gnss_ros.nodes.nav_messages import MODES, fix_msg, odom_msg, status_msg
 
     ins_modes = {ALIGNING: InsState.MODE_ALIGNING, NAVIGATING: InsState.MODE_NAVIGATING,
                  DEAD_RECKONING: InsState.MODE_DEAD_RECKONING}
-
-    result = navigator.output()
-    writer = bagio.BagWriter(path)
     counts = Counter()
     if len(result.t) == 0:
-        writer.close()
         return counts
     space, config = navigator.space, navigator.config
     rate_var = config.noise.gyro_psd / config.cov_interval
@@ -195,6 +261,7 @@ def _write_outputs(path, navigator, datum, ekf_p) -> Counter:
     u = 0
     accepted = rejected = 0
     next_status = -np.inf
+    topic = {name: prefix + name for name in ("ins/state", "nav/fix", "nav/odom", "nav/status")}
     for k in range(len(result.t)):
         t = float(result.t[k])
         st = NavState(result.lat[k], result.lon[k], result.h[k], result.v_enu[k],
@@ -205,15 +272,23 @@ def _write_outputs(path, navigator, datum, ekf_p) -> Counter:
         state = InsState()
         state.header.stamp, state.header.frame_id = stamp, "map"
         fill_ins_state(state, st)
+        if sensor_errors:
+            errors = SensorErrors.of_estimates({name: v[k] for name, v in
+                                                result.estimates.items()})
+            set_vector3(state.gyro_bias, errors.gyro_bias)
+            set_vector3(state.accel_bias, errors.accel_bias)
+            set_vector3(state.gyro_scale_factor, errors.gyro_scale)
+            set_vector3(state.accel_scale_factor, errors.accel_scale)
         state.mode = ins_modes[mode]
         state.correction_sequence = 1  # the filter's own, corrected solution
-        writer.write("ins/state", state)
-        writer.write("nav/fix", fix_msg(stamp, st, P[space["pos"], space["pos"]],
-                                        valid=mode == NAVIGATING))
-        counts.update(["/ins/state", "/nav/fix"])
+        writer.write(topic["ins/state"], state)
+        writer.write(topic["nav/fix"], fix_msg(stamp, st, P[space["pos"], space["pos"]],
+                                               valid=mode == NAVIGATING))
+        counts.update(["/" + topic["ins/state"], "/" + topic["nav/fix"]])
         if datum is not None:
-            writer.write("nav/odom", odom_msg(stamp, st, P, space, datum, Vector3(), rate_var))
-            counts["/nav/odom"] += 1
+            writer.write(topic["nav/odom"], odom_msg(stamp, st, P, space, datum, Vector3(),
+                                                     rate_var))
+            counts["/" + topic["nav/odom"]] += 1
         if t >= next_status:
             next_status = t + 1.0
             since = []
@@ -222,8 +297,7 @@ def _write_outputs(path, navigator, datum, ekf_p) -> Counter:
                 u += 1
             accepted += sum(x.accepted for x in since)
             rejected += sum(not x.accepted for x in since)
-            writer.write("nav/status", status_msg(t, MODES[mode], False, since, (space, P),
-                                                  accepted, rejected))
-            counts["/nav/status"] += 1
-    writer.close()
+            writer.write(topic["nav/status"], status_msg(t, MODES[mode], False, since,
+                                                         (space, P), accepted, rejected))
+            counts["/" + topic["nav/status"]] += 1
     return counts
