@@ -8,7 +8,7 @@
                  [--point X,Y,Z] [--export csv,kml,pos]
     trial export OUT [--formats csv,kml,pos]
     trial evaluate OUT [--truth bags/NAME] [--json] [--skip S] [--truth-point X Y Z]
-                   [--truth-velocity-delay S]
+                   [--truth-velocity-delay S] [--point X Y Z] [--aperture S ...]
     trial compare OUT_A OUT_B [--with-diagnostics]
     trial batch --config PROFILE --out DIR (--scenario S --seeds N | --bags B ...) [--scheduler A]
     trial run --config config/PROFILE.yaml
@@ -61,6 +61,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="horizontal position noise per axis, m")
     p.add_argument("--gnss-sigma-v", type=float, default=SimOptions.gnss_sigma_v,
                    help="vertical position noise, m")
+    p.add_argument("--gnss-latency", type=float, default=0.0, metavar="S",
+                   help="mean delay of gnss/* after their epochs (receiver output latency), s")
     p.add_argument("--out", required=True, help="new bag folder")
 
     p = sub.add_parser("import", help="convert recorded data into a bag")
@@ -118,6 +120,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "the GNSS antenna of an RTK truth")
     p.add_argument("--truth-velocity-delay", type=float, default=0.0, metavar="S",
                    help="latency of the truth velocities, s")
+    p.add_argument("--point", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                   help="evaluate the trajectory of this body point (base_link FLU, m; a "
+                        "smoothed run's point/state when it was recorded there)")
+    p.add_argument("--aperture", type=float, nargs="+", default=(), metavar="S",
+                   help="also the relative position error over windows of S s, linear trend "
+                        "removed (SAR apertures)")
 
     p = sub.add_parser("compare", help="are two replays' outputs identical, message by message")
     p.add_argument("a", help="replay output folder (or bag folder)")
@@ -182,7 +190,8 @@ def cmd_simulate(args) -> int:
                                imu_rate=args.imu_rate, imu_stamp_jitter=args.imu_stamp_jitter,
                                gnss_rate=args.gnss_rate, gnss_velocity=not args.no_gnss_vel,
                                gnss_covariance=not args.no_gnss_cov,
-                               gnss_sigma_h=args.gnss_sigma_h, gnss_sigma_v=args.gnss_sigma_v))
+                               gnss_sigma_h=args.gnss_sigma_h, gnss_sigma_v=args.gnss_sigma_v,
+                               gnss_latency=args.gnss_latency))
     print(path)
     return 0
 
@@ -265,11 +274,17 @@ def cmd_evaluate(args) -> int:
 
     evaluation, metrics = evaluate_run(args.out, args.truth, plots=not args.no_plots,
                                        skip_s=args.skip, truth_point=args.truth_point,
-                                       truth_velocity_delay=args.truth_velocity_delay)
+                                       truth_velocity_delay=args.truth_velocity_delay,
+                                       point=args.point, apertures=args.aperture)
     if args.json:
         print(json.dumps(metrics, sort_keys=True))
     else:
+        from ins_gnss_ros.trial.aperture import ApertureError, markdown_lines
+
         print(markdown_table(evaluation))
+        if "aperture" in metrics:
+            print("\n" + "\n".join(markdown_lines([ApertureError(**a)
+                                                    for a in metrics["aperture"]])))
         print(f"\nreport: {metrics['report']}")
     return 0
 
