@@ -62,8 +62,8 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
     run = forward_pass(bag_path, profile_path, outages, progress, out=out)
     out = Path(out)
     writer = bagio.BagWriter(out / "bag")
-    run.counts.recorded.update(write_outputs(writer, run.navigator.output(), run.navigator,
-                                             run.datum))
+    run.counts.recorded.update(write_outputs(writer, run.navigator.output(),
+                                             run.navigator.config, run.datum))
     writer.close()
     return run.summary(out, bag_path, outages, "offline")
 
@@ -221,7 +221,7 @@ class _Feeder:
                               msg.twist.covariance[0])
 
 
-def write_outputs(writer, result, navigator, datum, prefix="", sensor_errors=False) -> Counter:
+def write_outputs(writer, result, config, datum, prefix="", sensor_errors=False) -> Counter:
     """ins/state, nav/odom, nav/fix at every epoch of a recorded pass and nav/status once a
     second; returns the counts per topic.
 
@@ -230,10 +230,10 @@ def write_outputs(writer, result, navigator, datum, prefix="", sensor_errors=Fal
     writer : BagWriter
     result : NavigatorOutput
         The forward pass (``navigator.output()``) or another solution at its epochs with its
-        covariance (the smoothed one, trial/smooth.py).
-    navigator : Navigator
-        Its state space, configuration and update results (those since the last status go
-        into each nav/status).
+        covariance (the smoothed one, trial/smooth.py); its update results since the last
+        nav/status go into each nav/status.
+    config : NavigatorConfig
+        The filter's (the variance of the angular rate in nav/odom).
     datum : tuple or None
         ``map`` origin of nav/odom (none written without it).
     prefix : str
@@ -255,9 +255,8 @@ def write_outputs(writer, result, navigator, datum, prefix="", sensor_errors=Fal
     counts = Counter()
     if len(result.t) == 0:
         return counts
-    space, config = navigator.space, navigator.config
+    space, updates = result.space, result.updates
     rate_var = config.noise.gyro_psd / config.cov_interval
-    updates = navigator.updates
     u = 0
     accepted = rejected = 0
     next_status = -np.inf

@@ -14,7 +14,9 @@ holds
   InsState of that body point (position, velocity, attitude, compensated rates) at every IMU
   sample (:func:`~ins_gnss_ros.nav.smoother.imu_rate_track`).
 
-The forward record is what bounds the memory: P, P- and Phi per epoch (3 n^2 doubles, 10 Hz).
+The forward record is what bounds the memory: P, P- and Phi per epoch (3 n^2 doubles, 10 Hz or
+faster), kept once as the navigator's lists and once as the output's arrays while the output is
+made, then only as arrays (docs/results/postprocessing.md).
 """
 from __future__ import annotations
 
@@ -101,8 +103,11 @@ def smooth(bag_path, profile_path, out, outages=None, point=None, exports=(),
     run = forward_pass(bag_path, profile_path, outages, progress, out=out,
                        navigator_type=None if lever is None else _KeepingNavigator)
     out = Path(out)
-    nav = run.navigator
-    forward = nav.output()
+    forward = run.navigator.output()
+    config = run.navigator.config
+    increments = None if lever is None else run.navigator.increments.arrays()
+    # The navigator's record (lists of per-epoch arrays) is as large as its output: let it go.
+    run.navigator = None
     toc_forward = time.perf_counter()
     if forward.P is None:
         raise ValueError(f"{bag_path}: the filter never started (no GNSS fix to level on): "
@@ -116,10 +121,10 @@ def smooth(bag_path, profile_path, out, outages=None, point=None, exports=(),
     counts = run.counts.recorded
     solutions = [("", smoothed, True), (FORWARD_PREFIX, forward, False)]
     for prefix, result, errors in tqdm(solutions, disable=not progress, desc="writing"):
-        counts.update(write_outputs(writer, result, nav, run.datum, prefix, errors))
+        counts.update(write_outputs(writer, result, config, run.datum, prefix, errors))
         if lever is not None:
             counts.update(_write_point(writer, prefix + POINT_TOPIC, result, lever,
-                                       *nav.increments.arrays()))
+                                       *increments))
     writer.close()
     toc_write = time.perf_counter()
     summary = run.summary(out, bag_path, outages, "smooth",
