@@ -69,4 +69,7 @@ def test_seed_determinism():
     np.testing.assert_array_equal(a.dtheta, b.dtheta)
     np.testing.assert_array_equal(a.lat, b.lat)
     assert not np.allclose(a.q_nb, c.q_nb)
-    assert set(scenarios.SCENARIOS) == {"car", "sea"}
+    assert set(scenarios.SCENARIOS) == {"car", "sea", "aircraft"}
+    d = scenarios.aircraft(duration=60.0, seed=5, rate=50.0).trajectory
+    np.testing.assert_array_equal(d.lat, scenarios.aircraft(duration=60.0, seed=5,
+                                                            rate=50.0).trajectory.lat)

@@ -134,7 +134,8 @@ class Navigator:
                 self._refuse(m, epoch, "too old")
                 return
             self._state = checkpoint.state.copy()
-            self._recorder.truncate(checkpoint.epochs, checkpoint.update_count)
+            self._recorder.truncate(checkpoint.epochs, checkpoint.update_count,
+                                    checkpoint.last_epoch)
             for again in self._rewind.back_to(checkpoint):
                 self._queue(again)
         self._queue(m)
@@ -299,7 +300,8 @@ class Navigator:
                              s.nav.t, aiding=False)
             s.mode = modes.after_epoch(s.mode, s.nav.t, s.t_last_aid, cfg.dr_timeout)
             self._recorder.set_mode(s.mode)
-        oldest = self._rewind.keep(s, self._recorder.epochs, self._recorder.update_count)
+        oldest = self._rewind.keep(s, self._recorder.epochs, self._recorder.update_count,
+                                   self._recorder.last_epoch)
         if oldest is not None:
             self._recorder.forget_updates(oldest.update_count)
 

@@ -165,12 +165,26 @@ class Recorder:
         self._updates_dropped += first
 
     # -- rewind and output -------------------------------------------------------------------
-    def truncate(self, epochs, update_count):
+    def last_epoch(self):
+        """A copy of the current epoch's record (None without one), for :meth:`truncate`."""
+        if not self._record or not self._out["t"]:
+            return None
+        return {k: ({n: v.copy() for n, v in lst[-1].items()} if k == "est"
+                    else np.copy(lst[-1]) if isinstance(lst[-1], np.ndarray) else lst[-1])
+                for k, lst in self._out.items() if lst}
+
+    def truncate(self, epochs, update_count, last_epoch=None):
         """Forget the epochs after the first `epochs` and the update results after the first
-        `update_count`: a delayed measurement re-runs them."""
+        `update_count`: a delayed measurement re-runs them. `last_epoch` (:meth:`last_epoch`
+        when the run had got that far) restores the record of the epoch the re-run starts
+        from: the updates re-applied there would otherwise add their corrections (dx) twice,
+        which the smoother reads."""
         for lst in self._out.values():
             del lst[epochs:]
         del self._updates[update_count - self._updates_dropped:]
+        if last_epoch is not None and epochs > 0:
+            for k, value in last_epoch.items():
+                self._out[k][-1] = value
 
     def output(self):
         """The record so far, as a :class:`NavigatorOutput`."""

@@ -119,6 +119,9 @@ class Checkpoint:
     epochs: int         # epochs recorded (Recorder.epochs)
     update_count: int   # update results produced (Recorder.update_count)
     applied: int        # measurements applied (Rewind.applied_count)
+    # The record of the checkpoint's epoch as it was (Recorder.last_epoch): the updates applied
+    # at that epoch after the checkpoint change it, and the re-run applies them again.
+    last_epoch: dict | None = None
 
 
 class Rewind:
@@ -141,13 +144,14 @@ class Rewind:
         """Measurement m has been applied."""
         self._applied.append(m)
 
-    def keep(self, state, epochs, update_count):
+    def keep(self, state, epochs, update_count, last_epoch=lambda: None):
         """Take a checkpoint of `state` if `interval` has passed since the last one; drop those
         no measurement within `history` can need. Returns the oldest checkpoint when older ones
-        were dropped (the update results before it are no longer needed either), else None."""
+        were dropped (the update results before it are no longer needed either), else None.
+        `last_epoch()` gives the record of the current epoch to keep with a checkpoint."""
         if state.nav.t - self._t_last >= self.interval:
             self.checkpoints.append(Checkpoint(state.copy(), epochs, update_count,
-                                               self.applied_count))
+                                               self.applied_count, last_epoch()))
             self._t_last = state.nav.t
             horizon = state.nav.t - self.history
             cps, drop = self.checkpoints, 0

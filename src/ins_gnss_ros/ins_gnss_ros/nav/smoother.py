@@ -18,6 +18,11 @@ so with e_k the smoothed error of the corrected solution at k (computed minus tr
 (dx_(k+1) turns the error of the corrected solution at k+1 back into that of the uncorrected
 one, which is what the prediction refers to). The smoothed solution is the forward one with e_k
 removed by :func:`~ins_gnss_ros.nav.strapdown.apply_correction`.
+
+Between the epochs (the filter's covariance interval, 0.1 s by default) :func:`imu_rate_track`
+gives a solution at every IMU sample from the increments: each interval is mechanised from the
+smoothed state of its first epoch, and the closure to the smoothed state of the next is removed
+in proportion to the time elapsed (the usual way post-processors densify a smoothed solution).
 """
 from __future__ import annotations
 
@@ -25,8 +30,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .increments import SensorErrors
 from .modes import ALIGNING
-from .strapdown import apply_correction
+from .rotations import quat_conj, quat_from_rotvec, quat_mul, quat_to_rotvec
+from .strapdown import apply_correction, run
 from .track import Track
 
 
@@ -88,3 +95,67 @@ def rts_smooth(out):
         lat[k], lon[k], h[k], v[k], q[k] = st.lat, st.lon, st.h, st.v_enu, st.q_nb
     est = {name: values + e[:, S[name]] for name, values in out.estimates.items()}
     return SmoothedOutput(out.t.copy(), lat, lon, h, v, q, Ps, est)
+
+
+@dataclass
+class ImuRateTrack(Track):
+    """A solution at the IMU samples (:func:`imu_rate_track`).
+
+    Attributes
+    ----------
+    omega_b : (k, 3) rad/s
+        Compensated body rate of each sample (for velocities at a lever arm).
+    """
+
+    omega_b: np.ndarray
+
+
+def imu_rate_track(track, estimates, t, dtheta, dv):
+    """The solution of `track` at the IMU samples between its first and last epoch.
+
+    Each interval (t_k, t_(k+1)] is mechanised from epoch k's state with its sensor errors
+    (``estimates`` at k, the model of :class:`~ins_gnss_ros.nav.increments.SensorErrors`); the
+    closure x_mech(t_(k+1)) - x(t_(k+1)) in position, velocity and attitude is removed in the
+    fraction (t - t_k) / (t_(k+1) - t_k), so the result is continuous and meets every epoch.
+
+    Parameters
+    ----------
+    track : Track
+        Solution at epochs (forward or smoothed pass) whose times are IMU sample times.
+    estimates : dict of str to (k, size)
+        Its sensor-error estimates by block name.
+    t : (N,) s
+        End times of the IMU samples, increasing.
+    dtheta, dv : (N, 3)
+        Their coning/sculling-compensated increments (rad, m/s), sensor errors not removed.
+
+    Returns
+    -------
+    ImuRateTrack
+    """
+    t = np.asarray(t, float)
+    idx = np.searchsorted(t, track.t, side="right")  # samples of interval k: idx[k]..idx[k+1]-1
+    parts = []
+    for k in range(len(track.t) - 1):
+        i, j = idx[k], idx[k + 1]
+        span = track.t[k + 1] - track.t[k]
+        if j <= i or span <= 0.0:
+            continue
+        dts = np.diff(t[i:j], prepend=track.t[k])
+        errors = SensorErrors.of_estimates({name: v[k] for name, v in estimates.items()})
+        th, dvc = errors.compensate(dtheta[i:j], dv[i:j], dts)
+        r = run(track.state(k), th, dvc, float(dts.mean()))
+        w = ((t[i:j] - track.t[k]) / span)[:, None]
+        closure = np.array([r["lat"][-1] - track.lat[k + 1], r["lon"][-1] - track.lon[k + 1],
+                            r["h"][-1] - track.h[k + 1]])
+        lla = np.column_stack([r["lat"][1:], r["lon"][1:], r["h"][1:]]) - w * closure
+        v = r["v_enu"][1:] - w * (r["v_enu"][-1] - track.v_enu[k + 1])
+        phi = quat_to_rotvec(quat_mul(track.q_nb[k + 1], quat_conj(r["q_nb"][-1])))
+        q = quat_mul(quat_from_rotvec(w * phi), r["q_nb"][1:])
+        parts.append((t[i:j], lla, v, q, th / dts[:, None]))
+    if not parts:
+        empty = np.zeros((0, 3))
+        return ImuRateTrack(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), empty,
+                            np.zeros((0, 4)), empty)
+    tt, lla, v, q, w_b = (np.concatenate(c) for c in zip(*parts))
+    return ImuRateTrack(tt, lla[:, 0], lla[:, 1], lla[:, 2], v, q, w_b)

@@ -8,8 +8,12 @@
 * ``sea`` — Lab 2 (R/V "Azimut", Lake Ladoga): a vessel at 6–10 m/s changing course every one
   to two minutes, in a short-fetch lake sea (see :mod:`ins_gnss_ros.sim.waves`), with a water
   current for the speed log.
+* ``aircraft`` — seed 003's flight trials of the SAR micronavigation system: an aircraft at
+  100-200 m/s flying straight survey legs (the synthetic apertures) with the small heading and
+  pitch corrections of manual or autopilot flight (the trajectory instabilities the system
+  measures), joined by banked racetrack turns; the system starts in flight.
 
-Both are seeded: the same seed and duration give the identical trajectory.
+All are seeded: the same seed and duration give the identical trajectory.
 """
 from __future__ import annotations
 
@@ -24,6 +28,11 @@ from ins_gnss_ros.sim.trajectory import CarMotion, Route, ShipMotion, Trajectory
 CAR_START = (np.deg2rad(59.9), np.deg2rad(30.3), 22.0)
 #: Lab 2 start: Lake Ladoga (surface ~5 m above sea level + ~17 m geoid).
 SEA_START = (np.deg2rad(60.8), np.deg2rad(31.5), 22.0)
+
+#: Seed 003's flight start: over the Leningrad region, 3 km ellipsoidal height.
+AIRCRAFT_START = (np.deg2rad(59.8), np.deg2rad(30.3), 3000.0)
+#: Standard gravity, m/s^2: the bank of a coordinated turn is atan(lateral acceleration / g).
+_G = 9.80665
 
 #: Peak lateral acceleration of the car's circles and figure-eights, m/s² (≈0.6 g: a dry-road
 #: handling limit of a passenger car, "maximum feasible speed" in seed 004 Lab 1).
@@ -184,5 +193,42 @@ def sea(duration: float = 600.0, seed: int = 0, rate: float = 200.0,
                     max_lateral_accel=route.max_lateral_accel)
 
 
+def aircraft(duration: float = 600.0, seed: int = 0, rate: float = 200.0,
+             start=AIRCRAFT_START, oversample: int = 4) -> Scenario:
+    """Seed 003 SAR flight: survey legs at 100-200 m/s with trajectory instabilities, turns.
+
+    Legs of 60-120 s, each at up to 20 m/s from the last one's speed (within 100-200 m/s); every 3-8 s the heading changes by
+    0.1-0.5 deg over 4 s and the pitch by up to 0.3 deg (a few decimetres of deviation from the straight
+    line over an aperture, what the SAR's motion compensation must know to millimetres). Legs
+    are joined by 180 deg turns at a 25 deg bank. The motion is :class:`CarMotion`'s (velocity
+    along the body x axis: coordinated flight without wind) with the roll of a coordinated
+    turn, -v r / g (small-angle form; left turns bank left, negative ROS roll).
+
+    Parameters
+    ----------
+    duration, seed, rate, start, oversample : as in :func:`car`
+
+    Returns
+    -------
+    Scenario
+    """
+    rng = np.random.default_rng(seed)
+    route = Route(yaw0=rng.uniform(-np.pi, np.pi), speed0=rng.uniform(100.0, 200.0), ramp=4.0)
+    while route.t < duration:
+        route.change_speed(np.clip(route.current_speed + rng.uniform(-20.0, 20.0), 100.0, 200.0),
+                           1.0)
+        leg_end = route.t + rng.uniform(60.0, 120.0)
+        while route.t < leg_end:
+            route.set_pitch(np.deg2rad(rng.uniform(-0.3, 0.3)), 2.0)
+            # Each correction takes 4 s (its yaw-rate ramps): a shorter one of a small angle
+            # would step the coordinated-turn roll.
+            angle = np.deg2rad(rng.uniform(0.1, 0.5)) * rng.choice([-1.0, 1.0])
+            route.turn(angle, radius=route.current_speed * 4.0 / abs(angle))
+            route.hold(rng.uniform(3.0, 8.0))
+        route.turn(np.pi * rng.choice([-1.0, 1.0]), lateral_accel=_G * np.tan(np.deg2rad(25.0)))
+    traj = generate(CarMotion(route, roll_gain=-1.0 / _G), *start, duration, rate, oversample)
+    return Scenario("aircraft", seed, traj, max_lateral_accel=route.max_lateral_accel)
+
+
 #: Scenario factories by name, for ``trial simulate --scenario NAME``.
-SCENARIOS = {"car": car, "sea": sea}
+SCENARIOS = {"car": car, "sea": sea, "aircraft": aircraft}

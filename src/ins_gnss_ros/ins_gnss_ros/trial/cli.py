@@ -5,8 +5,11 @@
     trial replay bags/NAME --config config/PROFILE.yaml --out OUT [--outages LEN:PERIOD[:FIRST]]
                  [--init-from-truth] [--rate R --processes | --offline] [--faults FILE]
                  [--satellites N:LEN:PERIOD[:FIRST]]
+    trial smooth bags/NAME --config config/PROFILE.yaml --out OUT [--outages LEN:PERIOD[:FIRST]]
+                 [--point X,Y,Z] [--export csv,kml,pos]
+    trial export OUT [--formats csv,kml,pos]
     trial evaluate OUT [--truth bags/NAME] [--json] [--skip S] [--truth-point X Y Z]
-                   [--truth-velocity-delay S] [--remove-offset]
+                   [--truth-velocity-delay S] [--remove-offset] [--point X Y Z] [--aperture S ...]
     trial compare OUT_A OUT_B [--with-diagnostics]
     trial batch --config PROFILE --out DIR (--scenario S --seeds N | --bags B ...) [--scheduler A]
     trial run --config config/PROFILE.yaml
@@ -71,6 +74,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--wheel-slip-interval", type=float,
                    default=SimOptions.wheel_slip_interval, metavar="S",
                    help="mean time between wheel slip events, s (inf: none)")
+    p.add_argument("--gnss-latency", type=float, default=0.0, metavar="S",
+                   help="mean delay of gnss/* after their epochs (receiver output latency), s")
     p.add_argument("--out", required=True, help="new bag folder")
 
     p = sub.add_parser("import", help="convert recorded data into a bag")
@@ -108,6 +113,24 @@ def build_parser() -> argparse.ArgumentParser:
                         "gnss/observations, gnss/fix and gnss/vel are withheld (in-process "
                         "replay only)")
 
+    p = sub.add_parser("smooth", help="post-process a bag: the profile's forward filter, then "
+                       "the RTS smoother")
+    p.add_argument("bag")
+    p.add_argument("--config", required=True, help="params file (config/PROFILE.yaml)")
+    p.add_argument("--out", required=True, help="new output folder")
+    p.add_argument("--outages", default=None, help="LEN:PERIOD[:FIRST] s of GNSS withheld")
+    p.add_argument("--point", default=None, metavar="X,Y,Z",
+                   help="also record the solution of this body point (base_link FLU, m; an "
+                        "antenna, a camera) at the IMU rate: point/state")
+    p.add_argument("--export", default="", metavar="FORMATS",
+                   help="also export the solutions: comma-separated csv, kml, pos")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar (default: when stderr is a terminal)")
+
+    p = sub.add_parser("export", help="write a run's solutions as CSV, KML, RTKLIB .pos")
+    p.add_argument("out", help="replay or smooth output folder")
+    p.add_argument("--formats", default="csv,kml,pos", help="comma-separated csv, kml, pos")
+
     p = sub.add_parser("evaluate", help="error statistics, plots and report of a replay")
     p.add_argument("out", help="replay output folder")
     p.add_argument("--truth", default=None, help="bag with truth/state (default: the input bag)")
@@ -123,6 +146,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--remove-offset", action="store_true",
                    help="take the mean position error out (a truth with a constant offset of "
                         "its own, e.g. RTK against a base of unknown coordinates)")
+    p.add_argument("--point", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                   help="evaluate the trajectory of this body point (base_link FLU, m; a "
+                        "smoothed run's point/state when it was recorded there)")
+    p.add_argument("--aperture", type=float, nargs="+", default=(), metavar="S",
+                   help="also the relative position error over windows of S s, linear trend "
+                        "removed (SAR apertures)")
 
     p = sub.add_parser("compare", help="are two replays' outputs identical, message by message")
     p.add_argument("a", help="replay output folder (or bag folder)")
@@ -192,7 +221,8 @@ def cmd_simulate(args) -> int:
                                gnss_sigma_h=args.gnss_sigma_h, gnss_sigma_v=args.gnss_sigma_v,
                                wheel_odometry=args.wheel_odometry,
                                wheel_scale_error=args.wheel_scale_error,
-                               wheel_slip_interval=args.wheel_slip_interval))
+                               wheel_slip_interval=args.wheel_slip_interval,
+                               gnss_latency=args.gnss_latency))
     print(path)
     return 0
 
@@ -241,6 +271,37 @@ def cmd_replay(args) -> int:
     return 0
 
 
+def cmd_smooth(args) -> int:
+    from ins_gnss_ros.trial.run_folder import counts_table
+    from ins_gnss_ros.trial.smooth import smooth
+
+    point = None
+    if args.point is not None:
+        try:
+            point = [float(x) for x in args.point.split(",")]
+        except ValueError:
+            point = []
+        if len(point) != 3:
+            raise ValueError(f"--point takes X,Y,Z in metres, got {args.point!r}")
+    summary = smooth(args.bag, args.config, args.out, outages=args.outages, point=point,
+                     exports=args.export, progress=_progress(args))
+    print(f"smoothed {args.bag} ({', '.join(summary['graph'])}):")
+    print("\n".join("  " + line for line in counts_table(summary["messages"])))
+    print("  " + ", ".join(f"{k} {v:.1f} s" for k, v in summary["timing_s"].items()))
+    print(f"recorded {', '.join(summary['topics'])} into {args.out}")
+    for path in summary["exports"]:
+        print(f"exported {path}")
+    return 0
+
+
+def cmd_export(args) -> int:
+    from ins_gnss_ros.trial.export import export_run
+
+    for path in export_run(args.out, args.formats):
+        print(path)
+    return 0
+
+
 def cmd_evaluate(args) -> int:
     from ins_gnss_ros.trial.evaluate import markdown_table
     from ins_gnss_ros.trial.report import evaluate_run
@@ -248,11 +309,17 @@ def cmd_evaluate(args) -> int:
     evaluation, metrics = evaluate_run(args.out, args.truth, plots=not args.no_plots,
                                        skip_s=args.skip, truth_point=args.truth_point,
                                        truth_velocity_delay=args.truth_velocity_delay,
-                                       remove_offset=args.remove_offset)
+                                       remove_offset=args.remove_offset,
+                                       point=args.point, apertures=args.aperture)
     if args.json:
         print(json.dumps(metrics, sort_keys=True))
     else:
+        from ins_gnss_ros.trial.aperture import ApertureError, markdown_lines
+
         print(markdown_table(evaluation))
+        if "aperture" in metrics:
+            print("\n" + "\n".join(markdown_lines([ApertureError(**a)
+                                                    for a in metrics["aperture"]])))
         print(f"\nreport: {metrics['report']}")
     return 0
 
@@ -287,7 +354,7 @@ def cmd_run(args) -> int:
 
 
 COMMANDS = {"simulate": cmd_simulate, "import": cmd_import, "replay": cmd_replay,
-            "evaluate": cmd_evaluate, "compare": cmd_compare, "batch": cmd_batch, "run": cmd_run}
+            "smooth": cmd_smooth, "export": cmd_export, "evaluate": cmd_evaluate, "compare": cmd_compare, "batch": cmd_batch, "run": cmd_run}
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -16,7 +16,9 @@ the nodes build them) and ``nav/status`` once a second with the updates since th
 from __future__ import annotations
 
 from collections import Counter
+from dataclasses import dataclass
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 
@@ -61,6 +63,72 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
     Parameters as :func:`ins_gnss_ros.trial.replay.replay` (``gnss/*`` withheld in the outage
     windows). Returns the summary written to ``OUT/replay.json``.
     """
+    run = forward_pass(bag_path, profile_path, outages, progress, out=out)
+    out = Path(out)
+    writer = bagio.BagWriter(out / "bag")
+    run.counts.recorded.update(write_outputs(writer, run.navigator.output(),
+                                             run.navigator.config, run.datum, run.frames))
+    writer.close()
+    return run.summary(out, bag_path, outages, "offline")
+
+
+@dataclass(frozen=True)
+class OutputFrames:
+    """The TF set-up of the outputs, as the nodes have it: the ``ekf`` parameters (frame names,
+    ``publish_tf``, ``lever_arm``) and the ``imu_preprocessor``'s with its mounting C_bs."""
+
+    ekf_p: dict
+    pre_p: dict
+    c_bs: np.ndarray
+
+
+@dataclass
+class ForwardPass:
+    """The filter of a profile run over a bag (:func:`forward_pass`).
+
+    Attributes
+    ----------
+    navigator : Navigator
+        After ``flush``, its record (``output()``) holds the whole pass with covariances.
+    datum : tuple or None
+        ``map`` origin (lat rad, lon rad, h m) of ``nav/odom``; None without a fix.
+    profile : Profile
+    windows : (k, 2) int ndarray
+        GNSS outage windows, ns.
+    counts : MessageCounts
+        Played and withheld so far (the caller adds what it records).
+    events : Counter
+        What the front end reported, by text.
+    frames : OutputFrames
+    """
+
+    navigator: object
+    datum: tuple | None
+    profile: object
+    windows: np.ndarray
+    counts: MessageCounts
+    events: Counter
+    frames: OutputFrames
+
+    def summary(self, out, bag_path, outages, mode, graph=("imu_preprocessor",
+                                                           "ekf (filter only)")) -> dict:
+        """Write ``OUT/replay.json`` (run_folder.write_summary) with the front end's events."""
+        summary = write_summary(out, bag_path, self.profile, outages, self.windows, self.counts,
+                                mode, 0.0, graph=list(graph))
+        summary["events"] = dict(sorted(self.events.items()))
+        return summary
+
+
+def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
+                 navigator_type=None) -> ForwardPass:
+    """The profile's imu_preprocessor and ekf cores over a bag, recorded (``record=True``: the
+    per-epoch solution, covariance, transition and corrections the smoother needs).
+
+    ``out``: the run folder to create (run_folder.new_run_folder) once the profile and the bag
+    are checked, before the work.
+    ``navigator_type`` (default :class:`~ins_gnss_ros.nav.navigator.Navigator`) lets a caller
+    observe the filter's input, e.g. keep the increments (trial/smooth.py).
+    """
     from tqdm import tqdm
 
     from ins_gnss_ros.imu.preprocessor_params import preprocessor_from_params
@@ -73,8 +141,9 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
     check_inputs(bag_path, OFFLINE_TOPICS)
     rows = input_rows(bag_path)
     windows = gnss_windows(rows, outages)
-    out = new_run_folder(out)
-    navigator = Navigator(navigator_config(ekf_p, record=True))
+    if out is not None:
+        new_run_folder(out)
+    navigator = (navigator_type or Navigator)(navigator_config(ekf_p, record=True))
     events = Counter()
     aiding = Aiding(navigator, AidingPolicy.from_params(ekf_p),
                     lambda text, log=True: events.update([text]))
@@ -87,7 +156,7 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
         raise ProfileError(f"{profile.path}: imu_preprocessor: {err}") from None
     feed = _Feeder(aiding, preprocessor, pre_p, ekf_p, events)
     counts = MessageCounts()
-    for row in tqdm(rows, disable=not progress, unit="msg", desc="offline"):
+    for row in tqdm(rows, disable=not progress, unit="msg", desc="forward"):
         if row.topic.startswith(GNSS_PREFIX) and in_outage(row.t_ns, windows):
             counts.withheld[row.topic] += 1
             continue
@@ -96,13 +165,8 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
         if handler is not None:
             handler(bagio.decode_message(row, bag_path))
     navigator.flush()
-    recorded = _write_outputs(out / "bag", navigator, aiding.datum, ekf_p,
-                              (pre_p, preprocessor.calibration.c_bs))
-    counts.recorded.update(recorded)
-    summary = write_summary(out, bag_path, profile, outages, windows, counts, "offline", 0.0,
-                            graph=["imu_preprocessor", "ekf (filter only)"])
-    summary["events"] = dict(sorted(events.items()))
-    return summary
+    return ForwardPass(navigator, aiding.datum, profile, windows, counts, events,
+                       OutputFrames(ekf_p, pre_p, preprocessor.calibration.c_bs))
 
 
 class _Feeder:
@@ -185,44 +249,61 @@ class _Feeder:
         self.aiding.wheel_odometry(bagio.stamp_to_sec(msg.header.stamp), np.array([l.x, l.y, l.z]),
                                    np.diag(np.reshape(msg.twist.covariance, (6, 6)))[:3])
 
+def write_outputs(writer, result, config, datum, frames, prefix="", sensor_errors=False) -> Counter:
+    """ins/state, nav/odom, nav/fix, /tf at every epoch of a recorded pass, nav/status once a
+    second and /tf_static at the first; returns the counts per topic.
 
-def _write_outputs(path, navigator, datum, ekf_p, imu_mounting) -> Counter:
-    """ins/state, nav/odom, nav/fix, /tf at every recorded epoch of the filter, nav/status once
-    a second and /tf_static (``imu_mounting``: the imu_preprocessor's parameters and C_bs) at
-    the first; returns the counts per topic."""
+    Parameters
+    ----------
+    writer : BagWriter
+    result : NavigatorOutput
+        The forward pass (``navigator.output()``) or another solution at its epochs with its
+        covariance (the smoothed one, trial/smooth.py); its update results since the last
+        nav/status go into each nav/status.
+    config : NavigatorConfig
+        The filter's (the variance of the angular rate in nav/odom).
+    datum : tuple or None
+        ``map`` origin of nav/odom and /tf (none written without it).
+    frames : OutputFrames
+        The TF frames and mountings, as the nodes have them.
+    prefix : str
+        Put before every topic name (``forward/``); /tf and /tf_static only for the solution
+        without one (a bag holds one tree).
+    sensor_errors : bool
+        Fill the sensor-error fields of ins/state from ``result.estimates``.
+    """
     from geometry_msgs.msg import Vector3
     from ins_gnss_msgs.msg import InsState
     from sensor_msgs.msg import NavSatStatus
 
     from ins_gnss_ros.io import ns_to_stamp, sec_to_ns
     from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, NAVIGATING, NavState
-    from ins_gnss_ros.nodes.convert import fill_ins_state
+    from ins_gnss_ros.nav.increments import SensorErrors
+    from ins_gnss_ros.nodes.convert import fill_ins_state, set_vector3
     from ins_gnss_ros.nodes.nav_messages import MODES, fix_msg, fix_status, odom_msg, status_msg
     from ins_gnss_ros.nodes.tf_messages import solution_tf, static_tf
 
     ins_modes = {ALIGNING: InsState.MODE_ALIGNING, NAVIGATING: InsState.MODE_NAVIGATING,
                  DEAD_RECKONING: InsState.MODE_DEAD_RECKONING}
-
-    result = navigator.output()
-    writer = bagio.BagWriter(path)
     counts = Counter()
     if len(result.t) == 0:
-        writer.close()
         return counts
-    space, config = navigator.space, navigator.config
+    space, updates = result.space, result.updates
     rate_var = config.noise.gyro_psd / config.cov_interval
-    updates = navigator.updates
     u = 0
     accepted = rejected = 0
     next_status = -np.inf
-    frames = (ekf_p["map_frame"], ekf_p["base_link_frame"])
-    pre_p, c_bs = imu_mounting
+    topic = {name: prefix + name for name in ("ins/state", "nav/fix", "nav/odom", "nav/status")}
+    ekf_p, pre_p = frames.ekf_p, frames.pre_p
+    names = (ekf_p["map_frame"], ekf_p["base_link_frame"])
+    publish_tf = ekf_p["publish_tf"] and not prefix
     t0_ns = sec_to_ns(float(result.t[0]))
     # As the imu_preprocessor and ekf nodes publish them: each its own, once.
     for parent, publish, child in (
-            (pre_p["frame_id"], pre_p["publish_tf"], (pre_p["imu_frame"], (0.0, 0.0, 0.0), c_bs)),
-            (frames[1], ekf_p["publish_tf"], (ekf_p["gnss_frame"], ekf_p["lever_arm"], np.eye(3)))):
-        if publish:
+            (pre_p["frame_id"], pre_p["publish_tf"],
+             (pre_p["imu_frame"], (0.0, 0.0, 0.0), frames.c_bs)),
+            (names[1], ekf_p["publish_tf"], (ekf_p["gnss_frame"], ekf_p["lever_arm"], np.eye(3)))):
+        if publish and not prefix:
             writer.write("/tf_static", static_tf(ns_to_stamp(t0_ns), parent, [child]), t0_ns)
             counts["/tf_static"] += 1
     for k in range(len(result.t)):
@@ -235,20 +316,28 @@ def _write_outputs(path, navigator, datum, ekf_p, imu_mounting) -> Counter:
         state = InsState()
         state.header.stamp, state.header.frame_id = stamp, "map"
         fill_ins_state(state, st)
+        if sensor_errors:
+            errors = SensorErrors.of_estimates({name: v[k] for name, v in
+                                                result.estimates.items()})
+            set_vector3(state.gyro_bias, errors.gyro_bias)
+            set_vector3(state.accel_bias, errors.accel_bias)
+            set_vector3(state.gyro_scale_factor, errors.gyro_scale)
+            set_vector3(state.accel_scale_factor, errors.accel_scale)
         state.mode = ins_modes[mode]
         state.correction_sequence = 1  # the filter's own, corrected solution
-        writer.write("ins/state", state)
+        writer.write(topic["ins/state"], state)
         # The input's augmentation is not kept per epoch: a NAVIGATING solution is a FIX here.
-        writer.write("nav/fix", fix_msg(stamp, st, P[space["pos"], space["pos"]],
-                                        fix_status(mode == NAVIGATING, NavSatStatus.STATUS_FIX),
-                                        frame_id=frames[1]))
-        counts.update(["/ins/state", "/nav/fix"])
+        writer.write(topic["nav/fix"], fix_msg(stamp, st, P[space["pos"], space["pos"]],
+                                               fix_status(mode == NAVIGATING,
+                                                          NavSatStatus.STATUS_FIX),
+                                               frame_id=names[1]))
+        counts.update(["/" + topic["ins/state"], "/" + topic["nav/fix"]])
         if datum is not None:
-            writer.write("nav/odom", odom_msg(stamp, st, P, space, datum, Vector3(), rate_var,
-                                              frames))
-            counts["/nav/odom"] += 1
-            if ekf_p["publish_tf"]:
-                writer.write("/tf", solution_tf(stamp, st, datum, *frames), sec_to_ns(t))
+            writer.write(topic["nav/odom"], odom_msg(stamp, st, P, space, datum, Vector3(),
+                                                     rate_var, names))
+            counts["/" + topic["nav/odom"]] += 1
+            if publish_tf:
+                writer.write("/tf", solution_tf(stamp, st, datum, *names), sec_to_ns(t))
                 counts["/tf"] += 1
         if t >= next_status:
             next_status = t + 1.0
@@ -258,8 +347,7 @@ def _write_outputs(path, navigator, datum, ekf_p, imu_mounting) -> Counter:
                 u += 1
             accepted += sum(x.accepted for x in since)
             rejected += sum(not x.accepted for x in since)
-            writer.write("nav/status", status_msg(t, MODES[mode], False, since, (space, P),
-                                                  accepted, rejected))
-            counts["/nav/status"] += 1
-    writer.close()
+            writer.write(topic["nav/status"], status_msg(t, MODES[mode], False, since,
+                                                         (space, P), accepted, rejected))
+            counts["/" + topic["nav/status"]] += 1
     return counts

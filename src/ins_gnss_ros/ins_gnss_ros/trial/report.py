@@ -88,8 +88,11 @@ def attach_odometry_covariance(estimate: Trajectory, messages, t0_ns: int) -> Tr
                       att_cov=at_estimate(pose[:, 3:, 3:]))
 
 
-def load_run(out, truth_bag=None):
+def load_run(out, truth_bag=None, state_topic=STATE_TOPIC):
     """Estimate, truth and outage windows of a replay output folder.
+
+    ``state_topic``: the estimate's InsState topic (a smoothed run's ``/point/state``: then
+    without covariances, nav/odom being of base_link).
 
     Returns
     -------
@@ -119,14 +122,15 @@ def load_run(out, truth_bag=None):
         raise ValueError(f"{truth_bag}: no {TRUTH_TOPIC} messages to evaluate against")
     t0_ns = truth_msgs[0].t_ns
     truth = trajectory_from_states(truth_msgs, t0_ns)
-    outputs = bagio.read_bag(output_bag, [STATE_TOPIC, ODOM_TOPIC])
-    states = [m for m in outputs if m.topic == STATE_TOPIC]
+    outputs = bagio.read_bag(output_bag, [state_topic] + [ODOM_TOPIC] * (
+        state_topic == STATE_TOPIC))
+    states = [m for m in outputs if m.topic == state_topic]
     # A strapdown state no filter has corrected yet (sequence 0) is its start-up parameters,
     # not a solution: left out when a filter ran (a strapdown-only run keeps them all).
     corrected = [m for m in states if m.msg.correction_sequence > 0]
     estimate = trajectory_from_states(corrected or states, t0_ns)
     if estimate is None or truth is None:
-        raise ValueError(f"{output_bag}: no {STATE_TOPIC} with finite positions to evaluate")
+        raise ValueError(f"{output_bag}: no {state_topic} with finite positions to evaluate")
     estimate = attach_odometry_covariance(
         estimate, [m for m in outputs if m.topic == ODOM_TOPIC], t0_ns)
     # A satellite window (trial replay --satellites) is evaluated like an outage: the drift
@@ -165,7 +169,7 @@ def referred_to_truth(estimate: Trajectory, truth: Trajectory, truth_point=None,
 
 
 def evaluate_run(out, truth_bag=None, plots=True, skip_s=0.0, truth_point=None,
-                 truth_velocity_delay=0.0, remove_offset=False):
+                 truth_velocity_delay=0.0, remove_offset=False, point=None, apertures=()):
     """Evaluate a replay output folder; write ``report.md`` (and PNG plots) into it.
 
     Parameters
@@ -184,6 +188,11 @@ def evaluate_run(out, truth_bag=None, plots=True, skip_s=0.0, truth_point=None,
     remove_offset : bool
         Take the truth's constant position offset (the mean error) out of the statistics
         (:func:`~ins_gnss_ros.trial.evaluate.evaluate`); the report gives it.
+    point : (3,) array_like, optional
+        Evaluate the trajectory of this body point (base_link FLU, m) instead (:func:`at_point`).
+    apertures : iterable of float
+        Also the relative position error over windows of these lengths, s (aperture.py);
+        in the metrics as ``aperture``.
 
     Returns
     -------
@@ -196,8 +205,14 @@ def evaluate_run(out, truth_bag=None, plots=True, skip_s=0.0, truth_point=None,
     out = Path(out)
     if not skip_s >= 0.0:
         raise ValueError(f"--skip must be >= 0 s, got {skip_s}")
-    estimate, truth, windows, summary = load_run(out, truth_bag)
+    if point is not None and truth_point is not None:
+        raise ValueError("give a truth point or an evaluation point, not both")
+    recorded = point is not None and _recorded_point(out) == list(np.asarray(point, float))
+    estimate, truth, windows, summary = load_run(
+        out, truth_bag, "/point/state" if recorded else STATE_TOPIC)
     estimate, truth = referred_to_truth(estimate, truth, truth_point, truth_velocity_delay)
+    if point is not None:
+        estimate, truth = at_point(estimate, truth, point, recorded)
     keep = truth.time >= estimate.time[0] + skip_s
     if not keep.any():
         raise ValueError(f"no truth epoch after the first {skip_s:g} s of the estimate")
@@ -211,11 +226,45 @@ def evaluate_run(out, truth_bag=None, plots=True, skip_s=0.0, truth_point=None,
                 "truth velocity delay (s)": truth_velocity_delay or None,
                 "removed truth offset ENU (m)": None if evaluation.offset_enu is None
                 else [round(float(x), 3) for x in evaluation.offset_enu]}
-    report.write_text(markdown_report(evaluation, summary, truth_bag, images, out, skip_s,
-                                      referred))
+    from ins_gnss_ros.trial import aperture
+
+    relative = [aperture.aperture_error(evaluation.errors.time, evaluation.errors.pos_enu, w)
+                for w in apertures]
+    referred["evaluated point (FLU, m)"] = None if point is None else list(point)
+    text = markdown_report(evaluation, summary, truth_bag, images, out, skip_s, referred)
+    if relative:
+        text += "\n" + "\n".join(aperture.markdown_lines(relative)) + "\n"
+    report.write_text(text)
     metrics = evaluation.to_json()
+    if relative:
+        metrics["aperture"] = [vars(a) for a in relative]
     metrics["report"] = str(report)
     return evaluation, metrics
+
+
+def _recorded_point(out):
+    """The ``--point`` of a smoothed run folder (``smooth.json``), or None."""
+    try:
+        return json.loads((Path(out) / "smooth.json").read_text()).get("point_m")
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def at_point(estimate: Trajectory, truth: Trajectory, point, recorded=False):
+    """Estimate and truth at a body point (base_link FLU, m), each moved with its own attitude;
+    ``recorded``: the estimate is already there (a smoothed run's ``point/state``). Velocities
+    are left out (the truth lacks the body rates that move them) and so are the covariances
+    (those of nav/odom are base_link's)."""
+    if truth.q_nb is None or (estimate.q_nb is None and not recorded):
+        raise ValueError("an evaluation point needs the attitudes of the truth and the estimate")
+    point = np.asarray(point, float)
+
+    def moved(tr, move):
+        lat, lon, h = (lever_arm_position(tr.lat, tr.lon, tr.height, tr.q_nb, point) if move
+                       else (tr.lat, tr.lon, tr.height))
+        return Trajectory(time=tr.time, lat=lat, lon=lon, height=h, q_nb=tr.q_nb)
+
+    return moved(estimate, not recorded), moved(truth, True)
 
 
 def markdown_report(evaluation, summary, truth_bag, images, out, skip_s=0.0,

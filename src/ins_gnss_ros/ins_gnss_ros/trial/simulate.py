@@ -46,7 +46,7 @@ SIM_EPOCH_NS = 1_767_225_600 * 1_000_000_000
 
 #: IMU grade per scenario when none is given: a MEMS unit in the car (seed 004 Lab 1 uses an
 #: ADIS16405-class prototype), a tactical-grade unit on the ship (seed 004 Lab 2).
-DEFAULT_GRADE = {"car": "mems_adis16405", "sea": "tactical"}
+DEFAULT_GRADE = {"car": "mems_adis16405", "sea": "tactical", "aircraft": "navigation"}
 
 
 @dataclass(frozen=True)
@@ -83,6 +83,10 @@ class SimOptions:
         White position noise per horizontal axis and vertical, m.
     gnss_sigma_vel : float
         White velocity noise per axis, m/s.
+    gnss_latency : float
+        Mean delay of ``gnss/*`` after their stamps (log time = stamp + delay), s: the
+        receiver's output latency; each epoch's delay is drawn uniformly from 0.5 to 1.5 times
+        it (seed 003: the delays relative to the GNSS epochs are non-uniform).
     antenna_lever_arm : tuple of 3 float
         GNSS antenna relative to the IMU, m.
     mag_rate : float
@@ -121,6 +125,7 @@ class SimOptions:
     gnss_sigma_h: float = 0.5
     gnss_sigma_v: float = 1.0
     gnss_sigma_vel: float = 0.05
+    gnss_latency: float = 0.0
     antenna_lever_arm: tuple = (0.0, 0.0, 1.5)
     mag_rate: float = 50.0
     mag_noise: float = 100e-9
@@ -176,7 +181,8 @@ def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions
                                        rate=trajectory_rate(options, scenario), **start)
     traj = sc.trajectory
     imu = _write_imu(writer, traj, ImuSpec(grade, rate=options.imu_rate), int(seeds[0]), options)
-    _write_gnss(writer, traj, options, np.random.default_rng(seeds[1]))
+    _write_gnss(writer, traj, options, np.random.default_rng(seeds[1]),
+                np.random.default_rng([seed, 5]))
     _write_mag(writer, traj, options, int(seeds[2]))
     if scenario == "sea":
         _write_log(writer, traj, sc.water_current_enu, options, int(seeds[3]))
@@ -245,7 +251,7 @@ def _ahrs_orientation(traj, imu, sigma_deg, rng):
     return q, (np.radians(0.5) ** 2, np.radians(0.5) ** 2, sigma ** 2)
 
 
-def _write_gnss(writer, traj, options, rng):
+def _write_gnss(writer, traj, options, rng, latency_rng):
     k = _every(traj, options.gnss_rate)
     lever = np.asarray(options.antenna_lever_arm, float)
     lat, lon, h = lever_arm_position(traj.lat[k], traj.lon[k], traj.h[k], traj.q_nb[k], lever)
@@ -259,11 +265,16 @@ def _write_gnss(writer, traj, options, rng):
     vel = vel + options.gnss_sigma_vel * rng.standard_normal(vel.shape)
     t_ns = bag.sec_to_ns(traj.t[k], SIM_EPOCH_NS)
     var, var_v = sigma ** 2, [options.gnss_sigma_vel ** 2] * 3
+    arrival = t_ns
+    if options.gnss_latency > 0.0:
+        arrival = t_ns + bag.sec_to_ns(options.gnss_latency
+                                       * latency_rng.uniform(0.5, 1.5, len(t_ns)))
     for i, t in enumerate(t_ns):
         writer.write("gnss/fix", msgs.fix_msg(t, lat[i], lon[i], h[i],
-                                               var if options.gnss_covariance else None))
+                                               var if options.gnss_covariance else None),
+                     arrival[i])
         if options.gnss_velocity:
-            writer.write("gnss/vel", msgs.twist_msg(t, vel[i], var_v, "gnss"))
+            writer.write("gnss/vel", msgs.twist_msg(t, vel[i], var_v, "gnss"), arrival[i])
 
 
 def _write_mag(writer, traj, options, seed):

@@ -1,0 +1,166 @@
+"""``trial smooth``: post-processing of a bag, the forward filter and then the RTS smoother.
+
+The forward pass is the offline path's (trial/offline.py :func:`forward_pass`: the profile's
+imu_preprocessor and ekf cores, the aiding front end the ekf node uses), recorded with its
+covariances; :func:`~ins_gnss_ros.nav.smoother.rts_smooth` runs backwards over it. ``OUT/bag``
+holds
+
+* ``ins/state``, ``nav/fix``, ``nav/odom`` (with covariance), ``nav/status``: the smoothed
+  solution at the filter's epochs, ``ins/state`` with the smoothed sensor errors; what
+  ``trial evaluate OUT`` reads, as from a replay;
+* ``forward/ins/state``, ``forward/nav/fix``, ``forward/nav/odom``, ``forward/nav/status``: the
+  forward pass, message for message what ``trial replay --offline`` records;
+* with a ``point`` (base_link FLU lever arm): ``point/state`` and ``forward/point/state``,
+  InsState of that body point (position, velocity, attitude, compensated rates) at every IMU
+  sample (:func:`~ins_gnss_ros.nav.smoother.imu_rate_track`).
+
+The forward record is what bounds the memory: P, P- and Phi per epoch (3 n^2 doubles, 10 Hz or
+faster), kept once as the navigator's lists and once as the output's arrays while the output is
+made, then only as arrays (docs/results/postprocessing.md).
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ins_gnss_ros import io as bagio
+from ins_gnss_ros.nav import Navigator
+from ins_gnss_ros.trial.offline import forward_pass, write_outputs
+
+#: Topic prefix of the forward pass in a smoothed run's bag.
+FORWARD_PREFIX = "forward/"
+#: Topic of the IMU-rate solution at the ``--point``.
+POINT_TOPIC = "point/state"
+
+
+class _Increments:
+    """The increments a navigator was given, in growing arrays (one sample per call is the
+    usual case: a list of arrays would cost 100 bytes of overhead a sample)."""
+
+    def __init__(self):
+        self.n = 0
+        self.t, self.dtheta, self.dv = np.empty(0), np.empty((0, 3)), np.empty((0, 3))
+
+    def add(self, t, dtheta, dv):
+        t = np.atleast_1d(np.asarray(t, float))
+        m = len(t)
+        if self.n + m > len(self.t):
+            size = max(65536, 2 * (self.n + m))
+            self.t = np.resize(self.t, size)
+            self.dtheta = np.resize(self.dtheta, (size, 3))
+            self.dv = np.resize(self.dv, (size, 3))
+        self.t[self.n:self.n + m] = t
+        self.dtheta[self.n:self.n + m] = dtheta
+        self.dv[self.n:self.n + m] = dv
+        self.n += m
+
+    def arrays(self):
+        return self.t[:self.n], self.dtheta[:self.n], self.dv[:self.n]
+
+
+class _KeepingNavigator(Navigator):
+    """A Navigator that keeps every increment it is given (for the IMU-rate output)."""
+
+    def __init__(self, config):
+        self.increments = _Increments()
+        super().__init__(config)
+
+    def add_imu(self, t, dtheta, dv):
+        self.increments.add(t, dtheta, dv)
+        super().add_imu(t, dtheta, dv)
+
+
+def smooth(bag_path, profile_path, out, outages=None, point=None, exports=(),
+           progress=False) -> dict:
+    """Forward filter and RTS smoother of a profile over a bag; record both.
+
+    Parameters
+    ----------
+    bag_path, profile_path, out, outages, progress
+        As :func:`ins_gnss_ros.trial.offline.replay_offline`.
+    point : (3,) array_like, optional
+        Body point (base_link FLU, m) whose IMU-rate solution is recorded.
+    exports : iterable of str
+        Export formats written into ``OUT/export`` (trial/export.py).
+
+    Returns
+    -------
+    dict
+        The summary (``OUT/replay.json``, mode ``smooth``) with ``timing_s`` and ``exports``.
+    """
+    from tqdm import tqdm
+
+    from ins_gnss_ros.nav.smoother import rts_smooth
+    from ins_gnss_ros.trial.export import check_formats, export_run
+
+    formats = check_formats(exports)
+    tic = time.perf_counter()
+    lever = None if point is None else np.asarray(point, float).reshape(3)
+    run = forward_pass(bag_path, profile_path, outages, progress, out=out,
+                       navigator_type=None if lever is None else _KeepingNavigator)
+    out = Path(out)
+    forward = run.navigator.output()
+    config = run.navigator.config
+    increments = None if lever is None else run.navigator.increments.arrays()
+    # The navigator's record (lists of per-epoch arrays) is as large as its output: let it go.
+    run.navigator = None
+    toc_forward = time.perf_counter()
+    if forward.P is None:
+        raise ValueError(f"{bag_path}: the filter never started (no GNSS fix to level on): "
+                         "nothing to smooth")
+    sm = rts_smooth(forward)
+    smoothed = dataclasses.replace(forward, lat=sm.lat, lon=sm.lon, h=sm.h, v_enu=sm.v_enu,
+                                   q_nb=sm.q_nb, P=sm.P, estimates=sm.estimates)
+    del sm
+    toc_smooth = time.perf_counter()
+    writer = bagio.BagWriter(out / "bag")
+    counts = run.counts.recorded
+    solutions = [("", smoothed, True), (FORWARD_PREFIX, forward, False)]
+    for prefix, result, errors in tqdm(solutions, disable=not progress, desc="writing"):
+        counts.update(write_outputs(writer, result, config, run.datum, run.frames, prefix,
+                                    errors))
+        if lever is not None:
+            counts.update(_write_point(writer, prefix + POINT_TOPIC, result, lever,
+                                       *increments))
+    writer.close()
+    toc_write = time.perf_counter()
+    summary = run.summary(out, bag_path, outages, "smooth",
+                          graph=("imu_preprocessor", "ekf (filter only)", "rts smoother"))
+    summary["point_m"] = None if lever is None else lever.tolist()
+    summary["exports"] = [str(p) for p in export_run(out, formats)] if formats else []
+    summary["timing_s"] = {"forward": toc_forward - tic, "smoother": toc_smooth - toc_forward,
+                           "write": toc_write - toc_smooth,
+                           "export": time.perf_counter() - toc_write}
+    (out / "smooth.json").write_text(json.dumps(
+        {k: summary[k] for k in ("point_m", "exports", "timing_s")}, indent=2) + "\n")
+    return summary
+
+
+def _write_point(writer, topic, result, lever, t, dtheta, dv) -> dict:
+    """InsState of the body point at `lever` at every IMU sample of a recorded pass."""
+    from ins_gnss_msgs.msg import InsState
+
+    from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
+    from ins_gnss_ros.nav.smoother import imu_rate_track
+    from ins_gnss_ros.nodes.convert import set_vector3
+
+    dense = imu_rate_track(result, result.estimates, t, dtheta, dv)
+    lat, lon, h = lever_arm_position(dense.lat, dense.lon, dense.h, dense.q_nb, lever)
+    v = lever_arm_velocity(dense.v_enu, dense.q_nb, dense.omega_b, lever, dense.lat)
+    stamps = bagio.sec_to_ns(dense.t)
+    for k in range(len(dense.t)):
+        msg = InsState()
+        msg.header.stamp, msg.header.frame_id = bagio.ns_to_stamp(int(stamps[k])), "map"
+        msg.latitude, msg.longitude, msg.altitude = float(lat[k]), float(lon[k]), float(h[k])
+        set_vector3(msg.velocity, v[k])
+        o = msg.orientation
+        o.w, o.x, o.y, o.z = dense.q_nb[k].tolist()
+        set_vector3(msg.angular_velocity, dense.omega_b[k])
+        msg.mode = InsState.MODE_NAVIGATING
+        msg.correction_sequence = 1
+        writer.write(topic, msg)
+    return {"/" + topic: len(dense.t)}
