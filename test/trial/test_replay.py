@@ -398,3 +398,36 @@ def test_every_replay_bag_holds_the_tf_tree(default_drive, path):
         np.testing.assert_allclose(c, c_nb @ dcm_from_euler(*np.radians(mounting)), atol=1e-12)
         walked += 1
     assert walked == len(odom) > 100
+
+
+def test_with_wheel_odometry_the_tree_is_map_odom_base_link_and_odom_is_continuous(tmp_path):
+    """REP-105 with wheel odometry fused (config/sim_car_wheel.yaml, offline path): map ->
+    odom -> base_link walks to nav/odom's pose, and odom -> base_link moves by no more than the
+    velocity says between two epochs while map -> odom takes the GNSS corrections."""
+    bag = simulate("car", 60.0, 4, tmp_path / "bag", SimOptions(wheel_odometry=True))
+    replay_offline(bag, REPO / "config" / "sim_car_wheel.yaml", tmp_path / "out",
+                   outages="15:30:30")
+    rows = bagio.read_bag(tmp_path / "out" / "bag", ["/tf", "/tf_static", "nav/odom"])
+    static = {tf.child_frame_id: tf for m in rows if m.topic == "/tf_static"
+              for tf in m.msg.transforms}
+    odom = {bagio.msg_stamp_ns(m.msg): m.msg for m in rows if m.topic == "/nav/odom"}
+    trees = [{tf.child_frame_id: tf for tf in m.msg.transforms} for m in rows if m.topic == "/tf"]
+    assert len(trees) == len(odom) > 100
+    previous, corrections = None, []
+    for tree in trees:
+        assert tree["base_link"].header.frame_id == "odom"
+        assert tree["odom"].header.frame_id == "map"
+        msg = odom[bagio.msg_stamp_ns(tree["base_link"])]
+        p = msg.pose.pose.position
+        t, _ = _walk(tree, static, "base_link", "map")
+        np.testing.assert_allclose(t, [p.x, p.y, p.z], atol=1e-9)
+        v = tree["base_link"].transform.translation
+        here = (bagio.msg_stamp_ns(msg) * 1e-9, np.array([v.x, v.y, v.z]),
+                np.array([tree["odom"].transform.translation.x,
+                          tree["odom"].transform.translation.y]))
+        if previous is not None:
+            dt = here[0] - previous[0]
+            assert np.linalg.norm(here[1] - previous[1]) <= 40.0 * dt + 1e-6  # below 40 m/s
+            corrections.append(np.linalg.norm(here[2] - previous[2]))
+        previous = here
+    assert max(corrections) > 0.0  # map -> odom moves: the GNSS corrections go there

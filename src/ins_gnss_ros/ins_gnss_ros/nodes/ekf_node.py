@@ -70,6 +70,7 @@ from ..nav.aiding import Aiding, AidingPolicy
 from ..nav.error_model import LAYOUTS
 from ..nav.filter_config import HEADING_INPUTS, PARAMS, navigator_config
 from ..nav.local_frame import datum_from_degrees, from_map, to_map
+from ..nav.odom_frame import OdomTrack
 from ..nav.set_pose import set_pose
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import StrapdownSync
@@ -132,6 +133,8 @@ class EkfNode(NavNode):
         self.pub_imu = self.publisher(Imu, "nav/imu", SENSOR_QOS)
         self.pub_datum = self.publisher(NavSatFix, "nav/datum", LATCHED_QOS)
         self.pub_tf = self.publisher(TFMessage, "/tf", TF_QOS) if p["publish_tf"] else None
+        # REP-105: with wheel odometry fused, map -> odom -> base_link with a continuous odom
+        self.odom = (p["odom_frame"], OdomTrack()) if p["use_wheel_odometry"] else None
         self.pub_tf_static = self.publisher(TFMessage, "/tf_static", TF_STATIC_QOS) \
             if p["publish_tf"] else None
         self.service(Empty, "~/reset", self.on_reset)
@@ -423,8 +426,8 @@ class EkfNode(NavNode):
             self.pub_odom.publish(odom_msg(ins.header.stamp, st, P, S, self.aiding.datum,
                                            ins.angular_velocity, rate_var, frames))
             if self.pub_tf is not None:
-                # map -> base_link; with wheel odometry fused: map -> odom -> base_link
-                self.pub_tf.publish(solution_tf(ins.header.stamp, st, self.aiding.datum, *frames))
+                self.pub_tf.publish(solution_tf(ins.header.stamp, st, self.aiding.datum, *frames,
+                                                self.odom))
 
 
 def main(args=None) -> int:

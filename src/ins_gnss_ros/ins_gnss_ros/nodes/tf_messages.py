@@ -4,8 +4,9 @@
 replay build it here alike); ``/tf_static`` carries ``base_link -> imu_link`` (the IMU mounting,
 ``imu_preprocessor``) and ``base_link -> gnss_0`` (the antenna lever arm, ``ekf``). base_link
 is the navigation centre, i.e. the IMU: the IMU frame differs from it by the mounting rotation
-only. Once wheel odometry is fused the solution's chain becomes ``map -> odom -> base_link``
-(REP-105: odom continuous, map -> odom absorbing the GNSS corrections); ``odom_frame`` names it.
+only. Once wheel odometry is fused (``use_wheel_odometry``) the solution's chain is
+``map -> odom -> base_link`` (REP-105: odom continuous, map -> odom absorbing the GNSS
+corrections; nav/odom_frame.py); ``odom_frame`` names it.
 """
 from __future__ import annotations
 
@@ -46,11 +47,18 @@ def transform(stamp, parent: str, child: str, translation, q_wxyz) -> TransformS
     return tf
 
 
-def solution_tf(stamp, st, datum, map_frame: str, base_frame: str) -> TFMessage:
+def solution_tf(stamp, st, datum, map_frame: str, base_frame: str, odom=None) -> TFMessage:
     """/tf of a NavState: base_link in the map frame around ``datum`` (lat rad, lon rad, h m),
-    the pose nav/odom carries."""
-    return TFMessage(transforms=[transform(stamp, map_frame, base_frame,
-                                           to_map(datum, st.lat, st.lon, st.h), st.q_nb)])
+    the pose nav/odom carries; with ``odom`` = (odom frame, :class:`~ins_gnss_ros.nav.odom_frame.OdomTrack`)
+    the chain map -> odom -> base_link of the same pose, odom -> base_link continuous."""
+    position = to_map(datum, st.lat, st.lon, st.h)
+    if odom is None:
+        return TFMessage(transforms=[transform(stamp, map_frame, base_frame, position, st.q_nb)])
+    odom_frame, track = odom
+    p_odom = track.advance(st.t, position, st.v_enu)
+    return TFMessage(transforms=[
+        transform(stamp, map_frame, odom_frame, position - p_odom, (1.0, 0.0, 0.0, 0.0)),
+        transform(stamp, odom_frame, base_frame, p_odom, st.q_nb)])
 
 
 def static_tf(stamp, parent: str, children) -> TFMessage:

@@ -279,6 +279,7 @@ def write_outputs(writer, result, config, datum, frames, prefix="", sensor_error
     from ins_gnss_ros.io import ns_to_stamp, sec_to_ns
     from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, NAVIGATING, NavState
     from ins_gnss_ros.nav.increments import SensorErrors
+    from ins_gnss_ros.nav.odom_frame import OdomTrack
     from ins_gnss_ros.nodes.convert import fill_ins_state, set_vector3
     from ins_gnss_ros.nodes.nav_messages import MODES, fix_msg, fix_status, odom_msg, status_msg
     from ins_gnss_ros.nodes.tf_messages import solution_tf, static_tf
@@ -297,6 +298,7 @@ def write_outputs(writer, result, config, datum, frames, prefix="", sensor_error
     ekf_p, pre_p = frames.ekf_p, frames.pre_p
     names = (ekf_p["map_frame"], ekf_p["base_link_frame"])
     publish_tf = ekf_p["publish_tf"] and not prefix
+    odom = (ekf_p["odom_frame"], OdomTrack()) if ekf_p["use_wheel_odometry"] else None
     t0_ns = sec_to_ns(float(result.t[0]))
     # As the imu_preprocessor and ekf nodes publish them: each its own, once.
     for parent, publish, child in (
@@ -337,7 +339,7 @@ def write_outputs(writer, result, config, datum, frames, prefix="", sensor_error
                                                      rate_var, names))
             counts["/" + topic["nav/odom"]] += 1
             if publish_tf:
-                writer.write("/tf", solution_tf(stamp, st, datum, *names), sec_to_ns(t))
+                writer.write("/tf", solution_tf(stamp, st, datum, *names, odom), sec_to_ns(t))
                 counts["/tf"] += 1
         if t >= next_status:
             next_status = t + 1.0
