@@ -75,6 +75,8 @@ class OrientationHeadings:
         heading = orientation_heading(q_ns, covariance, self.c_bs)
         if heading is not None:
             self._next_ns = t_ns + self.period_ns
-        elif covariance[0] != -1.0:
+        elif covariance[0] != -1.0 and any(c != 0.0 for c in covariance):
+            # a covariance given (not "none" nor "unknown", which drivers without an
+            # orientation leave) that rules the yaw out: worth a word on /diagnostics
             self.without_yaw += 1
         return heading
