@@ -31,6 +31,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..io import ns_to_stamp
+from ..io.cdr import codec
 from ..params import Param, ParameterError
 
 # Sensor streams: reliable so that our own pipeline never silently drops an IMU increment (a
@@ -195,6 +196,34 @@ class _BusPublisher:
         return len(self._bus._subscribers.get(self.topic, ()))
 
 
+class Latest:
+    """The newest message of a topic, decoded when it is read.
+
+    For a node that needs a state now and then from a stream published at the navigation rate
+    (``ins/state`` at 100-1000 Hz, read by ``mag_compass`` per field sample and by
+    ``phase_heading`` per GNSS epoch): on DDS the subscription takes the serialized message
+    (rclpy ``raw=True``: no Python message is built per sample) and :meth:`take` decodes only
+    the newest one, once; on an :class:`InProcessBus` it holds the message object itself.
+    """
+
+    def __init__(self, msg_type):
+        self._codec = codec(msg_type)
+        self._pending = None
+
+    def put(self, data) -> None:
+        self._pending = data
+
+    @property
+    def waiting(self) -> bool:
+        """A message came that has not been taken."""
+        return self._pending is not None
+
+    def take(self):
+        """The newest message not taken before, or None."""
+        data, self._pending = self._pending, None
+        return self._codec.decode(data) if isinstance(data, bytes) else data
+
+
 class NavNode(Node):
     """Base class of the project's nodes.
 
@@ -225,6 +254,16 @@ class NavNode(Node):
             self.bus.subscribe(topic, callback)
         else:
             self.create_subscription(msg_type, topic, callback, qos)
+
+    def subscribe_latest(self, msg_type, topic: str, qos) -> Latest:
+        """A subscription that keeps only the newest message, decoded when it is taken
+        (:class:`Latest`)."""
+        latest = Latest(msg_type)
+        if self.bus is not None:
+            self.bus.subscribe(topic, latest.put)
+        else:
+            self.create_subscription(msg_type, topic, latest.put, qos, raw=True)
+        return latest
 
     def service(self, srv_type, name: str, callback) -> None:
         """A DDS service, or the same callback registered with the bus (``bus.call``); a
