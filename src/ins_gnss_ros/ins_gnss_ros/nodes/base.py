@@ -97,6 +97,9 @@ class Diagnostics:
         self._node = node
         self._pub = node.publisher(DiagnosticArray, "/diagnostics", 10)
         self.counts: Counter[str] = Counter()
+        # Messages taken and published per topic, on DDS only (bench/live_load.py reads them):
+        # "received /imu/delta", "published /ins/state".
+        self.traffic: Counter[str] = Counter()
         self._level = DiagnosticStatus.OK
         self._message = "ok"
         self._values: dict[str, str] = {}
@@ -131,6 +134,7 @@ class Diagnostics:
             message=message,
             hardware_id=self._node.get_name(),
             values=[KeyValue(key=k, value=str(v)) for k, v in sorted(self.counts.items())]
+            + [KeyValue(key=k, value=str(v)) for k, v in sorted(self.traffic.items())]
             + [KeyValue(key=k, value=v) for k, v in sorted(self._values.items())],
         )
         msg = DiagnosticArray(status=[status])
@@ -224,6 +228,21 @@ class Latest:
         return self._codec.decode(data) if isinstance(data, bytes) else data
 
 
+class _CountedPublisher:
+    """A DDS publisher that counts what it publishes in ``traffic["published <topic>"]``."""
+
+    def __init__(self, publisher, traffic: Counter):
+        self._publisher, self._traffic = publisher, traffic
+        self._key = f"published {publisher.topic_name}"
+
+    def publish(self, msg) -> None:
+        self._traffic[self._key] += 1
+        self._publisher.publish(msg)
+
+    def __getattr__(self, name):
+        return getattr(self._publisher, name)
+
+
 class NavNode(Node):
     """Base class of the project's nodes.
 
@@ -247,13 +266,26 @@ class NavNode(Node):
         """A DDS publisher, or the bus' stand-in with the same ``publish``."""
         if self.bus is not None:
             return _BusPublisher(self.bus, topic)
-        return self.create_publisher(msg_type, topic, qos)
+        publisher = self.create_publisher(msg_type, topic, qos)
+        if topic == "/diagnostics":
+            return publisher
+        return _CountedPublisher(publisher, self.diag.traffic)
 
     def subscribe(self, msg_type, topic: str, callback, qos) -> None:
         if self.bus is not None:
             self.bus.subscribe(topic, callback)
         else:
-            self.create_subscription(msg_type, topic, callback, qos)
+            self.create_subscription(msg_type, topic, self._counted(topic, callback), qos)
+
+    def _counted(self, topic: str, callback):
+        """``callback`` counting each message in ``diag.traffic["received <topic>"]`` (the
+        resolved topic name)."""
+        key, traffic = f"received {self.resolve_topic_name(topic)}", self.diag.traffic
+
+        def counted(msg):
+            traffic[key] += 1
+            callback(msg)
+        return counted
 
     def subscribe_latest(self, msg_type, topic: str, qos) -> Latest:
         """A subscription that keeps only the newest message, decoded when it is taken
@@ -262,7 +294,8 @@ class NavNode(Node):
         if self.bus is not None:
             self.bus.subscribe(topic, latest.put)
         else:
-            self.create_subscription(msg_type, topic, latest.put, qos, raw=True)
+            self.create_subscription(msg_type, topic, self._counted(topic, latest.put), qos,
+                                     raw=True)
         return latest
 
     def service(self, srv_type, name: str, callback) -> None:
