@@ -231,14 +231,20 @@ class Latest:
 class _CountedPublisher:
     """A DDS publisher that counts what it publishes in ``traffic["published <topic>"]`` and
     hands rclpy the message serialized by the project's codec (Imu 7 us; rclpy's conversion
-    and serialization 27 us here)."""
+    and serialization 27 us here). A volatile topic nobody subscribes to is not serialized
+    (``imu/data`` at the IMU rate, read only where a compass levels from it): no late joiner
+    could get it anyway."""
 
-    def __init__(self, publisher, msg_type, traffic: Counter):
+    def __init__(self, publisher, msg_type, qos, traffic: Counter):
         self._publisher, self._traffic = publisher, traffic
         self._encode = codec(msg_type).encode
         self._key = f"published {publisher.topic_name}"
+        self._volatile = not (isinstance(qos, QoSProfile)
+                              and qos.durability == DurabilityPolicy.TRANSIENT_LOCAL)
 
     def publish(self, msg) -> None:
+        if self._volatile and self._publisher.get_subscription_count() == 0:
+            return
         self._traffic[self._key] += 1
         self._publisher.publish(self._encode(msg))
 
@@ -272,7 +278,7 @@ class NavNode(Node):
         publisher = self.create_publisher(msg_type, topic, qos)
         if topic == "/diagnostics":
             return publisher
-        return _CountedPublisher(publisher, msg_type, self.diag.traffic)
+        return _CountedPublisher(publisher, msg_type, qos, self.diag.traffic)
 
     def subscribe(self, msg_type, topic: str, callback, qos) -> None:
         if self.bus is not None:
