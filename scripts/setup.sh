@@ -66,4 +66,20 @@ if changed ins_gnss_ros src/ins_gnss_ros/setup.py src/ins_gnss_ros/setup.cfg src
   pip install -q --no-build-isolation --no-deps -e src/ins_gnss_ros
   done_stamp ins_gnss_ros
 fi
+
+# The numba kernels' machine code (cache=True: the __pycache__ next to their sources), built here
+# so that a first run does not spend its start compiling (scripts/warm_numba.py). numba compiles
+# a kernel again when its source file's size or time stamp changed: the key holds those, the
+# warm-up script's, the cache files present and the pinned numba.
+KERNELS=(src/ins_gnss_ros/ins_gnss_ros/nav/_kernels.py src/ins_gnss_ros/ins_gnss_ros/nav/earth.py
+         src/ins_gnss_ros/ins_gnss_ros/gnss/lambda_search.py scripts/warm_numba.py)
+numba_key() {
+  { stat -c '%n %s %Y' "${KERNELS[@]}"; ls src/ins_gnss_ros/ins_gnss_ros/{nav,gnss}/__pycache__/*.nbi 2>/dev/null
+    grep -i '^numba' constraints.txt; } | sha256sum | cut -d' ' -f1
+}
+if [ "$(cat "$STAMPS/numba" 2>/dev/null)" != "$(numba_key)" ]; then
+  say "compiling the numba kernels into their cache"
+  "$PY" scripts/warm_numba.py > "$STAMPS/numba.log" 2>&1 || { cat "$STAMPS/numba.log"; exit 1; }
+  numba_key > "$STAMPS/numba"
+fi
 say "ready: $VENV"

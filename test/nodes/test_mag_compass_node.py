@@ -373,7 +373,8 @@ def test_publishes_over_ros(executor, ros_context, probe):
                      latitude=LAT0, longitude=LON0, altitude=H0)
     state.header.stamp = _stamp(0.0)
     pub_ins.publish(state)
-    spin_until(executor, lambda: node.attitude is not None, what="attitude")
+    # taken as serialized bytes and decoded with the next field sample
+    spin_until(executor, lambda: node.ins_state.waiting, what="ins/state")
     mag = MagneticField(magnetic_field=to_vector3(_earth_field().enu))
     mag.header.stamp = _stamp(0.05)
     pub_mag.publish(mag)

@@ -121,3 +121,21 @@ def test_publishes_ins_state_over_ros(node, probe, executor):
     spin_until(executor, lambda: len(states) == 3, what="3 ins/state")
     assert states[-1].mode == InsState.MODE_DEAD_RECKONING  # no filter running
     assert states[-1].header.stamp == sec_to_stamp(10.03)
+
+
+def test_counts_its_traffic_on_dds(node, executor, probe):
+    """The counters bench/live_load.py reads from /diagnostics: messages taken and published
+    per topic."""
+    from ins_gnss_msgs.msg import ImuDelta, InsState
+
+    from ins_gnss_ros.nodes.base import SENSOR_QOS
+    from rosutil import spin_until
+
+    states = []
+    probe.create_subscription(InsState, "ins/state", states.append, SENSOR_QOS)
+    pub = probe.create_publisher(ImuDelta, "imu/delta", SENSOR_QOS)
+    spin_until(executor, lambda: pub.get_subscription_count() > 0, what="strapdown subscription")
+    for k in range(3):
+        pub.publish(_delta(DT * (k + 1)))
+    spin_until(executor, lambda: len(states) == 3, what="ins/state")
+    assert node.diag.traffic == {"received /imu/delta": 3, "published /ins/state": 3}

@@ -6,7 +6,8 @@ documented in :mod:`ins_gnss_ros.nav.strapdown`, :mod:`ins_gnss_ros.nav.coning`,
 :mod:`ins_gnss_ros.nav.error_model`, :mod:`ins_gnss_ros.nav.discretize`,
 :mod:`ins_gnss_ros.nav.ekf` and :mod:`ins_gnss_ros.nav.lever_arm`. Numba
 caches the machine code next to the source (``cache=True``): the first call after a change
-compiles for a few seconds, a later process loads it in about a second (docs/results/replay.md).
+compiles for a few seconds, a later process loads it in about a second (docs/results/replay.md);
+``scripts/setup.sh`` builds that cache (``scripts/warm_numba.py``), so a first run does not.
 Quaternion arithmetic is written out on scalars here (rather than calling
 :mod:`ins_gnss_ros.nav.rotations`, which works on stacked numpy arrays) so that a step allocates
 almost nothing. Earth-model formulas are the ones of :mod:`ins_gnss_ros.nav.earth`, compiled

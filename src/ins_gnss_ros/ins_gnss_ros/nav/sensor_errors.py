@@ -25,7 +25,6 @@ the integral of white noise of intensity 2σ²/T, Babich §5).
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.signal import lfilter
 
 DEG = np.pi / 180.0
 DEG_PER_HOUR = DEG / 3600.0
@@ -238,6 +237,9 @@ class ImuErrorSimulator:
         if np.isfinite(t.gm_tau) and t.gm_sigma > 0.0:
             # Exact discrete first-order Gauss-Markov: x_{k+1} = a x_k + w_k,
             # var(w) = σ² (1 - a²) keeps the variance stationary (Babich B4.10).
+            # scipy.signal takes 2 s to import: only the simulators get here, not the nodes
+            from scipy.signal import lfilter
+
             a = np.exp(-dt / t.gm_tau)
             w = t.gm_sigma * np.sqrt(1.0 - a * a) * rng.standard_normal(shape)
             nxt, _ = lfilter([1.0], [1.0, -a], w, axis=1, zi=a * s.gm[:, None, :])
