@@ -184,7 +184,7 @@ class Aiding:
         noise = navigator.config.noise
         self._rest = RestDetector(noise.accel_psd, noise.gyro_psd)
         self._wmm_declination = None  # at the datum, once a magnetic heading needs it
-        self._first_fix_t: dict[str, float] = {}  # "t": the first fix held for the rest detector
+        self._first_held_t = math.nan  # the first fix held for the rest detector, s
         self.last_increment_t = math.inf  # end of the last increment, s
         self.wheel_still_since = math.inf  # stamp of the first of the zero wheel speeds, s
 
@@ -276,15 +276,23 @@ class Aiding:
         if self.datum is None:
             self.datum = (lat, lon, h)
         self._course.observe(t, lat, lon, h)
-        if self._rest.fix(t, lat, lon, h, self._course.fix_to_fix(cov)) and self._without_velocity_before_start():
-            self.navigator.add_measurement(ZeroVelocity(t))  # levels as a static start
-        elif self._rest.undecided and self._without_velocity_before_start() and \
-                t - self._first_fix_t.setdefault("t", t) < REST_DECISION_S:
-            self.report("gnss/fix held: telling rest from motion before levelling", log=False)
-            return self._seen("gnss/fix", t, True)
+        at_rest = self._rest.fix(t, lat, lon, h, self._course.fix_to_fix(cov))
+        if self._without_velocity_before_start():
+            if at_rest:
+                self.navigator.add_measurement(ZeroVelocity(t))  # levels as a static start
+            elif self._rest.undecided and t - self._held_since(t) < REST_DECISION_S:
+                self.report("gnss/fix held: telling rest from motion before levelling",
+                            log=False)
+                return self._seen("gnss/fix", t, True)
         self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov))
         self._course_velocity(t, lat, lon, h, cov)
         return self._seen("gnss/fix", t, True)
+
+    def _held_since(self, t: float) -> float:
+        """Stamp of the first fix held for the rest detector (t if this is it), s."""
+        if math.isnan(self._first_held_t):
+            self._first_held_t = t
+        return self._first_held_t
 
     def _without_velocity_before_start(self) -> bool:
         """No gnss/vel so far and the filter not yet levelled: the first fixes wait for the
