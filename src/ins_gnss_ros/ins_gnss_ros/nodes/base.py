@@ -210,8 +210,8 @@ class Latest:
     the newest one, once; on an :class:`InProcessBus` it holds the message object itself.
     """
 
-    def __init__(self, msg_type):
-        self._codec = codec(msg_type)
+    def __init__(self, msg_type, handler):
+        self._codec, self._handler = codec(msg_type), handler
         self._pending = None
 
     def put(self, data) -> None:
@@ -226,6 +226,13 @@ class Latest:
         """The newest message not taken before, or None."""
         data, self._pending = self._pending, None
         return self._codec.decode(data) if isinstance(data, bytes) else data
+
+    def handle(self) -> None:
+        """Hand the newest message not taken before, if any, to the handler (the messages
+        before it would have been overwritten by it)."""
+        msg = self.take()
+        if msg is not None:
+            self._handler(msg)
 
 
 class _CountedPublisher:
@@ -302,10 +309,10 @@ class NavNode(Node):
             callback(data)
         return counted
 
-    def subscribe_latest(self, msg_type, topic: str, qos) -> Latest:
+    def subscribe_latest(self, msg_type, topic: str, qos, handler) -> Latest:
         """A subscription that keeps only the newest message, decoded when it is taken
-        (:class:`Latest`)."""
-        latest = Latest(msg_type)
+        and handed to ``handler`` by :meth:`Latest.handle`."""
+        latest = Latest(msg_type, handler)
         if self.bus is not None:
             self.bus.subscribe(topic, latest.put)
         else:

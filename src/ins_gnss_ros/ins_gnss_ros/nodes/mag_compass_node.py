@@ -121,7 +121,8 @@ class MagCompassNode(NavNode):
         self.subscribe(MagneticField, "imu/mag", self.on_mag, SENSOR_QOS)
         self.subscribe(NavSatFix, "gnss/fix", self.on_fix, DRIVER_QOS)
         # Read per field sample (and fix), not decoded at the navigation rate.
-        self.ins_state = self.subscribe_latest(InsState, "ins/state", SENSOR_QOS)
+        self.ins_state = self.subscribe_latest(InsState, "ins/state", SENSOR_QOS,
+                                             self.on_ins_state)
         if p["attitude_source"] == "imu_data":
             self.subscribe(Imu, "imu/data", self.on_imu, SENSOR_QOS)
         else:
@@ -156,20 +157,13 @@ class MagCompassNode(NavNode):
 
     # -- inputs other than the field -------------------------------------------------------------
     def on_fix(self, msg: NavSatFix) -> None:
-        self.take_ins_state()  # as if it had been handled when it came: before the fix
+        self.ins_state.handle()  # as if it had been handled when it came: before the fix
         pos = (msg.latitude, msg.longitude, msg.altitude)
         if msg.status.status < NavSatStatus.STATUS_FIX or not all(map(math.isfinite, pos)):
             self.diag.count("gnss/fix without a valid position ignored", log=False)
             return
         self.position = (math.radians(pos[0]), math.radians(pos[1]), pos[2])
         self._fix_seen = True
-
-    def take_ins_state(self) -> None:
-        """Handle the newest ``ins/state`` received since the last call, if any (the states
-        before it would have been overwritten by it)."""
-        msg = self.ins_state.take()
-        if msg is not None:
-            self.on_ins_state(msg)
 
     def on_ins_state(self, msg: InsState) -> None:
         q = quat(msg.orientation)
@@ -218,7 +212,7 @@ class MagCompassNode(NavNode):
 
     # -- the field ------------------------------------------------------------------------------
     def on_mag(self, msg: MagneticField) -> None:
-        self.take_ins_state()
+        self.ins_state.handle()
         t = stamp_to_sec(msg.header.stamp)
         m = vec(msg.magnetic_field)
         if not np.all(np.isfinite(m)):

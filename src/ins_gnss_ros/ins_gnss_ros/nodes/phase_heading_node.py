@@ -182,7 +182,8 @@ class PhaseHeadingNode(NavNode):
         self.subscribe(GnssEphemeris, "gnss/ephemeris", self.on_ephemeris, STATE_QOS)
         self.subscribe(NavSatFix, "gnss/fix", self.on_fix, DRIVER_QOS)
         # Read per GNSS epoch (and fix), not decoded at the navigation rate.
-        self.ins_state = self.subscribe_latest(InsState, "ins/state", SENSOR_QOS)
+        self.ins_state = self.subscribe_latest(InsState, "ins/state", SENSOR_QOS,
+                                             self.on_ins_state)
         self.subscribe(FilterStatus, "nav/status", self.on_filter_status, STATE_QOS)
 
     # -- inputs ---------------------------------------------------------------------------------
@@ -196,17 +197,10 @@ class PhaseHeadingNode(NavNode):
         self.pipeline.add_ephemeris(f"{system}{int(msg.prn):02d}", partial(kepler_from_msg, msg))
 
     def on_fix(self, msg: NavSatFix) -> None:
-        self.take_ins_state()  # as if it had been handled when it came: before the fix
+        self.ins_state.handle()  # as if it had been handled when it came: before the fix
         if msg.status.status >= NavSatStatus.STATUS_FIX:
             self.pipeline.fix(stamp_to_sec(msg.header.stamp), math.radians(msg.latitude),
                               math.radians(msg.longitude), msg.altitude)
-
-    def take_ins_state(self) -> None:
-        """Handle the newest ``ins/state`` received since the last call, if any (the states
-        before it would have been overwritten by it)."""
-        msg = self.ins_state.take()
-        if msg is not None:
-            self.on_ins_state(msg)
 
     def on_ins_state(self, msg: InsState) -> None:
         # ALIGNING: levelled, heading unknown; DEAD_RECKONING: maybe never levelled (a strapdown
@@ -226,7 +220,7 @@ class PhaseHeadingNode(NavNode):
                                     [std.get(f"att[{i}]", math.nan) for i in range(3)])
 
     def on_observations(self, msg: GnssObservations) -> None:
-        self.take_ins_state()
+        self.ins_state.handle()
         obs = AntennaObservations(
             msg.antenna_id, gps_seconds(msg.gps_week, msg.time_of_week),
             stamp_to_sec(msg.header.stamp), parse_observations(msg, self.systems),
