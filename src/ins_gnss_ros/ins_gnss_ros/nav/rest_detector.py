@@ -14,8 +14,8 @@ specific force and the rate are the same), so rest is declared only when both ag
 * GNSS: the velocity fitted by least squares to the fixes since the IMU became still is below
   ``REST_SPEED`` with three sigmas to spare (a noisy receiver simply takes longer to confirm).
 
-While both hold, every still block yields a zero-velocity update; any block with motion in it
-ends the rest at once.
+While both hold, every still block is a cue for a zero-velocity update (nav/aiding.py uses
+them while the filter aligns); any block with motion in it ends the rest at once.
 """
 from __future__ import annotations
 
