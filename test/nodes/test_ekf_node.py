@@ -152,11 +152,11 @@ def test_bad_measurements_are_counted_not_used(ros_context):
     node = EkfNode(context=ros_context, bus=InProcessBus())
     nan_fix = _fix_msg(1.0, 1.0, 0.5, 10.0, np.zeros(3))
     nan_fix.latitude = float("nan")
-    node.on_fix(nan_fix)
+    node.on_input(node.inputs.fix, nan_fix)
     no_fix = _fix_msg(1.0, 1.0, 0.5, 10.0, np.zeros(3))
     no_fix.status.status = NavSatStatus.STATUS_NO_FIX
-    node.on_fix(no_fix)
-    node.on_vel(_vel_msg(1.0, np.array([np.inf, 0.0, 0.0]), np.zeros(3)))
+    node.on_input(node.inputs.fix, no_fix)
+    node.on_input(node.inputs.velocity, _vel_msg(1.0, np.array([np.inf, 0.0, 0.0]), np.zeros(3)))
     assert node.navigator.update_count == 0
     assert node.diag.counts["non-finite gnss/fix rejected"] == 1
     assert node.diag.counts["non-finite gnss/vel rejected"] == 1
@@ -281,8 +281,8 @@ def test_imu_gap_is_bridged_and_a_long_one_restarts_the_alignment(ros_context):
         for k in range(int(round(t_from * 100)), int(round(t_to * 100))):
             node.on_delta(delta(k / 100))
             if k % 25 == 0:
-                node.on_fix(_fix_msg(k / 100, lat, lon, h, np.zeros(3)))
-                node.on_vel(_vel_msg(k / 100, np.zeros(3), np.zeros(3)))
+                node.on_input(node.inputs.fix, _fix_msg(k / 100, lat, lon, h, np.zeros(3)))
+                node.on_input(node.inputs.velocity, _vel_msg(k / 100, np.zeros(3), np.zeros(3)))
 
     run(0.01, 5.0)
     assert node.navigator.solution is not None

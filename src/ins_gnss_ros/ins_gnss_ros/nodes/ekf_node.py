@@ -28,10 +28,9 @@ and ``/tf_static`` base_link -> gnss_0 (REP-105, nodes/tf_messages.py);
 /diagnostics says why the filter is not navigating (what it waits for), the datum and, per
 aiding input, its rate, staleness and refusals.
 
-Services (as robot_localization's and navsat_transform's): ``~/reset`` (std_srvs/Empty: align
-again from nothing), ``~/set_pose`` (the filter navigates on from a map-frame pose:
-:func:`ins_gnss_ros.nav.set_pose.set_pose`), ``~/set_datum``, ``~/to_ll``, ``~/from_ll``
-(:mod:`ins_gnss_ros.nav.local_frame`).
+Inputs are translated by :class:`.ekf_inputs.EkfInputs`, as the offline replay translates
+them. Services (``~/reset``, ``~/set_pose``, ``~/set_datum``, ``~/to_ll``, ``~/from_ll``):
+:class:`.ekf_services.EkfServices`.
 
 Integrity: a measurement kind rejected at the gate for 2 s is forced in with its innovation
 admitted on both sides (the navigator's integrity logic); until the noise floor this leaves decays
@@ -52,37 +51,33 @@ from functools import partial
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
-from geometry_msgs.msg import TwistWithCovarianceStamped
-from ins_gnss_msgs.msg import FilterStatus, GnssEphemeris, GnssObservations, Heading, ImuDelta, \
-    InsCorrection, InsState
-from ins_gnss_msgs.srv import FromLL, SetDatum, SetPose, ToLL
+from ins_gnss_msgs.msg import FilterStatus, ImuDelta, InsCorrection, InsState
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
-from std_srvs.srv import Empty
 from tf2_msgs.msg import TFMessage
 
-from ..gnss.constants import GALILEO, GPS, UBX_GNSS_ID
-from ..gnss.ranges import RangeConfig, ephemeris_valid, satellite_ranges
-from ..gnss.spp import DEFAULT_SIGNALS, SppConfig, solve_position, solve_velocity
 from ..io import new, ns_to_stamp, stamp_to_ns, stamp_to_sec
 from ..nav import NAVIGATING, Navigator
 from ..nav.aiding import Aiding, AidingPolicy
 from ..nav.error_model import LAYOUTS
-from ..nav.filter_config import HEADING_INPUTS, PARAMS, navigator_config
-from ..nav.local_frame import datum_from_degrees, from_map, to_map
+from ..nav.filter_config import PARAMS, navigator_config
 from ..nav.odom_frame import OdomTrack
-from ..nav.set_pose import set_pose
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import StrapdownSync
 from .base import DRIVER_QOS, LATCHED_QOS, SENSOR_QOS, STATE_QOS, TF_QOS, TF_STATIC_QOS, \
     NavNode, ParameterError, run
-from .convert import heading_of, increment_of, nav_state_from_msg, quat, sensor_errors_of, set_vector3, vec
-from .gnss_messages import kepler_from_msg, raw_epoch_from_msg
+from .convert import increment_of, nav_state_from_msg, sensor_errors_of, set_vector3
+from .ekf_inputs import EkfInputs
+from .ekf_services import EkfServices
 from .nav_messages import MODES, datum_msg, fix_msg, fix_status, imu_msg, odom_msg, status_msg
 from .tf_messages import FRAME_PARAMS, solution_tf, static_tf
 
+#: QoS of the inputs that are not sensor streams (EkfInputs.handlers gives the topics).
+INPUT_QOS = {"gnss/fix": DRIVER_QOS, "gnss/vel": DRIVER_QOS, "log/speed": DRIVER_QOS,
+             "wheel/odom": DRIVER_QOS, "gnss/ephemeris": STATE_QOS}
 
-class EkfNode(NavNode):
+
+class EkfNode(EkfServices, NavNode):
     PARAMS = PARAMS + FRAME_PARAMS
 
     def __init__(self, **kwargs):
@@ -91,25 +86,10 @@ class EkfNode(NavNode):
         if p["coupling"] != "loose" and "clock" not in LAYOUTS[p["layout"]]:
             raise ParameterError(f"parameter 'layout' = {p['layout']!r} has no receiver clock "
                                  f"states: coupling {p['coupling']!r} needs one (e.g. '24')")
-        self.ranges = RangeConfig(
-            signals={sys_: "1C" for sys_, on in ((GPS, p["tight.gps"]), (GALILEO, p["tight.galileo"]))
-                     if on},
-            elevation_mask=np.radians(p["tight.elevation_mask_deg"]),
-            code_sigma=tuple(p["tight.code_sigma_m"]),
-            doppler_sigma=tuple(p["tight.doppler_sigma_hz"]),
-            klobuchar=(tuple(p["tight.klobuchar"][:4]), tuple(p["tight.klobuchar"][4:]))
-            if any(p["tight.klobuchar"]) else None)
-        # Single-point solutions that align the filter when the receiver's fix is no input.
-        self.spp = SppConfig(elevation_mask=self.ranges.elevation_mask, iono_free=False,
-                             klobuchar=self.ranges.klobuchar,
-                             sigma0=float(np.hypot(*self.ranges.code_sigma)),
-                             signals={s: DEFAULT_SIGNALS[s] for s in self.ranges.signals}) \
-            if p["coupling"] != "loose" and p["tight.align_on_observations"] else None
-        self.spp_x0 = None  # the last single-point position, ECEF m: the next one starts there
-        self.ephemeris_msgs: dict[str, GnssEphemeris] = {}
         self.config = navigator_config(p)
         self.navigator = Navigator(self.config)
         self.aiding = Aiding(self.navigator, AidingPolicy.from_params(p), self.diag.count)
+        self.inputs = EkfInputs(self.aiding, p, self.diag.count)
         if not p["datum.from_first_fix"]:
             self.aiding.datum = (np.radians(p["datum.latitude_deg"]),
                                  np.radians(p["datum.longitude_deg"]), p["datum.altitude_m"])
@@ -123,8 +103,6 @@ class EkfNode(NavNode):
         self.last_status_t = -np.inf
         self.published_datum = None
         self.converging = False  # re-synchronising the strapdown onto a set pose
-        # NavSatStatus (status, service) of the last gnss/fix handed to the filter
-        self.fix_input = (NavSatStatus.STATUS_FIX, 0)
 
         self.pub_correction = self.publisher(InsCorrection, "ins/correction", STATE_QOS)
         self.pub_odom = self.publisher(Odometry, "nav/odom", SENSOR_QOS)
@@ -137,26 +115,12 @@ class EkfNode(NavNode):
         self.odom = (p["odom_frame"], OdomTrack()) if p["use_wheel_odometry"] else None
         self.pub_tf_static = self.publisher(TFMessage, "/tf_static", TF_STATIC_QOS) \
             if p["publish_tf"] else None
-        self.service(Empty, "~/reset", self.on_reset)
-        self.service(SetPose, "~/set_pose", self.on_set_pose)
-        self.service(SetDatum, "~/set_datum", self.on_set_datum)
-        self.service(ToLL, "~/to_ll", self.on_to_ll)
-        self.service(FromLL, "~/from_ll", self.on_from_ll)
+        self.register_services()
         self.subscribe(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS)
         self.subscribe(InsState, "ins/state", self.on_ins_state, SENSOR_QOS)
-        if self.spp is None:
-            self.subscribe(NavSatFix, "gnss/fix", self.on_fix, DRIVER_QOS)
-            self.subscribe(TwistWithCovarianceStamped, "gnss/vel", self.on_vel, DRIVER_QOS)
-        if p["coupling"] != "loose":
-            self.subscribe(GnssObservations, "gnss/observations", self.on_observations, SENSOR_QOS)
-            self.subscribe(GnssEphemeris, "gnss/ephemeris", self.on_ephemeris, STATE_QOS)
-        for topic, use in HEADING_INPUTS.items():
-            if p[use]:
-                self.subscribe(Heading, topic, partial(self.on_heading, topic), SENSOR_QOS)
-        if p["use_speed_log"]:
-            self.subscribe(TwistWithCovarianceStamped, "log/speed", self.on_log, DRIVER_QOS)
-        if p["use_wheel_odometry"]:
-            self.subscribe(Odometry, "wheel/odom", self.on_wheel, DRIVER_QOS)
+        for topic, (msg_type, handler) in self.inputs.handlers().items():
+            self.subscribe(msg_type, topic, partial(self.on_input, handler),
+                           INPUT_QOS.get(topic, SENSOR_QOS))
 
     # -- inputs --------------------------------------------------------------------------------
     def on_delta(self, msg: ImuDelta) -> None:
@@ -172,77 +136,9 @@ class EkfNode(NavNode):
             self.sync.invalidate()
         self.after_filter()
 
-    def on_fix(self, msg: NavSatFix) -> None:
-        if self.aiding.fix(stamp_to_sec(msg.header.stamp), msg.latitude, msg.longitude,
-                           msg.altitude, np.reshape(msg.position_covariance, (3, 3)),
-                           msg.status.status,
-                           msg.position_covariance_type != NavSatFix.COVARIANCE_TYPE_UNKNOWN):
-            self.fix_input = (msg.status.status, msg.status.service)
-            self.note_datum(msg.header.stamp)
-            self.after_filter()
-
-    def on_vel(self, msg: TwistWithCovarianceStamped) -> None:
-        if self.aiding.velocity(stamp_to_sec(msg.header.stamp), vec(msg.twist.twist.linear),
-                                np.reshape(msg.twist.covariance, (6, 6))[:3, :3]):
-            self.after_filter()
-
-    def on_ephemeris(self, msg: GnssEphemeris) -> None:
-        system = UBX_GNSS_ID.get(int(msg.system))
-        if system in self.ranges.signals:
-            self.ephemeris_msgs[f"{system}{int(msg.prn):02d}"] = msg
-
-    def on_observations(self, msg: GnssObservations) -> None:
-        parsed = raw_epoch_from_msg(msg, set(self.ranges.signals))
-        if parsed is None:
-            self.diag.count("gnss/observations with arrays of unequal length rejected")
-            return
-        raw = parsed[0]
-        ephemerides = {}
-        for o in raw.obs:
-            sat = f"{o.system}{o.prn:02d}"
-            if sat in self.ephemeris_msgs and sat not in ephemerides:
-                eph = kepler_from_msg(self.ephemeris_msgs[sat], raw.t_gps)
-                if ephemeris_valid(eph, raw.t_gps):
-                    ephemerides[sat] = eph
-        nav, t = self.navigator, stamp_to_sec(msg.header.stamp)
-        if not self.aiding.choose_ranges(len(ephemerides)):
-            if self.spp is not None:
-                self.align_on_single_point(raw, ephemerides, t, msg.header.stamp)
-            return
-        if self.aiding.ranges(satellite_ranges(raw, ephemerides, t, nav.state_at(t), nav.lever_arm_b,
-                                               self.ranges)):
-            self.after_filter()
-
-    def align_on_single_point(self, raw, ephemerides, t, stamp) -> None:
-        """Until ranges can aid (they need the heading), the epoch's single-point fix and
-        Doppler velocity (gnss/spp.py) stand in for gnss/fix and gnss/vel."""
-        sol = solve_position(raw, ephemerides, self.spp, self.spp_x0)
-        if sol is None or not sol.valid:
-            self.diag.count("observation epoch without a single-point solution", log=False)
-            return
-        self.spp_x0 = sol.xyz
-        vel = solve_velocity(raw, ephemerides, sol, self.spp,
-                             float(np.hypot(*self.ranges.doppler_sigma)))
-        fixed = self.aiding.fix(t, np.degrees(sol.lat), np.degrees(sol.lon), sol.h,
-                                sol.covariance_enu, NavSatStatus.STATUS_FIX, True)
-        if fixed:
-            self.note_datum(stamp)
-        if (vel is not None and self.aiding.velocity(t, vel[0], vel[2])) or fixed:
-            self.after_filter()
-
-    def on_heading(self, topic: str, msg: Heading) -> None:
-        reading = heading_of(msg)
-        if reading is not None and self.aiding.heading(*reading, source=topic):
-            self.after_filter()
-
-    def on_log(self, msg: TwistWithCovarianceStamped) -> None:
-        if self.aiding.speed_log(stamp_to_sec(msg.header.stamp), msg.twist.twist.linear.x,
-                                 msg.twist.covariance[0]):
-            self.after_filter()
-
-    def on_wheel(self, msg: Odometry) -> None:
-        if self.aiding.wheel_odometry(stamp_to_sec(msg.header.stamp), vec(msg.twist.twist.linear),
-                                      np.diag(np.reshape(msg.twist.covariance, (6, 6)))[:3]):
+    def on_input(self, handler, msg) -> None:
+        if handler(msg):
+            self.note_datum(msg.header.stamp)  # a first fix sets the datum
             self.after_filter()
 
     def on_ins_state(self, msg: InsState) -> None:
@@ -256,68 +152,6 @@ class EkfNode(NavNode):
             self.publish_solution(nav_state_from_msg(msg), msg)
         if t - self.last_status_t >= 1.0:  # the mode is reported even when nothing updates
             self.publish_status(t, [])
-
-    # -- services ------------------------------------------------------------------------------
-    def on_reset(self, request, response):
-        """Forget everything: the filter aligns again (the datum stays)."""
-        self.navigator.reset()
-        self.sync.invalidate()  # the strapdown's states are not the solution until re-synced
-        self.get_logger().info("reset: aligning again")
-        return response
-
-    def on_set_pose(self, request: SetPose.Request, response: SetPose.Response):
-        pose = request.pose
-        if pose.header.frame_id not in ("", self.p["map_frame"]):
-            response.message = f"pose in frame {pose.header.frame_id!r}, not {self.p['map_frame']!r}"
-            return response
-        if self.aiding.datum is None:
-            response.message = "no datum yet: set one (~/set_datum) or wait for a fix"
-            return response
-        p, q = pose.pose.pose.position, quat(pose.pose.pose.orientation)
-        norm = np.linalg.norm(q)
-        if not (np.isfinite([p.x, p.y, p.z]).all() and np.isfinite(norm) and norm > 0.5):
-            response.message = "pose not finite or its quaternion not a rotation"
-            return response
-        lat, lon, h = from_map(self.aiding.datum, (p.x, p.y, p.z))
-        set_pose(self.navigator, stamp_to_sec(pose.header.stamp), lat, lon, h, q / norm,
-                 np.reshape(pose.pose.covariance, (6, 6)))
-        self.sync.invalidate()
-        self.converging = True
-        self.after_filter()
-        response.success, response.message = True, "navigating from the pose"
-        return response
-
-    def on_set_datum(self, request: SetDatum.Request, response: SetDatum.Response):
-        try:
-            self.aiding.datum = datum_from_degrees(request.latitude, request.longitude,
-                                                   request.altitude)
-        except ValueError as err:
-            response.message = str(err)
-            return response
-        self.note_datum(self.now_msg())
-        response.success, response.message = True, "datum set"
-        return response
-
-    def on_to_ll(self, request: ToLL.Request, response: ToLL.Response):
-        if self.aiding.datum is None:
-            response.message = "no datum yet"
-            return response
-        p = request.map_point
-        lat, lon, response.altitude = from_map(self.aiding.datum, (p.x, p.y, p.z))
-        response.latitude, response.longitude = float(np.degrees(lat)), float(np.degrees(lon))
-        response.success = True
-        return response
-
-    def on_from_ll(self, request: FromLL.Request, response: FromLL.Response):
-        if self.aiding.datum is None:
-            response.message = "no datum yet"
-            return response
-        p = response.map_point
-        p.x, p.y, p.z = (float(v) for v in to_map(
-            self.aiding.datum, np.radians(request.latitude), np.radians(request.longitude),
-            request.altitude))
-        response.success = True
-        return response
 
     # -- synchronisation and outputs -----------------------------------------------------------
     def note_datum(self, stamp) -> None:
@@ -409,7 +243,7 @@ class EkfNode(NavNode):
         (with the noise floors of forced measurement kinds: Navigator.covariance)."""
         P, S, p = self.navigator.covariance(), self.navigator.space, self.p
         status, service = (NavSatStatus.STATUS_FIX, 0) if self.aiding.use_ranges \
-            else self.fix_input
+            else self.inputs.fix_input
         self.pub_fix.publish(fix_msg(ins.header.stamp, st, P[S["pos"], S["pos"]],
                                      fix_status(self.navigator.mode == NAVIGATING, status),
                                      service, p["base_link_frame"]))

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +31,7 @@ from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_s
 
 #: The inputs the offline path reads (the ekf's aiding topics and the IMU).
 OFFLINE_TOPICS = ("/imu/delta", "/imu/data_raw", "/gnss/fix", "/gnss/vel", "/gnss/heading",
-                  "/mag/heading", "/log/speed", "/wheel/odom")
+                  "/mag/heading", "/log/speed", "/wheel/odom", "/gnss/observations")
 
 
 def offline_parameters(profile) -> tuple[dict, dict]:
@@ -174,27 +173,19 @@ class _Feeder:
 
     def __init__(self, aiding, preprocessor, pre_p, ekf_p, events):
         # Message modules load with the first offline run, not with the trial package.
-        from sensor_msgs.msg import NavSatFix
-
         from ins_gnss_ros.imu.preprocessor_params import orientation_headings_from_params
-        from ins_gnss_ros.nav.filter_config import HEADING_INPUTS
-        from ins_gnss_ros.nodes.convert import heading_of, increment_of
+        from ins_gnss_ros.nodes.convert import increment_of
+        from ins_gnss_ros.nodes.ekf_inputs import EkfInputs
 
-        self.unknown_covariance = NavSatFix.COVARIANCE_TYPE_UNKNOWN
-        self.increment_of, self.heading_of = increment_of, heading_of
+        self.increment_of = increment_of
         # imu/heading: the imu_preprocessor node's, from the raw samples' own orientation
         self.orientation, self.declination = orientation_headings_from_params(
             pre_p, preprocessor.calibration.c_bs) if ekf_p["use_imu_heading"] else (None, None)
-        self.aiding, self.preprocessor, self.p, self.events = aiding, preprocessor, ekf_p, events
-        self.handlers = {"/imu/delta": self.delta, "/imu/data_raw": self.raw,
-                         "/gnss/fix": self.fix, "/gnss/vel": self.vel}
-        for topic, use in HEADING_INPUTS.items():
-            if ekf_p[use]:
-                self.handlers["/" + topic] = partial(self.heading, topic)
-        if ekf_p["use_speed_log"]:
-            self.handlers["/log/speed"] = self.log
-        if ekf_p["use_wheel_odometry"]:
-            self.handlers["/wheel/odom"] = self.wheel
+        self.aiding, self.preprocessor, self.events = aiding, preprocessor, events
+        self.handlers = {"/imu/delta": self.delta, "/imu/data_raw": self.raw}
+        inputs = EkfInputs(aiding, ekf_p, lambda text, log=True: events.update([text]))
+        for topic, (_, handler) in inputs.handlers().items():
+            self.handlers["/" + topic] = handler
 
     def increment(self, problem, t, dtheta, dv, dt):
         """An increment with its increment_problem verdict, as the ekf node takes it."""
@@ -225,29 +216,6 @@ class _Feeder:
                 problem = increment_problem(tuple(inc.dtheta), tuple(inc.dv), inc.dt)
                 self.increment(problem, inc.t_ns * 1e-9, inc.dtheta, inc.dv, inc.dt)
 
-    def fix(self, msg):
-        self.aiding.fix(bagio.stamp_to_sec(msg.header.stamp), msg.latitude, msg.longitude,
-                        msg.altitude, np.reshape(msg.position_covariance, (3, 3)),
-                        msg.status.status, msg.position_covariance_type != self.unknown_covariance)
-
-    def vel(self, msg):
-        l = msg.twist.twist.linear
-        self.aiding.velocity(bagio.stamp_to_sec(msg.header.stamp), np.array([l.x, l.y, l.z]),
-                             np.reshape(msg.twist.covariance, (6, 6))[:3, :3])
-
-    def heading(self, topic, msg):
-        reading = self.heading_of(msg)
-        if reading is not None:
-            self.aiding.heading(*reading, source=topic)
-
-    def log(self, msg):
-        self.aiding.speed_log(bagio.stamp_to_sec(msg.header.stamp), msg.twist.twist.linear.x,
-                              msg.twist.covariance[0])
-
-    def wheel(self, msg):
-        l = msg.twist.twist.linear
-        self.aiding.wheel_odometry(bagio.stamp_to_sec(msg.header.stamp), np.array([l.x, l.y, l.z]),
-                                   np.diag(np.reshape(msg.twist.covariance, (6, 6)))[:3])
 
 def write_outputs(writer, result, config, datum, frames, prefix="", sensor_errors=False) -> Counter:
     """ins/state, nav/odom, nav/fix, /tf at every epoch of a recorded pass, nav/status once a
