@@ -10,7 +10,7 @@ import pytest
 from conftest import REPO
 from ins_gnss_ros import io as bagio
 from ins_gnss_ros.io import cdr
-from ins_gnss_ros.io.mcap_reader import McapError, read_mcap
+from ins_gnss_ros.io.mcap_reader import McapError, McapReader
 from ins_gnss_ros.trial import contract_messages as msgs
 
 RNG = np.random.default_rng(7)
@@ -51,7 +51,7 @@ def test_reads_what_rosbags_and_mcap_read(chunked_bag):
         by_rosbags = [bagio.RawMessage(c.topic, t, c.msgtype, data)
                       for c, t, data in reader.messages()]
     assert direct == sorted(by_rosbags, key=lambda m: m.t_ns)
-    assert [(m.topic, m.t_ns, m.data) for m in read_mcap(mcap_file).messages] == by_mcap
+    assert [(m.topic, m.t_ns, m.data) for m in McapReader(mcap_file)] == by_mcap
     assert len(direct) == 15_000 + 15_000 // 40
     assert [m.topic for m in direct[:2]] == ["/imu/delta", "/gnss/fix"]  # tie: writing order
     assert bagio.read_raw(chunked_bag, ["gnss/fix"]) == [m for m in direct
@@ -63,8 +63,9 @@ def test_a_cut_file_is_read_up_to_where_it_ends(tmp_path, caplog):
     from a cut chunk), in file order, with one warning saying how much; nothing after it."""
     mcap_file = next(BUNDLED.glob("*.mcap"))
     data = mcap_file.read_bytes()
-    whole = read_mcap(mcap_file)
-    n = len(whole.messages)
+    whole = McapReader(mcap_file)
+    messages = list(whole)
+    n = len(messages)
     assert whole.cut_at is None and n == 22_967
     cut_bag = tmp_path / "cut"
     cut_bag.mkdir()
@@ -73,14 +74,15 @@ def test_a_cut_file_is_read_up_to_where_it_ends(tmp_path, caplog):
     for size in (0, 5, 8, 30, 1000, 100_000, 250_000, 429_776, 500_000, 700_000, 900_000,
                  len(data) - 300, len(data) - 1):
         (cut_bag / mcap_file.name).write_bytes(data[:size])
-        contents = read_mcap(cut_bag / mcap_file.name)
-        assert contents.messages == whole.messages[:len(contents.messages)], size
-        counts.append(len(contents.messages))
+        contents = McapReader(cut_bag / mcap_file.name)
+        read = list(contents)
+        assert read == messages[:len(read)], size
+        counts.append(len(read))
         caplog.clear()
         with caplog.at_level(logging.WARNING, logger="ins_gnss_ros.io.bag"):
             rows = bagio.read_raw(cut_bag)
         assert sorted(rows, key=lambda m: (m.t_ns, m.topic, m.data)) == \
-            sorted(contents.messages, key=lambda m: (m.t_ns, m.topic, m.data))
+            sorted(read, key=lambda m: (m.t_ns, m.topic, m.data))
         if contents.cut_at is None:   # cut in the summary, after the data: nothing lost
             assert len(rows) == n and not caplog.records
         else:
@@ -98,11 +100,46 @@ def test_damage_that_is_not_a_cut_is_an_error(tmp_path):
     for garbage in (b"not an mcap file at all", data[:8] + RNG.bytes(3000)):
         bad.write_bytes(garbage)
         with pytest.raises(McapError, match="not an MCAP file"):
-            read_mcap(bad)
+            list(McapReader(bad))
     # The first chunk (at byte 43) says it holds one byte more than it does (the writer leaves
     # the chunk checksums out, so a size is what can be checked).
     at = 43 + 9 + 16
     data[at:at + 8] = (int.from_bytes(data[at:at + 8], "little") + 1).to_bytes(8, "little")
     bad.write_bytes(bytes(data))
     with pytest.raises(McapError, match="chunk"):
-        read_mcap(bad)
+        list(McapReader(bad))
+
+
+def test_chunks_out_of_time_order_still_stream_in_stamp_order(tmp_path):
+    """A file whose chunks overlap in time and come back in time (written by the ``mcap``
+    library, not by this project): the reader holds them until nothing earlier can follow."""
+    from mcap.writer import CompressionType, Writer
+
+    path = tmp_path / "x.mcap"
+    stamps = [*range(500, 1000), *range(0, 500, 2), *range(1, 500, 2), *range(1000, 1500)]
+    with open(path, "wb") as f:
+        writer = Writer(f, chunk_size=2000, compression=CompressionType.ZSTD)
+        writer.start("ros2", "test")
+        schema = writer.register_schema("std_msgs/msg/UInt32", "ros2msg", b"uint32 data")
+        channel = writer.register_channel("/n", "cdr", schema)
+        for seq, t in enumerate(stamps):
+            writer.add_message(channel, t, t.to_bytes(8, "little"), t, seq)
+        writer.finish()
+    reader = McapReader(path)
+    rows = list(reader)
+    assert [r.t_ns for r in rows] == sorted(stamps)
+    assert all(int.from_bytes(r.data, "little") == r.t_ns for r in rows)
+    assert reader.cut_at is None and reader.channels == {("/n", "std_msgs/msg/UInt32")}
+
+
+def test_a_recording_in_time_order_is_read_a_chunk_at_a_time(chunked_bag, monkeypatch):
+    """Memory bounded by a chunk: the first message comes out after one decompression."""
+    from ins_gnss_ros.io import mcap_reader
+
+    calls = []
+    decompress = mcap_reader._decompress
+    monkeypatch.setattr(mcap_reader, "_decompress", lambda *a: calls.append(1) or decompress(*a))
+    stream = iter(McapReader(next(chunked_bag.glob("*.mcap"))))
+    next(stream)
+    assert len(calls) == 1
+    assert sum(1 for _ in stream) == 15_000 + 15_000 // 40 - 1 and len(calls) >= 2

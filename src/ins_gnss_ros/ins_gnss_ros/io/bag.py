@@ -12,7 +12,8 @@ Reading parses ``metadata.yaml`` and walks the MCAP files (:mod:`ins_gnss_ros.io
 which also reads a recording that was cut short, up to where it ends, with a warning on the
 ``ins_gnss_ros.io.bag`` logger saying what was lost; bags of other storage (sqlite3) or with
 whole-file compression go through ``rosbags``' public :class:`~rosbags.rosbag2.Reader`.
-Readers for which speed matters (the offline replay) take the undecoded rows (:func:`read_raw`)
+Readers for which speed matters (the offline replay) take the undecoded rows (:func:`iter_raw`,
+streamed: an hours-long bag is never held whole; :func:`read_raw` as a list)
 and decode fixed-layout topics in bulk (:func:`ins_gnss_ros.io.cdr.decode_columns`);
 :meth:`BagWriter.write_raw` takes payloads encoded that way.
 
@@ -21,6 +22,7 @@ are written in stamp order and a reader returns them in stamp order, ties in wri
 """
 from __future__ import annotations
 
+import heapq
 import logging
 import os
 from dataclasses import dataclass
@@ -31,7 +33,7 @@ from typing import Any, Iterable, Iterator
 
 from ..params_io import ParamsFileError, load_yaml_file
 from .cdr import Unsupported, codec
-from .mcap_reader import RawMessage, read_mcap
+from .mcap_reader import McapReader, RawMessage
 from .messages import MessageTypeError, msg_class, msgtype_of
 from .stamps import msg_stamp_ns
 
@@ -121,7 +123,8 @@ def resolve(topic: str) -> str:
 
 
 class BagWriter:
-    """Collects messages and writes them, sorted by stamp, when closed.
+    """Collects messages and writes them, sorted by stamp, when closed; or, ``ordered``,
+    writes each at once (the producer hands them in stamp order).
 
     Example
     -------
@@ -129,15 +132,21 @@ class BagWriter:
     ...     bag.write("imu/data_raw", imu_msg)
 
     Sorting at the end lets a producer write each sensor stream in turn; a bag of a few hundred
-    thousand small messages fits in memory comfortably.
+    thousand small messages fits in memory comfortably. A producer of hours of output in stamp
+    order (trial smooth) writes ``ordered``: the memory is then one MCAP chunk's.
     """
 
-    def __init__(self, path):
+    def __init__(self, path, ordered: bool = False):
         self.path = Path(path)
         if self.path.exists():
             raise BagError(f"{self.path} exists: choose a new output folder")
         self._rows: list[tuple[int, int, str, bytes]] = []
         self._types: dict[str, str] = {}
+        self._ordered = ordered
+        self._count = 0
+        self._last_ns = -1
+        self._writer = None   # the rosbags writer, open from the first ordered message on
+        self._connections: dict[str, Any] = {}
 
     def write(self, topic: str, msg, t_ns: int | None = None) -> None:
         """Queue ``msg`` on ``topic`` at log time ``t_ns`` (default: its header stamp)."""
@@ -149,44 +158,72 @@ class BagWriter:
         topic = resolve(topic)
         if self._types.setdefault(topic, msgtype) != msgtype:
             raise BagError(f"topic {topic} carries {self._types[topic]}, not {msgtype}")
-        self._rows.append((int(t_ns), len(self._rows), topic, data))
+        t_ns = int(t_ns)
+        if self._ordered:
+            if t_ns < self._last_ns:
+                raise BagError(f"{self.path}: {topic} at {t_ns} ns comes after {self._last_ns} "
+                               "ns: an ordered writer takes messages in stamp order")
+            self._last_ns = t_ns
+            self._open().write(self._connection(topic), t_ns, data)
+        else:
+            self._rows.append((t_ns, self._count, topic, data))
+        self._count += 1
 
     def __len__(self) -> int:
-        return len(self._rows)
+        return self._count
 
     def write_all(self, topic: str, msgs: Iterable) -> None:
         for msg in msgs:
             self.write(topic, msg)
 
     def close(self) -> Path:
-        from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
-
         # (stamp, writing order) decide: the order is unique, so no key function is needed.
         self._rows.sort()
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        store = typestore()
-        writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
-        # zstd-compressed MCAP chunks (rosbag2's "storage" compression, which the mcap plugin,
-        # Foxglove and the mcap tools read natively): IMU messages shrink about fourfold.
-        writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
-        with writer:
-            connections = {topic: writer.add_connection(topic, msgtype, typestore=store)
-                           for topic, msgtype in sorted(self._types.items())}
-            for t, _, topic, data in self._rows:
-                writer.write(connections[topic], t, data)
+        writer = self._open()
+        for topic in sorted(self._types):   # channels in name order, as ever
+            self._connection(topic)
+        for t, _, topic, data in self._rows:
+            writer.write(self._connection(topic), t, data)
+        self._rows = []
+        writer.close()
         return self.path
+
+    def _open(self):
+        if self._writer is None:
+            from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
+
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+            # zstd-compressed MCAP chunks (rosbag2's "storage" compression, which the mcap
+            # plugin, Foxglove and the mcap tools read natively): IMU messages shrink fourfold.
+            self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+            self._writer.open()
+        return self._writer
+
+    def _connection(self, topic: str):
+        if topic not in self._connections:
+            self._connections[topic] = self._writer.add_connection(
+                topic, self._types[topic], typestore=typestore())
+        return self._connections[topic]
 
     def __enter__(self) -> "BagWriter":
         return self
 
     def __exit__(self, exc_type, *exc) -> None:
-        if exc_type is None:
+        # An ordered bag holds what was written before a failure, like a recording cut short.
+        if exc_type is None or self._writer is not None:
             self.close()
 
 
 def bag_topics(path) -> dict[str, str]:
     """Topics of a bag with their type names (from its metadata.yaml)."""
     return {topic: msgtype for topic, (msgtype, _) in _metadata(Path(path))[1].items()}
+
+
+def bag_message_counts(path) -> dict[str, int]:
+    """Topics of a bag with their message counts (from its metadata.yaml: what was recorded,
+    more than a file cut short holds)."""
+    return {topic: count for topic, (_, count) in _metadata(Path(path))[1].items()}
 
 
 def read_bag(path, topics: Iterable[str] | None = None) -> list[BagMessage]:
@@ -208,41 +245,60 @@ def read_bag(path, topics: Iterable[str] | None = None) -> list[BagMessage]:
 
 
 def iter_bag(path, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
-    """Like :func:`read_bag`, decoding lazily (rows are read and sorted by stamp first)."""
-    for raw in read_raw(path, topics):
+    """Like :func:`read_bag`, streaming (:func:`iter_raw`, each message decoded as it comes)."""
+    for raw in iter_raw(path, topics):
         yield BagMessage(raw.topic, raw.t_ns, decode_message(raw, path))
 
 
 def read_raw(path, topics: Iterable[str] | None = None) -> list[RawMessage]:
     """The messages of a bag (or of ``topics``) undecoded, in stamp order, ties in writing
-    order: for readers that decode in bulk (:mod:`ins_gnss_ros.io.cdr`) or not at all.
+    order: for readers that decode in bulk (:mod:`ins_gnss_ros.io.cdr`) or not at all
+    (:func:`iter_raw` as a list)."""
+    return list(iter_raw(path, topics))
+
+
+def iter_raw(path, topics: Iterable[str] | None = None) -> Iterator[RawMessage]:
+    """The messages of a bag (or of ``topics``) undecoded, streamed in stamp order, ties in
+    writing order; memory bounded by a chunk per MCAP file, not by the bag's length.
 
     A bag whose MCAP file ends early (a recording that was killed) is read up to where it
-    ends; a warning on the ``ins_gnss_ros.io.bag`` logger says how much was read.
+    ends; a warning on the ``ins_gnss_ros.io.bag`` logger says how much was read, once the
+    file's messages have been handed on.
+
+    Raises (while iterating)
+    ------
+    BagError
+        One line naming the bag and what is wrong with it.
     """
     path = Path(path)
     info, listed = _metadata(path)
     wanted = None if topics is None else {resolve(t) for t in topics}
     try:
         if info["storage_identifier"] == "mcap" and not info.get("compression_mode"):
-            rows = []
-            for file in _files(path, info):
-                contents = read_mcap(file, wanted)
-                _check_types(path, contents.channels, listed)
-                rows += contents.messages
-                if contents.cut_at is not None:
-                    _warn_cut(path, file, contents, info, listed, wanted)
+            # Files in stamp order each; merged stably (ties in file order, as written).
+            yield from heapq.merge(*(_mcap_rows(path, file, info, listed, wanted)
+                                     for file in _files(path, info)), key=itemgetter(1))
         else:
-            rows = _read_with_rosbags(path, wanted)
+            yield from _read_with_rosbags(path, wanted)
     except BagError:
         raise
     except Exception as err:  # mcap_reader, rosbags and the decompressors raise many types
         raise BagError(f"{path}: unreadable bag ({type(err).__name__}: {first_line(err)})") \
             from None
-    # Stable: ties stay in file order. The rows are built once, in their final type (a bag
-    # has a few hundred thousand of them).
-    rows.sort(key=itemgetter(1))
-    return rows
+
+
+def _mcap_rows(path: Path, file: Path, info: dict, listed: dict, wanted) -> Iterator[RawMessage]:
+    """One MCAP file's messages, its channel types checked against metadata.yaml's (rosbag2
+    would mis-decode), and a warning once they are read if the file was cut short."""
+    def check(topic, msgtype):
+        if topic in listed and listed[topic][0] != msgtype:
+            raise BagError(f"{path}: {topic} carries {msgtype}, metadata.yaml says "
+                           f"{listed[topic][0]}")
+
+    reader = McapReader(file, wanted, on_channel=check)
+    yield from reader
+    if reader.cut_at is not None:
+        _warn_cut(path, file, reader, info, listed, wanted)
 
 
 def _metadata(path: Path) -> tuple[dict, dict]:
@@ -273,14 +329,6 @@ def _metadata(path: Path) -> tuple[dict, dict]:
     return info, listed
 
 
-def _check_types(path: Path, channels: set, listed: dict) -> None:
-    """The MCAP channels carry the types metadata.yaml lists (rosbag2 would mis-decode)."""
-    for topic, msgtype in channels:
-        if topic in listed and listed[topic][0] != msgtype:
-            raise BagError(f"{path}: {topic} carries {msgtype}, metadata.yaml says "
-                           f"{listed[topic][0]}")
-
-
 def _files(path: Path, info: dict) -> list[Path]:
     files = [path / PurePath(name).name for name in info["relative_file_paths"]]
     missing = [file.name for file in files if not file.is_file()]
@@ -289,37 +337,38 @@ def _files(path: Path, info: dict) -> list[Path]:
     return files
 
 
-def _warn_cut(path: Path, file: Path, contents, info: dict, listed: dict, wanted) -> None:
+def _warn_cut(path: Path, file: Path, reader: McapReader, info: dict, listed: dict,
+              wanted) -> None:
     """Log what a cut MCAP file (a recording that was killed) lost."""
-    rows = contents.messages
+    n = reader.count
     expected = sum(count for topic, (_, count) in listed.items()
                    if wanted is None or topic in wanted)
-    read = f"{len(rows):,} of the {expected:,} messages metadata.yaml lists" \
-        if expected > len(rows) else f"{len(rows):,} messages"
+    read = f"{n:,} of the {expected:,} messages metadata.yaml lists" \
+        if expected > n else f"{n:,} messages"
     try:
         start = info["starting_time"]["nanoseconds_since_epoch"]
         duration = info["duration"]["nanoseconds"] * 1e-9
-        span = f", the first {(max(r.t_ns for r in rows) - start) * 1e-9:.1f} s of " \
-               f"{duration:.1f} s" if rows else ""
+        span = f", the first {(reader.last_ns - start) * 1e-9:.1f} s of " \
+               f"{duration:.1f} s" if n else ""
     except (KeyError, TypeError):
         span = ""
-    where = "between records" if contents.cut_at == contents.size else \
-        f"inside a record that starts at byte {contents.cut_at:,}"
+    where = "between records" if reader.cut_at == reader.size else \
+        f"inside a record that starts at byte {reader.cut_at:,}"
     log.warning("%s: %s ends at byte %s, %s, without the end of its data (the recording was "
                 "cut short): read %s%s; the rest is lost", path, file.name,
-                f"{contents.size:,}", where, read, span)
+                f"{reader.size:,}", where, read, span)
 
 
-def _read_with_rosbags(path: Path, wanted) -> list[RawMessage]:
-    """The rows of a bag that is not plain MCAP, through rosbags' public reader."""
+def _read_with_rosbags(path: Path, wanted) -> Iterator[RawMessage]:
+    """The rows of a bag that is not plain MCAP, through rosbags' public reader (in stamp
+    order, streamed)."""
     from rosbags.rosbag2 import Reader
 
     with Reader(path) as reader:
         connections = [c for c in reader.connections if wanted is None or c.topic in wanted]
-        if not connections:
-            return []
-        return [RawMessage(c.topic, t, c.msgtype, data)
-                for c, t, data in reader.messages(connections=connections)]
+        if connections:
+            for c, t, data in reader.messages(connections=connections):
+                yield RawMessage(c.topic, t, c.msgtype, data)
 
 
 def first_line(err: Exception) -> str:

@@ -67,6 +67,45 @@ def estimate_sizes(space):
         yield name, (BLOCK_SIZES[name] if name in BLOCK_SIZES else space.extras[name].size)
 
 
+class _Columns:
+    """Per-epoch values in numpy columns that grow by doubling, so that a long run costs no
+    Python object per value and the record's output is a view of them. A doubled column is
+    only resident as far as it is written (the pages beyond are address space), and the old
+    one is freed at once: the copy is the only transient."""
+
+    def __init__(self):
+        self.n = 0
+        self._data: dict[str, np.ndarray] = {}
+
+    def append(self, values: dict) -> None:
+        if not self._data:
+            self._data = {k: np.empty((1024,) + np.shape(v), object if isinstance(v, str)
+                                      else float) for k, v in values.items()}
+        if self.n == len(next(iter(self._data.values()))):
+            for k, old in self._data.items():
+                grown = np.empty((2 * self.n,) + old.shape[1:], old.dtype)
+                grown[:self.n] = old
+                self._data[k] = grown
+        for k, v in values.items():
+            self._data[k][self.n] = v
+        self.n += 1
+
+    def last(self, name) -> np.ndarray:
+        """The current epoch's value (a writable view for an array value)."""
+        return self._data[name][self.n - 1]
+
+    def set_last(self, name, value) -> None:
+        self._data[name][self.n - 1] = value
+
+    def view(self, name) -> np.ndarray:
+        return self._data[name][:self.n] if self._data else np.empty(0)
+
+    def last_values(self) -> dict:
+        """A copy of the current epoch's values."""
+        return {k: np.copy(v[self.n - 1]) if v.dtype != object else v[self.n - 1]
+                for k, v in self._data.items()}
+
+
 class Recorder:
     """Per-epoch record and update results of a run.
 
@@ -80,13 +119,12 @@ class Recorder:
         Keep P, P_prior and Phi per epoch (NavigatorConfig.store_covariance).
     """
 
-    _COLUMNS = ("t", "lat", "lon", "h", "v", "q", "mode", "P", "Pp", "phi", "dx", "est")
-
     def __init__(self, space, record, store_covariance):
         self.space = space
         self._record = record
         self._store_covariance = store_covariance
-        self._out = {k: [] for k in self._COLUMNS}
+        self._estimates = dict(estimate_sizes(space))
+        self._out = _Columns()
         self._updates = []
         self._updates_dropped = 0   # update results forgotten in streaming use (record=False)
 
@@ -94,49 +132,46 @@ class Recorder:
     @property
     def epochs(self):
         """Number of epochs recorded."""
-        return len(self._out["t"])
+        return self._out.n
 
     def epoch(self, state, phi, P_prior):
         """Record a new epoch: the run state after the propagation, with its Phi and P-."""
         if not self._record:
             return
-        o, nav = self._out, state.nav
-        o["t"].append(nav.t)
-        o["lat"].append(nav.lat)
-        o["lon"].append(nav.lon)
-        o["h"].append(nav.h)
-        o["v"].append(nav.v_enu)
-        o["q"].append(nav.q_nb)
-        o["mode"].append(state.mode)
-        o["dx"].append(np.zeros(self.space.size))
-        o["est"].append({k: v.copy() for k, v in state.estimates.items()})
+        nav = state.nav
+        values = {"t": nav.t, "lat": nav.lat, "lon": nav.lon, "h": nav.h, "v": nav.v_enu,
+                  "q": nav.q_nb, "mode": state.mode, "dx": np.zeros(self.space.size),
+                  **self._estimate_values(state)}
         if self._store_covariance:
-            o["P"].append(state.ekf.P.copy())
-            o["Pp"].append(P_prior)
-            o["phi"].append(phi)
+            values.update(P=state.ekf.P, Pp=P_prior, phi=phi)
+        self._out.append(values)
 
     def correct(self, state, dx):
         """Replace the current epoch's record by the corrected state (after an update)."""
         if not self._record:
             return
         o, nav = self._out, state.nav
-        o["lat"][-1], o["lon"][-1], o["h"][-1] = nav.lat, nav.lon, nav.h
-        o["v"][-1], o["q"][-1], o["mode"][-1] = nav.v_enu, nav.q_nb, state.mode
-        o["dx"][-1] = o["dx"][-1] + dx
-        o["est"][-1] = {k: v.copy() for k, v in state.estimates.items()}
+        for name, value in (("lat", nav.lat), ("lon", nav.lon), ("h", nav.h),
+                            ("v", nav.v_enu), ("q", nav.q_nb), ("mode", state.mode),
+                            *self._estimate_values(state).items()):
+            o.set_last(name, value)
+        o.last("dx")[:] += dx
         if self._store_covariance:
-            o["P"][-1] = state.ekf.P.copy()
+            o.set_last("P", state.ekf.P)
+
+    def _estimate_values(self, state):
+        return {"est:" + name: state.estimates[name] for name in self._estimates}
 
     def set_mode(self, mode):
         """The current epoch's mode changed."""
         if self._record:
-            self._out["mode"][-1] = mode
+            self._out.set_last("mode", mode)
 
     def widen_prior(self, s, variances):
         """Add `variances` to the block `s` (slice) of the current epoch's P-: process noise of
         this epoch as far as the smoother is concerned."""
         if self._record and self._store_covariance:
-            self._out["Pp"][-1][s, s] += np.diag(variances)
+            self._out.last("Pp")[s, s] += np.diag(variances)
 
     # -- update results ----------------------------------------------------------------------
     @property
@@ -167,11 +202,9 @@ class Recorder:
     # -- rewind and output -------------------------------------------------------------------
     def last_epoch(self):
         """A copy of the current epoch's record (None without one), for :meth:`truncate`."""
-        if not self._record or not self._out["t"]:
+        if not self._record or not self._out.n:
             return None
-        return {k: ({n: v.copy() for n, v in lst[-1].items()} if k == "est"
-                    else np.copy(lst[-1]) if isinstance(lst[-1], np.ndarray) else lst[-1])
-                for k, lst in self._out.items() if lst}
+        return self._out.last_values()
 
     def truncate(self, epochs, update_count, last_epoch=None):
         """Forget the epochs after the first `epochs` and the update results after the first
@@ -179,24 +212,24 @@ class Recorder:
         when the run had got that far) restores the record of the epoch the re-run starts
         from: the updates re-applied there would otherwise add their corrections (dx) twice,
         which the smoother reads."""
-        for lst in self._out.values():
-            del lst[epochs:]
+        self._out.n = min(self._out.n, epochs)
         del self._updates[update_count - self._updates_dropped:]
         if last_epoch is not None and epochs > 0:
             for k, value in last_epoch.items():
-                self._out[k][-1] = value
+                self._out.set_last(k, value)
 
     def output(self):
-        """The record so far, as a :class:`NavigatorOutput`."""
-        o = self._out
-        full = self._store_covariance and len(o["P"]) > 0
-        est = {name: np.array([e[name] for e in o["est"]]).reshape(len(o["t"]), size)
-               for name, size in estimate_sizes(self.space)}
+        """The record so far, as a :class:`NavigatorOutput` of views, not copies, of the
+        record (a record is as large as its output): take it when the run is over, as what a
+        run does next may rewrite its last epochs."""
+        o, n = self._out, self._out.n
+        full = self._store_covariance and n > 0
+        est = {name: o.view("est:" + name).reshape(n, size)
+               for name, size in self._estimates.items()}
         return NavigatorOutput(
-            t=np.array(o["t"]), lat=np.array(o["lat"]), lon=np.array(o["lon"]),
-            h=np.array(o["h"]), v_enu=np.array(o["v"]).reshape(-1, 3),
-            q_nb=np.array(o["q"]).reshape(-1, 4), mode=np.array(o["mode"]),
-            P=np.array(o["P"]) if full else None, P_prior=np.array(o["Pp"]) if full else None,
-            phi=np.array(o["phi"]) if full else None,
-            dx=np.array(o["dx"]).reshape(len(o["t"]), self.space.size), estimates=est,
+            t=o.view("t"), lat=o.view("lat"), lon=o.view("lon"), h=o.view("h"),
+            v_enu=o.view("v").reshape(n, 3), q_nb=o.view("q").reshape(n, 4),
+            mode=o.view("mode").astype(str), P=o.view("P") if full else None,
+            P_prior=o.view("Pp") if full else None, phi=o.view("phi") if full else None,
+            dx=o.view("dx").reshape(n, self.space.size), estimates=est,
             space=self.space, updates=list(self._updates))

@@ -20,7 +20,7 @@ class InputTopicsError(ValueError):
     """A bag none of whose topics is an input of the graph (nothing would reach the nodes)."""
 
 
-def bag_rows(bag_path, keep: Callable[[str], bool]) -> list:
+def bag_rows(bag_path, keep: Callable[[str], bool]) -> Iterator:
     """The undecoded messages of the topics of a bag whose absolute name passes ``keep``.
 
     Parameters
@@ -32,23 +32,30 @@ def bag_rows(bag_path, keep: Callable[[str], bool]) -> list:
 
     Returns
     -------
-    list of RawMessage
-        In stamp order (ties in writing order), each under its absolute topic name.
+    iterator of RawMessage
+        Streamed in stamp order (ties in writing order), each under its absolute topic name.
     """
     listed = [t for t in bagio.bag_topics(bag_path) if keep(bagio.resolve(t))]
     if not listed:
-        return []
+        return iter(())
     if all(t.startswith("/") for t in listed):
-        return bagio.read_raw(bag_path, listed)
+        return bagio.iter_raw(bag_path, listed)
     # The reader selects topics by absolute name only: read every row and pick them here.
     names = set(listed)
-    return [row._replace(topic=bagio.resolve(row.topic)) for row in bagio.read_raw(bag_path)
-            if row.topic in names]
+    return (row._replace(topic=bagio.resolve(row.topic)) for row in bagio.iter_raw(bag_path)
+            if row.topic in names)
 
 
-def input_rows(bag_path) -> list:
+def input_rows(bag_path) -> Iterator:
     """The undecoded messages a graph may see (:func:`bag_rows` of all but ``truth/*``)."""
     return bag_rows(bag_path, lambda topic: not topic.startswith(TRUTH_PREFIX))
+
+
+def input_count(bag_path) -> int:
+    """How many messages :func:`input_rows` gives at most (metadata.yaml's counts: a progress
+    bar's total)."""
+    return sum(n for topic, n in bagio.bag_message_counts(bag_path).items()
+               if not bagio.resolve(topic).startswith(TRUTH_PREFIX))
 
 
 def read_inputs(bag_path) -> list:

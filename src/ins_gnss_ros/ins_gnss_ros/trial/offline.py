@@ -17,14 +17,16 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass
+from operator import itemgetter
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
 from ins_gnss_ros import io as bagio
 from ins_gnss_ros.nav.increments import increment_problem
 from ins_gnss_ros.params import ParameterError, resolve
-from ins_gnss_ros.trial.inputs import check_inputs, input_rows
+from ins_gnss_ros.trial.inputs import bag_rows, check_inputs, input_count, input_rows
 from ins_gnss_ros.trial.outages import GNSS_PREFIX, gnss_windows, in_outage
 from ins_gnss_ros.trial.profile import ProfileError, load_profile
 from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_summary
@@ -64,10 +66,9 @@ def replay_offline(bag_path, profile_path, out, outages=None, progress=False) ->
     """
     run = forward_pass(bag_path, profile_path, outages, progress, out=out)
     out = Path(out)
-    writer = bagio.BagWriter(out / "bag")
-    run.counts.recorded.update(write_outputs(writer, run.navigator.output(),
-                                             run.navigator.config, run.datum, run.frames))
-    writer.close()
+    with bagio.BagWriter(out / "bag", ordered=True) as writer:
+        run.counts.recorded.update(write_ordered(writer, output_messages(
+            run.navigator.output(), run.navigator.config, run.datum, run.frames)))
     return run.summary(out, bag_path, outages, "offline")
 
 
@@ -138,8 +139,9 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
     profile = load_profile(profile_path)
     pre_p, ekf_p = offline_parameters(profile)
     check_inputs(bag_path, OFFLINE_TOPICS)
-    rows = input_rows(bag_path)
-    windows = gnss_windows(rows, outages)
+    # The GNSS span (outage windows) first, from the GNSS topics alone: the rest is streamed.
+    windows = gnss_windows(bag_rows(bag_path, lambda topic: topic.startswith(GNSS_PREFIX))
+                           if outages else (), outages)
     if out is not None:
         new_run_folder(out)
     navigator = (navigator_type or Navigator)(navigator_config(ekf_p, record=True))
@@ -155,7 +157,8 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
         raise ProfileError(f"{profile.path}: imu_preprocessor: {err}") from None
     feed = _Feeder(aiding, preprocessor, pre_p, ekf_p, events)
     counts = MessageCounts()
-    for row in tqdm(rows, disable=not progress, unit="msg", desc="forward"):
+    for row in tqdm(input_rows(bag_path), disable=not progress, unit="msg", desc="forward",
+                    total=input_count(bag_path)):
         if row.topic.startswith(GNSS_PREFIX) and in_outage(row.t_ns, windows):
             counts.withheld[row.topic] += 1
             continue
@@ -217,13 +220,22 @@ class _Feeder:
                 self.increment(problem, inc.t_ns * 1e-9, inc.dtheta, inc.dv, inc.dt)
 
 
-def write_outputs(writer, result, config, datum, frames, prefix="", sensor_errors=False) -> Counter:
+def write_ordered(writer, messages) -> Counter:
+    """Write (t_ns, topic, msg) in stamp order into an ``ordered`` BagWriter as they come;
+    returns the counts per topic."""
+    counts = Counter()
+    for t_ns, topic, msg in messages:
+        writer.write(topic, msg, t_ns)
+        counts[bagio.resolve(topic)] += 1
+    return counts
+
+
+def output_messages(result, config, datum, frames, prefix="", sensor_errors=False) -> Iterator:
     """ins/state, nav/odom, nav/fix, /tf at every epoch of a recorded pass, nav/status once a
-    second and /tf_static at the first; returns the counts per topic.
+    second and /tf_static at the first, as (t_ns, topic, msg) in stamp order.
 
     Parameters
     ----------
-    writer : BagWriter
     result : NavigatorOutput
         The forward pass (``navigator.output()``) or another solution at its epochs with its
         covariance (the smoothed one, trial/smooth.py); its update results since the last
@@ -244,7 +256,7 @@ def write_outputs(writer, result, config, datum, frames, prefix="", sensor_error
     from ins_gnss_msgs.msg import InsState
     from sensor_msgs.msg import NavSatStatus
 
-    from ins_gnss_ros.io import ns_to_stamp, sec_to_ns
+    from ins_gnss_ros.io import msg_stamp_ns, ns_to_stamp, sec_to_ns
     from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, NAVIGATING, NavState
     from ins_gnss_ros.nav.increments import SensorErrors
     from ins_gnss_ros.nav.odom_frame import OdomTrack
@@ -254,9 +266,8 @@ def write_outputs(writer, result, config, datum, frames, prefix="", sensor_error
 
     ins_modes = {ALIGNING: InsState.MODE_ALIGNING, NAVIGATING: InsState.MODE_NAVIGATING,
                  DEAD_RECKONING: InsState.MODE_DEAD_RECKONING}
-    counts = Counter()
     if len(result.t) == 0:
-        return counts
+        return
     space, updates = result.space, result.updates
     rate_var = config.noise.gyro_psd / config.cov_interval
     u = 0
@@ -268,20 +279,22 @@ def write_outputs(writer, result, config, datum, frames, prefix="", sensor_error
     publish_tf = ekf_p["publish_tf"] and not prefix
     odom = (ekf_p["odom_frame"], OdomTrack()) if ekf_p["use_wheel_odometry"] else None
     t0_ns = sec_to_ns(float(result.t[0]))
-    # As the imu_preprocessor and ekf nodes publish them: each its own, once.
+    # As the imu_preprocessor and ekf nodes publish them: each its own, once (with the first
+    # epoch's messages).
+    statics = []
     for parent, publish, child in (
             (pre_p["frame_id"], pre_p["publish_tf"],
              (pre_p["imu_frame"], (0.0, 0.0, 0.0), frames.c_bs)),
             (names[1], ekf_p["publish_tf"], (ekf_p["gnss_frame"], ekf_p["lever_arm"], np.eye(3)))):
         if publish and not prefix:
-            writer.write("/tf_static", static_tf(ns_to_stamp(t0_ns), parent, [child]), t0_ns)
-            counts["/tf_static"] += 1
+            statics.append((t0_ns, "/tf_static", static_tf(ns_to_stamp(t0_ns), parent, [child])))
     for k in range(len(result.t)):
         t = float(result.t[k])
         st = NavState(result.lat[k], result.lon[k], result.h[k], result.v_enu[k],
                       result.q_nb[k], t)
         P = result.P[k]
-        stamp = ns_to_stamp(sec_to_ns(t))
+        t_ns = sec_to_ns(t)
+        stamp = ns_to_stamp(t_ns)
         mode = result.mode[k]
         state = InsState()
         state.header.stamp, state.header.frame_id = stamp, "map"
@@ -295,20 +308,19 @@ def write_outputs(writer, result, config, datum, frames, prefix="", sensor_error
             set_vector3(state.accel_scale_factor, errors.accel_scale)
         state.mode = ins_modes[mode]
         state.correction_sequence = 1  # the filter's own, corrected solution
-        writer.write(topic["ins/state"], state)
+        # Each at its header stamp, /tf at the epoch's (the ns roundings of a stamp and of t
+        # differ by up to a few hundred ns at epoch scale): sorted, ties in this order.
+        logged = statics if k == 0 else []
+        logged.append((msg_stamp_ns(state), topic["ins/state"], state))
         # The input's augmentation is not kept per epoch: a NAVIGATING solution is a FIX here.
-        writer.write(topic["nav/fix"], fix_msg(stamp, st, P[space["pos"], space["pos"]],
-                                               fix_status(mode == NAVIGATING,
-                                                          NavSatStatus.STATUS_FIX),
-                                               frame_id=names[1]))
-        counts.update(["/" + topic["ins/state"], "/" + topic["nav/fix"]])
+        fix = fix_msg(stamp, st, P[space["pos"], space["pos"]],
+                      fix_status(mode == NAVIGATING, NavSatStatus.STATUS_FIX), frame_id=names[1])
+        logged.append((msg_stamp_ns(fix), topic["nav/fix"], fix))
         if datum is not None:
-            writer.write(topic["nav/odom"], odom_msg(stamp, st, P, space, datum, Vector3(),
-                                                     rate_var, names))
-            counts["/" + topic["nav/odom"]] += 1
+            odom_out = odom_msg(stamp, st, P, space, datum, Vector3(), rate_var, names)
+            logged.append((msg_stamp_ns(odom_out), topic["nav/odom"], odom_out))
             if publish_tf:
-                writer.write("/tf", solution_tf(stamp, st, datum, *names, odom), sec_to_ns(t))
-                counts["/tf"] += 1
+                logged.append((t_ns, "/tf", solution_tf(stamp, st, datum, *names, odom)))
         if t >= next_status:
             next_status = t + 1.0
             since = []
@@ -317,7 +329,6 @@ def write_outputs(writer, result, config, datum, frames, prefix="", sensor_error
                 u += 1
             accepted += sum(x.accepted for x in since)
             rejected += sum(not x.accepted for x in since)
-            writer.write(topic["nav/status"], status_msg(t, MODES[mode], False, since,
-                                                         (space, P), accepted, rejected))
-            counts["/" + topic["nav/status"]] += 1
-    return counts
+            status = status_msg(t, MODES[mode], False, since, (space, P), accepted, rejected)
+            logged.append((msg_stamp_ns(status), topic["nav/status"], status))
+        yield from sorted(logged, key=itemgetter(0))

@@ -21,15 +21,18 @@ made, then only as arrays (docs/results/postprocessing.md).
 from __future__ import annotations
 
 import dataclasses
+import heapq
 import json
 import time
+from operator import itemgetter
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
 from ins_gnss_ros import io as bagio
 from ins_gnss_ros.nav import Navigator
-from ins_gnss_ros.trial.offline import forward_pass, write_outputs
+from ins_gnss_ros.trial.offline import forward_pass, output_messages, write_ordered
 
 #: Topic prefix of the forward pass in a smoothed run's bag.
 FORWARD_PREFIX = "forward/"
@@ -117,16 +120,16 @@ def smooth(bag_path, profile_path, out, outages=None, point=None, exports=(),
                                    q_nb=sm.q_nb, P=sm.P, estimates=sm.estimates)
     del sm
     toc_smooth = time.perf_counter()
-    writer = bagio.BagWriter(out / "bag")
-    counts = run.counts.recorded
-    solutions = [("", smoothed, True), (FORWARD_PREFIX, forward, False)]
-    for prefix, result, errors in tqdm(solutions, disable=not progress, desc="writing"):
-        counts.update(write_outputs(writer, result, config, run.datum, run.frames, prefix,
-                                    errors))
+    # Both solutions (and their points) merged in stamp order, written as they are made.
+    streams = []
+    for prefix, result, errors in (("", smoothed, True), (FORWARD_PREFIX, forward, False)):
+        streams.append(output_messages(result, config, run.datum, run.frames, prefix, errors))
         if lever is not None:
-            counts.update(_write_point(writer, prefix + POINT_TOPIC, result, lever,
-                                       *increments))
-    writer.close()
+            streams.append(_point_messages(prefix + POINT_TOPIC, result, lever, *increments))
+    with bagio.BagWriter(out / "bag", ordered=True) as writer:
+        run.counts.recorded.update(write_ordered(writer, tqdm(
+            heapq.merge(*streams, key=itemgetter(0)), disable=not progress, unit="msg",
+            desc="writing")))
     toc_write = time.perf_counter()
     summary = run.summary(out, bag_path, outages, "smooth",
                           graph=("imu_preprocessor", "ekf (filter only)", "rts smoother"))
@@ -140,8 +143,9 @@ def smooth(bag_path, profile_path, out, outages=None, point=None, exports=(),
     return summary
 
 
-def _write_point(writer, topic, result, lever, t, dtheta, dv) -> dict:
-    """InsState of the body point at `lever` at every IMU sample of a recorded pass."""
+def _point_messages(topic, result, lever, t, dtheta, dv) -> Iterator:
+    """InsState of the body point at `lever` at every IMU sample of a recorded pass, as
+    (t_ns, topic, msg) in stamp order."""
     from ins_gnss_msgs.msg import InsState
 
     from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
@@ -162,5 +166,4 @@ def _write_point(writer, topic, result, lever, t, dtheta, dv) -> dict:
         set_vector3(msg.angular_velocity, dense.omega_b[k])
         msg.mode = InsState.MODE_NAVIGATING
         msg.correction_sequence = 1
-        writer.write(topic, msg)
-    return {"/" + topic: len(dense.t)}
+        yield int(stamps[k]), topic, msg
