@@ -56,15 +56,15 @@ from ins_gnss_ros.nodes.strapdown_node import StrapdownNode
 from ins_gnss_ros.sim import scenarios
 from ins_gnss_ros.sim.imu_sim import ImuSpec, simulate_imu
 from ins_gnss_ros.trial.evaluate import euler_error_jacobian
+from ins_gnss_ros.trial.simulate import array_antennas
 
-TWO_ANTENNAS = ((0.75, 0.0, 1.0), (-0.75, 0.0, 1.0))                 # 1.5 m fore-aft
+TWO_ANTENNAS = array_antennas(2, 1.5, 0.0, (0.0, 0.0, 1.0))          # 1.5 m fore-aft
 
 
 def four_antennas(length: float = 1.5, width: float = 1.0) -> tuple:
     """Antennas at the corners of a length (fore-aft) x width (athwartship) rectangle, 1 m
-    above the IMU (FLU, m)."""
-    x, y = length / 2, width / 2
-    return (x, y, 1.0), (-x, y, 1.0), (x, -y, 1.0), (-x, -y, 1.0)
+    above the IMU (FLU, m): the layout of ``trial simulate --antennas 4 --array LxW``."""
+    return array_antennas(4, length, width, (0.0, 0.0, 1.0))
 
 
 STAMP0_S = 1_750_000_000   # ROS-axis stamp of trajectory time 0, whole s

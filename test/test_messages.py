@@ -43,8 +43,9 @@ def _filled(cls):
             setattr(msg, field, [True, False])
         elif ftype.startswith("sequence<string"):
             setattr(msg, field, ["a", "b"])
-        elif ftype.startswith("sequence<ins_gnss_msgs/"):
-            inner = _message_class(ftype.split("/")[-1].rstrip(">"))
+        elif ftype.startswith("sequence<") and "/" in ftype:   # of messages of any package
+            package, name = ftype[len("sequence<"):].rstrip(">").split("/")
+            inner = getattr(importlib.import_module(f"{package}.msg"), name)
             setattr(msg, field, [_filled(inner)])
         elif ftype.startswith("sequence<"):
             setattr(msg, field, [1, 2])

@@ -10,7 +10,7 @@ from scipy.stats import chi2
 from ins_gnss_ros.gnss.attitude import (
     AttitudeSolver, baseline_azimuth_elevation, correlated_variance_factor, estimate_mounting,
     rigid_body_misfit, solve_attitude, wahba_svd)
-from ins_gnss_ros.gnss.differences import form_double_differences
+from ins_gnss_ros.gnss.differences import NoiseModel, form_double_differences
 from ins_gnss_ros.gnss.multipath import MultipathModel
 from ins_gnss_ros.nav.conventions import azimuth_from_yaw, wrap_pi
 from ins_gnss_ros.nav.rotations import dcm_from_euler
@@ -329,3 +329,30 @@ def test_published_variance_counts_the_correlated_part_for_the_averaging_time():
         for sol, f in zip(sols[1:], factors[1:]):
             assert sol.var_azimuth - s0.var_azimuth == pytest.approx(extra * (f if i else 1.0),
                                                                      rel=1e-9)
+
+
+def test_fixed_double_differences_are_the_baselines_seen_along_the_lines_of_sight():
+    # A FIXED epoch of the 4-antenna solver hands out its DDs with the integers removed: each
+    # value is (e_ref - e_i) . (C b) of the true attitude (exact ranges: the plane-wavefront
+    # error (|b|^2 / range) is ~1e-7 m) up to the phase noise, with the DD covariance in m^2.
+    sim = PhaseSim(61, FOUR, noise=NoiseModel(1e-4, 1e-4, 0.05, 0.05))
+    solver = AttitudeSolver(FOUR, noise=sim.noise)
+    R = dcm_from_euler(0.05, -0.03, 1.1)
+    sol = solver.process(sim.observe(0.0, R), sim.los(0.0), 0.0)
+    assert sol.status == "FIXED"
+    dds = sol.double_differences
+    assert set(dds.remote) == {1, 2, 3} and len(dds.value) == len(dds.pairs)
+    np.testing.assert_array_equal(dds.baseline_b, FOUR[dds.remote] - FOUR[0])
+    los = sim.los(0.0)
+    np.testing.assert_allclose(dds.geometry,
+                               [los[r] - los[s] for s, r in dds.pairs], atol=1e-15)
+    predicted = np.einsum("ij,ij->i", dds.geometry, dds.baseline_b @ R.T)
+    np.testing.assert_allclose(dds.value, predicted, atol=2e-3)
+    dd = form_double_differences(sim.observe(0.0, R), los, solver.references, sim.noise)
+    assert np.all(np.linalg.eigvalsh(dds.cov) > 0)
+    np.testing.assert_allclose(np.diag(dds.cov), dd.wavelength ** 2 * np.diag(dd.cov_phase),
+                               rtol=1e-12)
+    # The white part of the published covariance is the one the fixing used: the values scatter
+    # by it (normalised squared residual about 1 per row, over many rows).
+    r = dds.value - predicted
+    assert r @ np.linalg.solve(dds.cov, r) / len(r) < 3.0

@@ -9,7 +9,8 @@ import pytest
 
 from ins_gnss_ros.nav.aiding import Aiding, AidingPolicy, WheelPolicy
 from ins_gnss_ros.nav.filter_config import PARAMS, navigator_config
-from ins_gnss_ros.nav import GnssFix, GnssVelocity, HeadingFix, WheelOdometry, ZeroVelocity
+from ins_gnss_ros.nav import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, WheelOdometry, \
+    ZeroVelocity
 from ins_gnss_ros.params import ParameterError, resolve
 
 
@@ -132,3 +133,23 @@ def test_successive_fixes_give_a_course_velocity_until_the_heading_is_known():
         lon = lon0 + 10.0 * 0.2 * k / (rn * np.cos(lat0))
         front.fix(0.2 * k, 59.9, np.degrees(lon), 10.0, cov, 0, True)
     assert len([m for m in nav.measurements if isinstance(m, GnssVelocity)]) == 1
+
+
+def test_phase_differences_are_checked_and_then_replace_the_phase_heading():
+    front, nav, events = aiding(phase_differences=True)
+    b, g = np.array([[-2.7, 0.0, 0.0], [0.0, -1.2, 0.0]]), np.array([[0.3, -0.8, 0.4],
+                                                                      [-0.5, 0.2, 0.6]])
+    value, cov = np.array([0.5, -0.2]), 1e-6 * np.array([[2.0, 1.0], [1.0, 2.0]])
+    assert front.phase_differences(1.0, b, g, value, cov)
+    assert isinstance(nav.measurements[-1], PhaseDifferences)
+    assert not front.phase_differences(1.2, b, g, value, -cov)           # not positive definite
+    assert not front.phase_differences(1.4, b, g, np.array([np.nan, 0.0]), cov)
+    assert not front.phase_differences(1.6, b[:0], g[:0], value[:0], cov[:0, :0])
+    assert len(nav.measurements) == 1
+    # The heading solved from the same phase would count it twice: it only aligns.
+    assert not front.heading(1.0, 0.3, 1e-4, None, source="gnss/heading")
+    nav.heading_known = False
+    assert front.heading(1.2, 0.3, 1e-4, None, source="gnss/heading")
+    nav.heading_known = True
+    assert front.heading(1.4, 0.3, 1e-4, None, source="mag/heading")   # other sources stay
+    assert [type(m) for m in nav.measurements] == [PhaseDifferences, HeadingFix, HeadingFix]

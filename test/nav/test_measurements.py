@@ -13,7 +13,7 @@ from ins_gnss_ros.nav.earth import ecef_to_enu_matrix, geodetic_to_ecef
 from ins_gnss_ros.nav.ekf import ExtraState, StateSpace
 from ins_gnss_ros.nav.error_model import make_layout
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
-from ins_gnss_ros.nav.rotations import quat_from_euler
+from ins_gnss_ros.nav.rotations import quat_from_euler, quat_from_rotvec, quat_mul, quat_to_dcm
 from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405, filter_noise
 from ins_gnss_ros.nav.strapdown import NavState, apply_correction
 
@@ -252,3 +252,32 @@ def test_time_offset_column():
     v_ant = np.array([5.0, -3.0, 0.2])
     model = M.gnss_position(SPACE, TRUE, TRUE.lat, TRUE.lon, TRUE.h, np.eye(3), dzdt=v_ant)
     np.testing.assert_array_equal(model.H[:, SPACE["td"].start], v_ant)
+
+
+#: Two baselines of a 4-antenna array (body FLU, m) and the line-of-sight differences e_ref - e_i
+#: of three satellite pairs (ENU).
+DD_BASELINES = np.array([[-2.7, 0.0, 0.0], [0.0, -1.2, 0.0], [-2.7, -1.2, 0.05]])
+DD_GEOMETRY = np.array([[0.3, -0.8, 0.4], [-0.5, 0.2, 0.6], [0.1, 0.9, -0.3]])
+
+
+def test_phase_double_differences_jacobian():
+    C = quat_to_dcm(TRUE.q_nb)
+    value = np.einsum("ij,ij->i", DD_GEOMETRY, DD_BASELINES @ C.T)
+    cov = 1e-6 * (np.eye(3) + 0.5)          # correlated through the reference satellite
+
+    def z_of(dx):
+        state, _ = perturbed(dx)
+        return M.phase_differences(SPACE, state, DD_BASELINES, DD_GEOMETRY, value, cov).z
+
+    model = M.phase_differences(SPACE, TRUE, DD_BASELINES, DD_GEOMETRY, value, cov)
+    np.testing.assert_allclose(model.z, 0.0, atol=1e-12)   # the true attitude predicts them
+    np.testing.assert_array_equal(model.R, cov)
+    check(model, z_of, 1e-7)
+    # The sign of the attitude error written out: C_computed = (I - [phi x]) C_true to first
+    # order, so a computed attitude rotated by -phi predicts z = H phi.
+    phi = np.array([2e-4, -1e-4, 3e-4])
+    computed = NavState(TRUE.lat, TRUE.lon, TRUE.h, TRUE.v_enu,
+                        quat_mul(quat_from_rotvec(-phi), TRUE.q_nb), TRUE.t)
+    z = M.phase_differences(SPACE, computed, DD_BASELINES, DD_GEOMETRY, value, cov).z
+    np.testing.assert_allclose(z, model.H[:, SPACE["att"]] @ phi, rtol=1e-3, atol=1e-12)
+    assert np.all(model.H[:, np.r_[0:SPACE["att"].start, SPACE["att"].stop:SPACE.size]] == 0.0)

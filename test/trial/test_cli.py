@@ -110,6 +110,10 @@ def _bad_cases(d):
                          str(d / "o9")],
         "GNSS rate": ["simulate", "--scenario", "car", "--duration", "1", "--gnss-rate", "0",
                       "--out", str(d / "o10")],
+        "antenna array": ["simulate", "--scenario", "sea", "--antennas", "4", "--array", "2.7",
+                          "--out", str(d / "o11")],
+        "antennas": ["simulate", "--scenario", "sea", "--antennas", "5", "--out",
+                     str(d / "o12")],
     }
 
 

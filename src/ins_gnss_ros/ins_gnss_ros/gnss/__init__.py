@@ -13,7 +13,7 @@ from ..lazy_exports import lazy_exports
 #: Module -> the public names it defines.
 _PUBLIC = {
     "antennas": ("antenna_positions", "mounted_antennas"),
-    "attitude": ("AttitudeSolution", "AttitudeSolver"),
+    "attitude": ("AttitudeSolution", "AttitudeSolver", "FixedDoubleDifferences"),
     "clock_model": ("OCXO", "TCXO"),
     "constants": ("BEIDOU", "C_LIGHT", "FIT_HALF_WIDTH_S", "GALILEO", "GLONASS", "GPS",
                   "SECONDS_PER_WEEK", "SIGNAL_ID", "SYSTEM_ID", "UBX_GNSS_ID", "UBX_SIGNALS"),

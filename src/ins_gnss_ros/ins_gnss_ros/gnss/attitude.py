@@ -300,6 +300,42 @@ def correlated_variance_factor(a: float, n: float) -> float:
 
 
 @dataclass
+class FixedDoubleDifferences:
+    """The fixed double differences of an epoch as attitude measurements (the seeds' direct use
+    of second differences in the filter, extract_004 §2.2.2-2.2.3 and §2.5).
+
+    Row j: ``value[j] = geometry[j] · (C_nb baseline_b[j]) + noise`` (m), the plane-wavefront
+    model of :mod:`.differences` with the integer removed, λ (DD - N) = -(e_i - e_ref) · b_enu.
+
+    Attributes
+    ----------
+    remote : ndarray of int, shape (m,)
+        Remote antenna index of each row (the master is antenna 0).
+    baseline_b : ndarray, shape (m, 3)
+        Remote minus master antenna in the body frame (FLU, m).
+    pairs : list of (str, str)
+        (signal, reference signal).
+    wavelength : ndarray, shape (m,)
+        (m).
+    value : ndarray, shape (m,)
+        λ (DD phase - fixed ambiguity), m.
+    geometry : ndarray, shape (m, 3)
+        e_ref - e_i, unit lines of sight toward the satellites (ENU).
+    cov : ndarray, shape (m, m)
+        Covariance (m²): the white part and the time-correlated part counted as for the
+        published attitude (:meth:`AttitudeSolver._correlated_factor`).
+    """
+
+    remote: np.ndarray
+    baseline_b: np.ndarray
+    pairs: list
+    wavelength: np.ndarray
+    value: np.ndarray
+    geometry: np.ndarray
+    cov: np.ndarray
+
+
+@dataclass
 class AttitudeSolution:
     """Output of :meth:`AttitudeSolver.process` (fields of ins_gnss_msgs/Heading).
 
@@ -319,6 +355,8 @@ class AttitudeSolution:
         ENU baselines used (m), NaN if none.
     slipped : set of str
         Signals detected as slipped at this epoch.
+    double_differences : FixedDoubleDifferences or None
+        The fixed double differences the FIXED attitude was solved from (None otherwise).
     """
 
     status: str
@@ -332,6 +370,7 @@ class AttitudeSolution:
     satellites: tuple = ()
     baselines: np.ndarray = field(default_factory=lambda: np.full((1, 3), np.nan))
     slipped: set = field(default_factory=set)
+    double_differences: FixedDoubleDifferences | None = None
 
 
 class AttitudeSolver:
@@ -502,9 +541,12 @@ class AttitudeSolver:
         sats = tuple(sorted({s for p in dd.pairs for s in p}))
         if fixed is not None:
             self._prev = (t, epochs, dd, fixed.baselines)
-            return self._solution("FIXED", fixed.baselines, self._published_cov(fixed, interval),
-                                  sats, slipped,
-                                  min(self._ratio.values()) if self._ratio else np.nan)
+            factor = self._correlated_factor(interval)
+            sol = self._solution("FIXED", fixed.baselines, self._published_cov(fixed, factor),
+                                 sats, slipped,
+                                 min(self._ratio.values()) if self._ratio else np.nan)
+            sol.double_differences = self._fixed_differences(dd, self.store.lookup(dd), factor)
+            return sol
         held = self.store.lookup(dd)
         floats = [float_solution(dd, k, held, priors[k - 1]) for k in range(1, K + 1)]
         if any(f is None for f in floats):
@@ -517,17 +559,36 @@ class AttitudeSolver:
         self._prev = (t, epochs, dd, b)
         return self._solution("FLOAT", b, cov, sats, slipped, np.nan)
 
-    def _published_cov(self, fixed, interval: float) -> np.ndarray:
-        """Baseline covariance for the published attitude: the white part plus the correlated
-        part times :func:`correlated_variance_factor` for the epoch interval, the correlation
-        time and ``averaging_time``."""
-        if fixed.cov_correlated is None:
-            return fixed.cov
+    def _correlated_factor(self, interval: float) -> float:
+        """How many times the published covariances count the time-correlated part:
+        :func:`correlated_variance_factor` for the epoch interval, the correlation time and
+        ``averaging_time`` (1 without a multipath model)."""
         a, n = 0.0, 1.0          # the first epoch (no predecessor): the variance once
-        if 0.0 < interval < np.inf:
+        if self.multipath is not None and 0.0 < interval < np.inf:
             a = np.exp(-interval / self.multipath.phase_tau)
             n = max(self.averaging_time / interval, 1.0)
-        return fixed.cov + correlated_variance_factor(a, n) * fixed.cov_correlated
+        return correlated_variance_factor(a, n)
+
+    def _published_cov(self, fixed, factor: float) -> np.ndarray:
+        """Baseline covariance for the published attitude: the white part plus ``factor`` times
+        the correlated part."""
+        if fixed.cov_correlated is None:
+            return fixed.cov
+        return fixed.cov + factor * fixed.cov_correlated
+
+    def _fixed_differences(self, dd, ambiguities, factor: float) -> FixedDoubleDifferences:
+        """The rows of ``dd`` with a held ambiguity, in metres, with their joint covariance (the
+        correlated part ``factor`` times, as for the attitude)."""
+        use = np.flatnonzero(np.isfinite(ambiguities))
+        lam = dd.wavelength[use]
+        cov = dd.cov_phase[np.ix_(use, use)]
+        if dd.cov_correlated is not None:
+            cov = cov + factor * dd.cov_correlated[np.ix_(use, use)]
+        remote = dd.baseline[use]
+        return FixedDoubleDifferences(
+            remote, self.b_body[remote - 1], [dd.pairs[j] for j in use], lam,
+            lam * (dd.phase[use] - ambiguities[use]), dd.geometry[use],
+            lam[:, None] * cov * lam[None, :])
 
     def _detect_doppler(self, epochs, t) -> set:
         slipped = set()

@@ -17,6 +17,7 @@ _EXPORTS = {
     "GnssFix": "measurement_types",
     "GnssVelocity": "measurement_types",
     "HeadingFix": "measurement_types",
+    "PhaseDifferences": "measurement_types",
     "SpeedLog": "measurement_types",
     "WheelOdometry": "measurement_types",
     "ZeroVelocity": "measurement_types",

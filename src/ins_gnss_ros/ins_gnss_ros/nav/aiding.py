@@ -23,8 +23,8 @@ import numpy as np
 from ..magnetic.wmm import decimal_year, field_elements
 from .course import CourseFromFixes
 from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
-from .measurement_types import GnssFix, GnssVelocity, HeadingFix, SpeedLog, WheelOdometry, \
-    ZeroVelocity
+from .measurement_types import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, SpeedLog, \
+    WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .navigator import Navigator
 from .rest_detector import RestDetector
@@ -100,6 +100,9 @@ class AidingPolicy:
         Longest gap in the increments bridged by holding the rates of the increment after it; a
         longer one loses the IMU and the filter aligns again, s.
     wheel : WheelPolicy
+    phase_differences : bool
+        The fixed phase double differences aid the attitude: ``gnss/heading`` only aligns the
+        heading (the two come from the same phase and would count it twice).
     """
 
     position_sigma_floor: float = 0.02
@@ -109,13 +112,15 @@ class AidingPolicy:
     min_satellites: int = 5
     max_imu_gap: float = 2.5
     wheel: WheelPolicy = WheelPolicy()
+    phase_differences: bool = False
 
     @classmethod
     def from_params(cls, p: dict) -> "AidingPolicy":
         """The policy of the ``ekf`` node's parameters."""
         return cls(p["gnss.position_sigma_floor_m"], p["gnss.velocity_sigma_floor_mps"],
                    p["gnss.velocity_delay_s"], p["coupling"], p["auto.min_satellites"],
-                   p["max_imu_gap_s"], wheel=WheelPolicy.from_params(p))
+                   p["max_imu_gap_s"], wheel=WheelPolicy.from_params(p),
+                   phase_differences=p["use_phase_dd"])
 
 
 #: Longest the first fixes of a receiver without velocity wait for the rest detector, s (a
@@ -341,9 +346,34 @@ class Aiding:
         if not (np.isfinite(azimuth) and np.isfinite(variance) and variance > 0.0):
             self.report(f"{source} without a finite azimuth, declination and variance rejected")
             return self._seen(source, t, False)
+        if source == "gnss/heading" and self.policy.phase_differences and \
+                self.navigator.heading_known:
+            self.report("gnss/heading not fused: its phase double differences are", log=False)
+            return self._seen(source, t, False)
         self.navigator.add_measurement(HeadingFix(t, float(azimuth), float(variance),
                                                   bias=HEADING_SOURCES[source]))
         return self._seen(source, t, True)
+
+    def phase_differences(self, t: float, baseline_b: np.ndarray, geometry: np.ndarray,
+                          value: np.ndarray, cov: np.ndarray) -> bool:
+        """Fixed carrier-phase double differences at t (s): per row the antenna baseline
+        (body FLU, m), the line-of-sight difference (ENU), the value (m); their covariance
+        (m^2, symmetric positive definite)."""
+        n = len(value)
+        ok = n > 0 and np.shape(baseline_b) == (n, 3) and np.shape(geometry) == (n, 3) and \
+            np.shape(cov) == (n, n) and np.isfinite(baseline_b).all() and \
+            np.isfinite(geometry).all() and np.isfinite(value).all() and np.isfinite(cov).all()
+        if ok:
+            try:
+                np.linalg.cholesky(cov)
+            except np.linalg.LinAlgError:
+                ok = False
+        if not ok:
+            self.report("gnss/phase_dd without finite rows and a positive definite covariance "
+                        "rejected")
+            return self._seen("gnss/phase_dd", t, False)
+        self.navigator.add_measurement(PhaseDifferences(t, baseline_b, geometry, value, cov))
+        return self._seen("gnss/phase_dd", t, True)
 
     def _declination(self, t: float) -> float:
         """The WMM declination at the datum (the first fix) for a magnetic azimuth whose

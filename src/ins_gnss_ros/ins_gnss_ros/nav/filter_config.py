@@ -64,6 +64,9 @@ PARAMS = (
           "fix and Doppler velocity of gnss/observations, and subscribe neither gnss/fix nor "
           "gnss/vel (a receiver whose own fix is no input, e.g. the RTK reference of a trial)"),
     Param("use_heading", True, "use gnss/heading (phase-difference or receiver azimuth)"),
+    Param("use_phase_dd", False, "fuse the fixed carrier-phase double differences of "
+          "gnss/phase_dd as attitude measurements (the antenna baselines and the full DD "
+          "covariance they carry) once the heading is known; gnss/heading then only aligns it"),
     Param("use_magnetic_heading", False, "use mag/heading as backup heading aiding"),
     Param("use_imu_heading", True, "use imu/heading (the IMU's own orientation where its "
           "covariance says the yaw is valid) as a heading source"),

@@ -46,6 +46,21 @@ class HeadingFix:
 
 
 @dataclass(frozen=True)
+class PhaseDifferences:
+    """Fixed carrier-phase double differences between antennas of the body at GNSS time t:
+    row j, ``value[j] = geometry[j] · (C_nb baseline_b[j])`` + noise (m), with ``baseline_b`` the
+    two antennas' difference in body FLU (m) and ``geometry`` the difference of the unit lines
+    of sight to the reference and the other satellite (ENU); ``cov`` their joint covariance
+    (m^2), correlated through the common reference satellite and antenna."""
+
+    t: float
+    baseline_b: np.ndarray
+    geometry: np.ndarray
+    value: np.ndarray
+    cov: np.ndarray
+
+
+@dataclass(frozen=True)
 class SpeedLog:
     """Speed through the water along the body x axis (m/s) at time t, variance ((m/s)^2);
     with a "log" extra block the current and the log scale error are estimated."""

@@ -215,6 +215,41 @@ def biased_heading(space, state, azimuth, variance, bias=0.0, block="mag"):
 HEADING_NAMES = {"mag": "mag_heading", "ahrs": "imu_heading"}
 
 
+def phase_differences(space, state, baseline_b, geometry, value, cov):
+    """Fixed carrier-phase double differences as attitude measurements: the seeds' second
+    differences fused directly (extract_004 sections 2.2.2-2.2.3 and 2.5) instead of the
+    attitude solved from them, so the filter weighs each satellite pair with the full DD
+    covariance and keeps the pairs' correlations.
+
+    Row j predicts g_j . (C b_j), with b_j the antenna baseline (body FLU) and g_j the
+    difference of the unit lines of sight (ENU); the baseline is the same from the IMU as from
+    any other point, so no lever arm to the IMU enters. With C_computed = (I - [phi x]) C_true,
+    z_j = g_j . (-[phi x] C b_j) = g_j . ((C b_j) x phi), hence H_att row j = (g_j x C b_j)^T.
+
+    Parameters
+    ----------
+    baseline_b : array_like, shape (m, 3)
+        Remote minus master antenna of each row, body FLU, m.
+    geometry : array_like, shape (m, 3)
+        e_ref - e_sat of each row (unit lines of sight toward the satellites, ENU).
+    value : array_like, shape (m,)
+        Measured double differences with the integers removed, m.
+    cov : array_like, shape (m, m)
+        Their covariance, m^2.
+
+    Returns
+    -------
+    Innovation
+        "phase_dd", z in metres.
+    """
+    g = np.asarray(geometry, float)
+    p = np.asarray(baseline_b, float) @ quat_to_dcm(state.q_nb).T   # C b_j, row by row
+    H = _zeros(space, len(g))
+    H[:, space["att"]] = np.cross(g, p)
+    return Innovation("phase_dd", np.einsum("ij,ij->i", g, p) - np.asarray(value, float), H,
+                      np.asarray(cov, float))
+
+
 def zero_velocity(space, state, sigma):
     """ZUPT: the vehicle is at rest, v_enu = 0 (sigma m/s per axis)."""
     H = _zeros(space, 3)

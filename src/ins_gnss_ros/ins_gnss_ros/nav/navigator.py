@@ -40,8 +40,8 @@ from .imu_buffer import ImuBuffer
 from .imu_gaps import BridgedGaps
 from .integrity import Integrity
 from .lever_arm import lever_arm_velocity
-from .measurement_types import GNSS_TYPES, GnssFix, GnssVelocity, HeadingFix, SatelliteRanges, \
-    SpeedLog, WheelOdometry, ZeroVelocity
+from .measurement_types import GNSS_TYPES, GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, \
+    SatelliteRanges, SpeedLog, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .propagation import extrapolate, propagate
 from .recording import Recorder
@@ -415,6 +415,13 @@ class Navigator:
         else:
             self._update(meas.heading(self._space, st, m.azimuth, m.variance), epoch)
 
+    def _phase_differences(self, m, st, epoch):
+        if not self._state.heading_known:  # linearised about the heading: a heading aligns
+            self._refuse(m, epoch, "aligning")
+            return
+        self._update(meas.phase_differences(self._space, st, m.baseline_b, m.geometry, m.value,
+                                            m.cov), epoch)
+
     def _speed_log(self, m, st, epoch):
         log = self._state.estimates.get("log", np.zeros(3))
         self._update(meas.speed_log(self._space, st, m.speed, m.variance, log[:2], log[2]),
@@ -447,7 +454,7 @@ class Navigator:
 
     #: Measurement type -> handler(self, m, st, epoch).
     _HANDLERS = {GnssFix: _gnss_fix, GnssVelocity: _gnss_velocity, HeadingFix: _heading,
-                 SpeedLog: _speed_log, WheelOdometry: _wheel_odometry,
+                 PhaseDifferences: _phase_differences, SpeedLog: _speed_log, WheelOdometry: _wheel_odometry,
                  ZeroVelocity: _zero_velocity,
                  SatelliteRanges: _satellite_ranges}
 

@@ -2,7 +2,7 @@
 replay alike.
 
 :class:`EkfInputs` turns each aiding message (``gnss/fix``, ``gnss/vel``, the heading topics,
-``log/speed``, ``wheel/odom`` and, coupled tightly, ``gnss/observations`` with
+``gnss/phase_dd``, ``log/speed``, ``wheel/odom`` and, coupled tightly, ``gnss/observations`` with
 ``gnss/ephemeris``) into the call of :class:`ins_gnss_ros.nav.aiding.Aiding` that judges it.
 The ``ekf`` node subscribes to :meth:`EkfInputs.handlers` and ``trial replay --offline`` feeds
 the bag's messages to the same handlers, so both read a profile's inputs the same way: the same
@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 from geometry_msgs.msg import TwistWithCovarianceStamped
-from ins_gnss_msgs.msg import GnssEphemeris, GnssObservations, Heading
+from ins_gnss_msgs.msg import GnssEphemeris, GnssObservations, Heading, PhaseDoubleDifferences
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import NavSatFix, NavSatStatus
 
@@ -58,6 +58,8 @@ class EkfInputs:
         for topic, use in HEADING_INPUTS.items():
             if p[use]:
                 out[topic] = (Heading, partial(self.heading, topic))
+        if p["use_phase_dd"]:
+            out["gnss/phase_dd"] = (PhaseDoubleDifferences, self.phase_dd)
         if p["use_speed_log"]:
             out["log/speed"] = (TwistWithCovarianceStamped, self.speed_log)
         if p["use_wheel_odometry"]:
@@ -80,6 +82,22 @@ class EkfInputs:
     def heading(self, topic: str, msg: Heading) -> bool:
         reading = heading_of(msg)
         return reading is not None and self.aiding.heading(*reading, source=topic)
+
+    def phase_dd(self, msg: PhaseDoubleDifferences) -> bool:
+        """The rows whose ambiguity is FIXED (arrays of unequal length: none)."""
+        n = len(msg.value)
+        cov = np.asarray(msg.covariance, float)
+        rows = [j for j, status in enumerate(msg.ambiguity_status)
+                if status == PhaseDoubleDifferences.AMBIGUITY_FIXED]
+        if not (len(msg.baseline) == len(msg.line_of_sight_difference) ==
+                len(msg.ambiguity_status) == n and cov.size == n * n):
+            rows = []
+        return self.aiding.phase_differences(
+            stamp_to_sec(msg.header.stamp),
+            np.array([vec(msg.baseline[j]) for j in rows]).reshape(-1, 3),
+            np.array([vec(msg.line_of_sight_difference[j]) for j in rows]).reshape(-1, 3),
+            np.asarray(msg.value, float)[rows], cov.reshape(n, n)[np.ix_(rows, rows)] if rows
+            else np.zeros((0, 0)))
 
     def speed_log(self, msg: TwistWithCovarianceStamped) -> bool:
         return self.aiding.speed_log(stamp_to_sec(msg.header.stamp), msg.twist.twist.linear.x,

@@ -16,12 +16,14 @@ import math
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import TwistWithCovarianceStamped
-from ins_gnss_msgs.msg import GnssEphemeris, GnssObservations, Heading
+from geometry_msgs.msg import Vector3
+from ins_gnss_msgs.msg import GnssEphemeris, GnssObservations, Heading, PhaseDoubleDifferences
 from sensor_msgs.msg import NavSatFix, NavSatStatus, TimeReference
 from std_msgs.msg import Header
 
 from ..gnss import (BDT_MINUS_GPST_S, BEIDOU, GALILEO, GLONASS, GPS, SECONDS_PER_WEEK,
-                    SIGNAL_ID, SYSTEM_ID, UBX_GNSS_ID, UBX_SIGNALS, GlonassEphemeris, GnssHeading,
+                    SIGNAL_ID, SYSTEM_ID, UBX_GNSS_ID, UBX_SIGNALS, FixedDoubleDifferences,
+                    GlonassEphemeris, GnssHeading,
                     KeplerEphemeris, NmeaErrors, NmeaFix, PvtFix, RawEpoch, SatObs, Stamp,
                     accuracy_m, glonass_time_of_day, gps_to_posix_ns, system_week,
                     time_of_week_near, utc_to_posix)
@@ -197,6 +199,22 @@ def heading_msg(h: GnssHeading, stamp: Time, frame_id: str, source: int) -> Head
         roll_variance=h.var_roll, reference=Heading.REFERENCE_TRUE, source=source,
         declination=0.0, baseline_length=h.baseline_length, satellites_used=h.satellites,
         ambiguity_ratio=h.ratio, status=_HEADING_STATUS[h.status])
+
+
+def phase_dd_msg(dds: FixedDoubleDifferences, ratio: float, stamp: Time,
+                 frame_id: str) -> PhaseDoubleDifferences:
+    """ins_gnss_msgs/PhaseDoubleDifferences of an epoch's fixed double differences (every row
+    from the master antenna 0, status FIXED)."""
+    n = len(dds.value)
+    return PhaseDoubleDifferences(
+        header=Header(stamp=stamp, frame_id=frame_id), master_antenna=[0] * n,
+        remote_antenna=dds.remote.tolist(),
+        baseline=[Vector3(x=x, y=y, z=z) for x, y, z in dds.baseline_b.tolist()],
+        satellite=[s for s, _ in dds.pairs], reference_satellite=[r for _, r in dds.pairs],
+        wavelength=dds.wavelength.tolist(), value=dds.value.tolist(),
+        line_of_sight_difference=[Vector3(x=x, y=y, z=z) for x, y, z in dds.geometry.tolist()],
+        ambiguity_status=[PhaseDoubleDifferences.AMBIGUITY_FIXED] * n,
+        covariance=dds.cov.ravel().tolist(), ambiguity_ratio=float(ratio))
 
 
 def time_reference_msg(stamp: Time, time_ref: Time, frame_id: str, source: str) -> TimeReference:

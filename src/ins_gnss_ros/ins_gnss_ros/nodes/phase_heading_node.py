@@ -28,6 +28,13 @@ degrees rather than tenths); otherwise, with ``publish_none``, a status-NONE mes
 angles so that consumers see the node is alive. Skipped epochs and dropped inputs are counted on
 /diagnostics.
 
+With ``publish_double_differences``, every FIXED epoch's fixed double differences go out on
+``gnss/phase_dd`` (ins_gnss_msgs/PhaseDoubleDifferences, before the epoch's heading): value
+λ (DD - N) in metres, the antenna pair and its base_link baseline, the difference of the unit
+lines of sight and the full covariance (correlated through the reference satellite and the
+master antenna; the multipath counted as for the heading), for an ekf that fuses them as
+attitude measurements (seed 004 §2.2.2-2.2.3).
+
 Antenna positions are parameters in the frame of the antenna mount; ``mounting_rpy_deg`` rotates
 that frame into base_link (a calibration such as
 :func:`~ins_gnss_ros.gnss.attitude.estimate_mounting` gives), so the published angles are those of
@@ -43,7 +50,8 @@ from functools import partial
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
-from ins_gnss_msgs.msg import FilterStatus, GnssEphemeris, GnssObservations, Heading, InsState
+from ins_gnss_msgs.msg import (FilterStatus, GnssEphemeris, GnssObservations, Heading, InsState,
+                               PhaseDoubleDifferences)
 from sensor_msgs.msg import NavSatFix, NavSatStatus
 
 from ..gnss import (BEIDOU, GALILEO, GPS, UBX_GNSS_ID, AntennaObservations, AttitudeSolution,
@@ -53,7 +61,8 @@ from ..gnss import (BEIDOU, GALILEO, GPS, UBX_GNSS_ID, AntennaObservations, Atti
 from ..io import stamp_to_sec
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import quat
-from .gnss_messages import heading_msg, kepler_from_msg, kepler_msg_plausible, raw_epoch_from_msg
+from .gnss_messages import (heading_msg, kepler_from_msg, kepler_msg_plausible, phase_dd_msg,
+                            raw_epoch_from_msg)
 
 #: Systems the node can use: their Keplerian ephemerides are supported (GLONASS FDMA signals form
 #: no integer double differences across frequency slots, see gnss/differences.py).
@@ -121,6 +130,9 @@ class PhaseHeadingNode(NavNode):
               "publish FLOAT solutions (status FLOAT, with the float variance); false: not used"),
         Param("publish_none", True,
               "publish a status-NONE Heading (NaN angles) for epochs without a usable solution"),
+        Param("publish_double_differences", False,
+              "also publish the fixed double differences of every FIXED epoch on gnss/phase_dd "
+              "(PhaseDoubleDifferences: the ekf's direct phase update, ekf use_phase_dd)"),
         Param("epoch_tolerance_s", 0.005,
               "observations of different antennas within this of each other are one epoch, s",
               1e-6, 0.5),
@@ -178,6 +190,8 @@ class PhaseHeadingNode(NavNode):
         self.pipeline = PhaseHeading(solver, len(antennas), config, report=self.diag.count)
         self.status_counts: Counter[str] = Counter()
         self.pub = self.publisher(Heading, "gnss/heading", SENSOR_QOS)
+        self.pub_dd = (self.publisher(PhaseDoubleDifferences, "gnss/phase_dd", SENSOR_QOS)
+                       if p["publish_double_differences"] else None)
         self.subscribe(GnssObservations, "gnss/observations", self.on_observations, SENSOR_QOS)
         self.subscribe(GnssEphemeris, "gnss/ephemeris", self.on_ephemeris, STATE_QOS)
         self.subscribe(NavSatFix, "gnss/fix", self.on_fix, DRIVER_QOS)
@@ -237,6 +251,11 @@ class PhaseHeadingNode(NavNode):
         self.status_counts[sol.status] += 1
         for status, n in self.status_counts.items():
             self.diag.set_value(f"epochs {status}", n)
+        if self.pub_dd is not None and sol.double_differences is not None:
+            # Before the heading: an ekf that fuses the differences takes the heading only to
+            # align, and the epoch's differences then find the heading known.
+            self.pub_dd.publish(phase_dd_msg(sol.double_differences, sol.ratio, stamp,
+                                             "base_link"))
         heading = attitude_heading(sol, self.p["publish_float"])
         if heading.status != "NONE" or self.p["publish_none"]:
             self.pub.publish(heading_msg(heading, stamp, "base_link",

@@ -76,6 +76,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="mean time between wheel slip events, s (inf: none)")
     p.add_argument("--gnss-latency", type=float, default=0.0, metavar="S",
                    help="mean delay of gnss/* after their epochs (receiver output latency), s")
+    p.add_argument("--antennas", type=int, choices=range(5), default=0, metavar="N",
+                   help="raw GNSS (gnss/observations per antenna, gnss/ephemeris) of N = 1-4 "
+                   "antennas from the gnss_simulator node, gnss/fix and gnss/vel from its "
+                   "solution (default 0: fix and velocity as truth plus noise)")
+    p.add_argument("--array", type=_array, default=SimOptions.array, metavar="LxW",
+                   help="antenna array length (fore-aft) x width, m, centred 1.5 m above the "
+                   "IMU (e.g. 2.7x1.2)")
     p.add_argument("--out", required=True, help="new bag folder")
 
     p = sub.add_parser("import", help="convert recorded data into a bag")
@@ -204,6 +211,17 @@ def main(argv=None) -> int:
         return EXIT_BAD_INPUT if bad_input else 1
 
 
+def _array(text: str) -> tuple:
+    """``LxW`` (m) -> (L, W)."""
+    try:
+        length, width = (float(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LENGTHxWIDTH in m, e.g. 2.7x1.2, got {text!r}")
+    if not (length >= 0.0 and width >= 0.0):
+        raise argparse.ArgumentTypeError(f"array sides must be >= 0 m, got {text!r}")
+    return length, width
+
+
 def _progress(args) -> bool:
     return sys.stderr.isatty() if args.progress is None else args.progress
 
@@ -222,7 +240,8 @@ def cmd_simulate(args) -> int:
                                wheel_odometry=args.wheel_odometry,
                                wheel_scale_error=args.wheel_scale_error,
                                wheel_slip_interval=args.wheel_slip_interval,
-                               gnss_latency=args.gnss_latency))
+                               gnss_latency=args.gnss_latency, antennas=args.antennas,
+                               array=args.array))
     print(path)
     return 0
 

@@ -7,8 +7,12 @@ and setup"):
   with ``imu_topic="delta"``, ``imu/delta`` (ImuDelta, the same increments unchanged); the IMU
   axes are the body axes (identity mounting);
 * ``gnss/fix`` and ``gnss/vel``: the truth at the antenna lever arm (Groves eqs. 2.165-2.167 via
-  :mod:`ins_gnss_ros.nav.lever_arm`) plus white noise. Raw pseudoranges and carrier phase are the
-  GNSS simulator node's job (from real orbits), not this writer's;
+  :mod:`ins_gnss_ros.nav.lever_arm`) plus white noise;
+* with ``antennas`` N >= 1 instead: what the ``gnss_simulator`` node publishes (raw
+  ``gnss/observations`` of every antenna from real orbits, ``gnss/ephemeris``, and ``gnss/fix``
+  / ``gnss/vel`` from the single-point solution of antenna 0), the node itself fed the truth at
+  the GNSS rate on an in-process bus (:func:`_write_raw_gnss`); the antennas lie on an
+  ``array`` length x width centred on ``antenna_lever_arm`` (:func:`array_antennas`);
 * ``imu/mag_raw``: :mod:`ins_gnss_ros.sim.mag_sim` in the WMM field at the start point and date;
 * ``log/speed`` (sea only): :mod:`ins_gnss_ros.sim.log_sim`, longitudinal speed through the water
   (transverse and vertical NaN: a single-axis log), body frame;
@@ -88,7 +92,12 @@ class SimOptions:
         receiver's output latency; each epoch's delay is drawn uniformly from 0.5 to 1.5 times
         it (seed 003: the delays relative to the GNSS epochs are non-uniform).
     antenna_lever_arm : tuple of 3 float
-        GNSS antenna relative to the IMU, m.
+        GNSS antenna relative to the IMU, m; with ``antennas``, the centre of the array.
+    antennas : int
+        0: ``gnss/fix`` and ``gnss/vel`` as truth plus noise; 1-4: the raw GNSS of that many
+        antennas from the GNSS simulator node (the fix and velocity from its solution).
+    array : tuple of 2 float
+        Length (fore-aft) and width (athwartship) of the antenna array, m.
     mag_rate : float
         Magnetometer rate, Hz.
     mag_noise : float
@@ -127,6 +136,8 @@ class SimOptions:
     gnss_sigma_vel: float = 0.05
     gnss_latency: float = 0.0
     antenna_lever_arm: tuple = (0.0, 0.0, 1.5)
+    antennas: int = 0
+    array: tuple = (1.5, 1.0)
     mag_rate: float = 50.0
     mag_noise: float = 100e-9
     log_rate: float = 2.0
@@ -172,8 +183,11 @@ def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions
         raise ValueError(f"unknown IMU grade {grade_name!r}; known: {', '.join(GRADES)}")
     grade = GRADES[grade_name]
     writer = bag.BagWriter(out)  # an existing output is refused before the work
-    # Words of one SeedSequence: a fifth (the wheels) leaves the first four as they were.
-    seeds = np.random.SeedSequence(seed).generate_state(5)
+    if not 0 <= options.antennas <= 4:
+        raise ValueError(f"antennas must be 0 to 4, got {options.antennas}")
+    # Words of one SeedSequence: a fifth (the wheels), a sixth (the raw GNSS) leave the first
+    # ones as they were.
+    seeds = np.random.SeedSequence(seed).generate_state(6)
     start = {} if options.start_static is None else {"static": options.start_static}
     if start and scenario != "car":
         raise ValueError("start_static is an option of the car scenario")
@@ -181,8 +195,11 @@ def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions
                                        rate=trajectory_rate(options, scenario), **start)
     traj = sc.trajectory
     imu = _write_imu(writer, traj, ImuSpec(grade, rate=options.imu_rate), int(seeds[0]), options)
-    _write_gnss(writer, traj, options, np.random.default_rng(seeds[1]),
-                np.random.default_rng([seed, 5]))
+    if options.antennas:
+        _write_raw_gnss(writer, traj, options, int(seeds[5]) % 2 ** 31)
+    else:
+        _write_gnss(writer, traj, options, np.random.default_rng(seeds[1]),
+                    np.random.default_rng([seed, 5]))
     _write_mag(writer, traj, options, int(seeds[2]))
     if scenario == "sea":
         _write_log(writer, traj, sc.water_current_enu, options, int(seeds[3]))
@@ -275,6 +292,54 @@ def _write_gnss(writer, traj, options, rng, latency_rng):
                      arrival[i])
         if options.gnss_velocity:
             writer.write("gnss/vel", msgs.twist_msg(t, vel[i], var_v, "gnss"), arrival[i])
+
+
+def array_antennas(n: int, length: float, width: float, centre=(0.0, 0.0, 0.0)) -> tuple:
+    """Positions of n = 1-4 antennas on a length (fore-aft) x width (athwartship) array about
+    ``centre`` (base_link FLU, m): one at the centre; two fore and aft on the centre line; three
+    or four at the corners, fore-port first (antenna 0, the master), then aft-port, fore-
+    starboard, aft-starboard."""
+    x, y = length / 2, width / 2
+    layouts = {1: ((0.0, 0.0),), 2: ((x, 0.0), (-x, 0.0)),
+               3: ((x, y), (-x, y), (x, -y)), 4: ((x, y), (-x, y), (x, -y), (-x, -y))}
+    cx, cy, cz = (float(c) for c in centre)
+    return tuple((cx + dx, cy + dy, cz) for dx, dy in layouts[n])
+
+
+#: Topics of the GNSS simulator node a simulated trial keeps.
+RAW_GNSS_TOPICS = ("gnss/observations", "gnss/ephemeris", "gnss/fix", "gnss/vel")
+
+
+def _write_raw_gnss(writer, traj, options, seed):
+    """The ``gnss_simulator`` node's output (:data:`RAW_GNSS_TOPICS`) for the truth at the
+    GNSS epochs: the node runs on an in-process bus, as in a graph, so the bag holds what the
+    node publishes live (SimOptions.antennas)."""
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from ins_gnss_ros.nodes.base import InProcessBus
+    from ins_gnss_ros.nodes.gnss_simulator_node import GnssSimulatorNode
+
+    antennas = array_antennas(options.antennas, *options.array, options.antenna_lever_arm)
+    context = rclpy.Context()
+    rclpy.init(context=context, args=[])
+    try:
+        bus = InProcessBus()
+        node = GnssSimulatorNode(bus=bus, context=context, parameter_overrides=[
+            Parameter("source", value="truth"),
+            Parameter("lever_arms", value=[v for a in antennas for v in a]),
+            Parameter("rate_hz", value=float(options.gnss_rate)), Parameter("seed", value=seed)])
+        for topic in RAW_GNSS_TOPICS:
+            bus.subscribe(topic, lambda msg, topic=topic: writer.write(topic, msg))
+        k = _every(traj, options.gnss_rate)
+        for t_ns, i in zip(bag.sec_to_ns(traj.t[k], SIM_EPOCH_NS), k):
+            bus.publish("sim/truth", msgs.ins_state_msg(
+                t_ns, traj.lat[i], traj.lon[i], traj.h[i], traj.v_enu[i], traj.q_nb[i],
+                traj.omega_ib_b[i]))
+            bus.drain()
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
 
 
 def _write_mag(writer, traj, options, seed):
