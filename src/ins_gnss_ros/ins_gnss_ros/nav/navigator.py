@@ -454,8 +454,8 @@ class Navigator:
 
     #: Measurement type -> handler(self, m, st, epoch).
     _HANDLERS = {GnssFix: _gnss_fix, GnssVelocity: _gnss_velocity, HeadingFix: _heading,
-                 PhaseDifferences: _phase_differences, SpeedLog: _speed_log, WheelOdometry: _wheel_odometry,
-                 ZeroVelocity: _zero_velocity,
+                 PhaseDifferences: _phase_differences, SpeedLog: _speed_log,
+                 WheelOdometry: _wheel_odometry, ZeroVelocity: _zero_velocity,
                  SatelliteRanges: _satellite_ranges}
 
     def _update(self, innov, epoch, aiding=True):
