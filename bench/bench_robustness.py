@@ -11,6 +11,11 @@ out) and judges the outputs against the simulation's truth:
 * ``nav/fix`` flagged valid (STATUS_FIX) before alignment, or beyond 5 sigma of its own
   horizontal covariance: must be zero.
 
+A cell with ``previous_drive`` first replays an earlier drive of the same car (the same
+``--mag-iron`` vehicle, the next seed) with the default profile saving the magnetometer's
+online calibration (``mag_compass online_calibration.save_file``), and replays the cell with
+config/default.yaml plus that file as ``calibration_file``: a robot that kept its calibration.
+
 Usage::
 
     .venv/bin/python bench/bench_robustness.py            # the full matrix (~15 min)
@@ -36,6 +41,7 @@ PROFILE = REPO / "config" / "default.yaml"
 class Cell:
     name: str
     simulate: tuple  # extra `trial simulate` arguments
+    previous_drive: float = 0.0  # s of an earlier drive whose magnetometer calibration is kept
 
 
 CELLS = [Cell(f"imu {rate:g} Hz, 2 ms jitter", ("--imu-rate", str(rate), "--imu-stamp-jitter",
@@ -56,7 +62,11 @@ CELLS += [Cell("fix only 1 Hz", ("--gnss-rate", "1", "--no-gnss-vel")),
           Cell("ground robot: 30 Hz IMU + orientation, 2.5 Hz fixes, no velocity or covariance",
                ("--imu-rate", "30", "--imu-stamp-jitter", "0.003", "--imu-orientation", "3",
                 "--gnss-rate", "2.5", "--no-gnss-vel", "--no-gnss-cov", "--gnss-sigma-h", "1.0",
-                "--gnss-sigma-v", "2.0"))]
+                "--gnss-sigma-v", "2.0")),
+          Cell("magnetometer heading (uncalibrated car), fix only 5 Hz",
+               ("--mag-iron", "1", "--no-gnss-vel")),
+          Cell("magnetometer heading, stored calibration of an earlier 300 s drive, fix only 5 Hz",
+               ("--mag-iron", "1", "--no-gnss-vel"), previous_drive=300.0)]
 SHORT = [CELLS[0], CELLS[3], CELLS[10]]
 
 
@@ -130,14 +140,38 @@ def judge(bag: Path, out: Path) -> dict:
             "valid_fixes": len(valid)}
 
 
-def run_cell(cell: Cell, tmp: Path, duration: float, seed: int) -> dict:
-    tag = "".join(c if c.isalnum() else "_" for c in cell.name)
-    bag, out = tmp / f"{tag}_bag", tmp / f"{tag}_out"
+def _simulate_and_replay(cell: Cell, bag: Path, out: Path, duration: float, seed: int,
+                         profile: Path) -> None:
     subprocess.run(TRIAL + ["simulate", "--scenario", "car", "--duration", str(duration),
                             "--seed", str(seed), *cell.simulate, "--out", str(bag)],
                    check=True, cwd=REPO, capture_output=True)
-    subprocess.run(TRIAL + ["replay", str(bag), "--config", str(PROFILE), "--out", str(out)],
+    subprocess.run(TRIAL + ["replay", str(bag), "--config", str(profile), "--out", str(out)],
                    check=True, cwd=REPO, capture_output=True)
+
+
+def _with_mag_compass(tmp: Path, name: str, **params) -> Path:
+    """config/default.yaml with these mag_compass parameters, as a new file in tmp."""
+    import yaml
+
+    profile = yaml.safe_load(PROFILE.read_text())
+    profile["mag_compass"]["ros__parameters"].update(params)
+    path = tmp / name
+    path.write_text(yaml.safe_dump(profile, sort_keys=False))
+    return path
+
+
+def run_cell(cell: Cell, tmp: Path, duration: float, seed: int) -> dict:
+    tag = "".join(c if c.isalnum() else "_" for c in cell.name)
+    bag, out = tmp / f"{tag}_bag", tmp / f"{tag}_out"
+    profile = PROFILE
+    if cell.previous_drive:
+        stored = tmp / f"{tag}_calibration.yaml"
+        _simulate_and_replay(cell, tmp / f"{tag}_previous_bag", tmp / f"{tag}_previous_out",
+                             cell.previous_drive, seed + 1,
+                             _with_mag_compass(tmp, f"{tag}_save.yaml", **{
+                                 "online_calibration.save_file": str(stored)}))
+        profile = _with_mag_compass(tmp, f"{tag}_stored.yaml", calibration_file=str(stored))
+    _simulate_and_replay(cell, bag, out, duration, seed, profile)
     return judge(bag, out)
 
 

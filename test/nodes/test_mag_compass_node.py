@@ -395,10 +395,17 @@ DISTURBANCE = {"kind": "magnetic_disturbance", "start": 30.0, "duration": 10.0,
 @pytest.fixture(scope="module")
 def drive(tmp_path_factory):
     """The drive replayed through config/default.yaml (the replay leaves the sensor sources
-    out), clean and with DISTURBANCE."""
+    out) with the simulated sensor's calibration (the identity: an ideal sensor) given as one
+    from an earlier run, clean and with DISTURBANCE."""
     root = tmp_path_factory.mktemp("compass_drive")
     bag = simulate("car", DRIVE_S, DRIVE_SEED, root / "car")
-    profile = REPO / "config" / "default.yaml"  # a replay leaves the sensor sources out
+    calibration = root / "identity.yaml"
+    calibration.write_text(yaml.safe_dump({"mag_calibration": {"hard_iron": [0.0] * 3}}))
+    profile = yaml.safe_load((REPO / "config" / "default.yaml").read_text())
+    profile["mag_compass"]["ros__parameters"]["calibration_file"] = str(calibration)
+    profile_path = root / "profile.yaml"
+    profile_path.write_text(yaml.safe_dump(profile))
+    profile = profile_path
     faults = root / "faults.yaml"
     faults.write_text(yaml.safe_dump({"faults": [DISTURBANCE]}))
     replay(bag, profile, root / "clean")

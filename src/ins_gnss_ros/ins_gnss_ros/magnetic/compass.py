@@ -18,6 +18,7 @@ azimuth = magnetic azimuth + declination (declination positive east, WMM convent
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,6 +26,9 @@ from ins_gnss_ros.magnetic.disturbance import DisturbanceDetector, DisturbanceSt
 from ins_gnss_ros.magnetic.ellipsoid_fit import HardSoftIron
 from ins_gnss_ros.nav.conventions import wrap_2pi
 from ins_gnss_ros.nav.rotations import dcm_from_euler, skew
+
+if TYPE_CHECKING:  # field_calibration levels with this module's functions
+    from ins_gnss_ros.magnetic.field_calibration import FieldCalibration
 
 
 def level_field(mag_b, roll, pitch) -> np.ndarray:
@@ -102,17 +106,39 @@ class MagneticCompass:
     field_std, roll_std, pitch_std : float
         Noise of the calibrated field (T) and of the INS roll and pitch (rad), for the variance
         and the detector's noise floor.
+    field_calibration : FieldCalibration, optional
+        Calibrate in the field as the vehicle turns: ``calibration`` then comes from it, no
+        reading is given before it is good enough, and its heading error joins the variance.
+        Needs :meth:`set_field_model`.
     """
 
     def __init__(self, calibration: HardSoftIron | None = None,
                  detector: DisturbanceDetector | None = None, heading_bias: float = 0.0,
                  field_std: float = 100e-9, roll_std: float = np.radians(0.05),
-                 pitch_std: float = np.radians(0.05)):
+                 pitch_std: float = np.radians(0.05),
+                 field_calibration: FieldCalibration | None = None):
         self.calibration = calibration
         self.detector = detector
         self.heading_bias = heading_bias
         self.field_std = field_std
+        self.field_calibration = field_calibration
+        self._model = None  # (horizontal, up) intensity of the field model, T
+        if field_calibration is not None and field_calibration.ready:
+            self.calibration = field_calibration.current.calibration
         self.set_attitude_std(roll_std, pitch_std)
+
+    def set_field_model(self, total: float, inclination: float, horizontal: float,
+                        up: float) -> None:
+        """The field model at the current position and date (T, rad; ``up`` = minus the WMM
+        Z): the detector's reference and the field calibration's constraints."""
+        if self.detector is not None:
+            self.detector.set_reference(total, inclination)
+        self._model = (horizontal, up)
+
+    @property
+    def calibrating(self) -> bool:
+        """The field calibration is not good enough yet: no readings."""
+        return self.field_calibration is not None and not self.field_calibration.ready
 
     def set_attitude_std(self, roll_std: float, pitch_std: float) -> None:
         """Roll and pitch error (rad) of the attitude the next samples are levelled with."""
@@ -138,10 +164,22 @@ class MagneticCompass:
         Returns
         -------
         reading : CompassReading or None
-            None while a disturbance is flagged.
+            None while a disturbance is flagged or while :attr:`calibrating`.
         status : DisturbanceStatus or None
-            The detector's verdict (None without a detector).
+            The detector's verdict (None without a detector or while calibrating).
         """
+        cal = self.field_calibration
+        if cal is not None:
+            # The levelled field's error of one reading: the sensor's noise and the tilt error
+            # times the field (its vertical part turned into the horizontal).
+            field_std = float(np.hypot(self.field_std, np.hypot(*self._model)
+                                       * max(self.roll_std, self.pitch_std)))
+            if cal.update(t, mag_raw, roll, pitch, *self._model, field_std):
+                self.calibration = cal.current.calibration
+                if self.detector is not None:
+                    self.detector.restart()
+            if not cal.ready:
+                return None, None
         mag_b = self.calibration.apply(mag_raw) if self.calibration else np.asarray(mag_raw, float)
         status: DisturbanceStatus | None = None
         if self.detector is not None:
@@ -151,5 +189,7 @@ class MagneticCompass:
         mag_az = float(wrap_2pi(magnetic_azimuth(mag_b, roll, pitch) - self.heading_bias))
         var = float(azimuth_variance(mag_b, roll, pitch, self.field_std, self.roll_std,
                                      self.pitch_std))
+        if cal is not None:
+            var += cal.azimuth_variance(mag_raw, roll, pitch)
         return CompassReading(mag_az, float(wrap_2pi(mag_az + declination)), var,
                               float(declination)), status

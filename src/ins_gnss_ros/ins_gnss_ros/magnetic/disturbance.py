@@ -125,6 +125,12 @@ class DisturbanceDetector:
         """Update the model field (when the position has moved)."""
         self.total, self.inclination = float(total), float(inclination)
 
+    def restart(self):
+        """Forget the running averages and the flag (the calibration of the field changed)."""
+        self.disturbed = False
+        self._running, self._n_running = None, 0
+        self._last_t = self._quiet_since = None
+
     def set_noise(self, field_std: float, tilt_std: float):
         """Update the per-sample noise: field per axis (T) and roll/pitch error (rad)."""
         self.field_std, self.tilt_std = float(field_std), float(tilt_std)

@@ -2,7 +2,10 @@
 
 Per ``imu/mag`` sample (base_link axes, from the ``imu_preprocessor``) the
 :class:`~ins_gnss_ros.magnetic.compass.MagneticCompass` removes the vehicle's hard and soft iron
-(``mag_calibrate_cli`` output or inline parameters), tilt-compensates with the latest roll and
+(``mag_calibrate_cli`` output or inline parameters; with ``online_calibration.enabled`` fitted
+in the field as the vehicle turns, :mod:`ins_gnss_ros.magnetic.field_calibration`, nothing
+published until that fit's heading error is small enough, /diagnostics ``calibration`` saying
+what it waits for, and a given calibration taken as one from an earlier run), tilt-compensates with the latest roll and
 pitch (from ``ins/state``, or levelled from the accelerometer on ``imu/data`` where no INS runs)
 and gates the sample with the :class:`~ins_gnss_ros.magnetic.disturbance.DisturbanceDetector`:
 while a disturbance is flagged nothing is published and /diagnostics says why. An ``ins/state``
@@ -35,27 +38,43 @@ from ..io import stamp_to_sec
 from ..magnetic.compass import MagneticCompass
 from ..magnetic.disturbance import DisturbanceDetector
 from ..magnetic.ellipsoid_fit import HardSoftIron
+from ..magnetic.field_calibration import FieldCalibration, FieldCalibrationConfig
 from ..magnetic.wmm import decimal_year, field_elements
 from ..nav.alignment import level
 from ..nav.rotations import quat_to_euler
 from ..params_io import ParamsFileError, load_yaml_file
+from ..tools import write_yaml
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 from .convert import quat, vec
 
 _IDENTITY = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+_FILE_KEYS = {"hard_iron", "soft_iron", "heading_bias", "heading_sigma"}
 
 
 class MagCompassNode(NavNode):
     PARAMS = (
         Param("calibration_file", "",
-              "YAML hard/soft-iron calibration (mag_calibrate_cli output: key mag_calibration with "
-              "hard_iron, soft_iron, optional heading_bias); empty: the calibration.* parameters"),
+              "YAML hard/soft-iron calibration (mag_calibrate_cli or online_calibration.save_file "
+              "output: key mag_calibration with hard_iron, soft_iron, optional heading_bias and "
+              "heading_sigma, rad); empty: the calibration.* parameters"),
         Param("calibration.hard_iron", [0.0, 0.0, 0.0],
               "hard-iron offset c in base_link (b = W (m - c)), T", -1e-3, 1e-3, length=3),
         Param("calibration.soft_iron", _IDENTITY,
               "soft-iron correction W, 3x3 row-major, dimensionless", -10.0, 10.0, length=9),
         Param("calibration.heading_bias_deg", 0.0,
               "installation azimuth error to subtract (turntable calibration), deg", -180.0, 180.0),
+        Param("online_calibration.enabled", False,
+              "fit the hard/soft iron in the field from the readings as the vehicle turns "
+              "(the WMM horizontal and vertical field as constraints) and publish only once the "
+              "fit is good enough; a calibration given above is used until a fit is better"),
+        Param("online_calibration.max_heading_sigma_deg", 2.0,
+              "largest heading error of the fit over a full circle for it to be used, deg",
+              0.01, 45.0),
+        Param("online_calibration.soft_iron_sigma", 0.05,
+              "prior sigma of the soft-iron matrix elements about the identity, -", 1e-4, 1.0),
+        Param("online_calibration.save_file", "",
+              "write each calibration the online fit adopts here (YAML for calibration_file: "
+              "the next run starts calibrated); empty: not saved"),
         Param("reference", "true", "north reference of the published azimuth",
               choices=("true", "magnetic")),
         Param("attitude_source", "ins_state",
@@ -98,7 +117,7 @@ class MagCompassNode(NavNode):
     def __init__(self, **kwargs):
         super().__init__("mag_compass", **kwargs)
         p = self.p
-        calibration, heading_bias = self._calibration()
+        calibration, heading_bias, heading_sigma, stored = self._calibration()
         self.position = (math.radians(p["position.latitude_deg"]),
                          math.radians(p["position.longitude_deg"]), p["position.altitude_m"])
         self._fix_seen = False
@@ -114,9 +133,17 @@ class MagCompassNode(NavNode):
             p["disturbance.running_total_tol"],
             math.radians(p["disturbance.running_inclination_deg"]), p["disturbance.release"],
             p["disturbance.clear_time_s"], p["disturbance.time_constant_s"])
+        field_calibration = None
+        if p["online_calibration.enabled"]:
+            field_calibration = FieldCalibration(
+                FieldCalibrationConfig(
+                    soft_iron_sigma=p["online_calibration.soft_iron_sigma"],
+                    max_heading_sigma=math.radians(p["online_calibration.max_heading_sigma_deg"])),
+                calibration if stored else None, heading_sigma)
         self.compass = MagneticCompass(calibration, detector, heading_bias,
                                        p["field_std_nT"] * 1e-9, math.radians(p["roll_std_deg"]),
-                                       math.radians(p["pitch_std_deg"]))
+                                       math.radians(p["pitch_std_deg"]), field_calibration)
+        self._saved = field_calibration.current if field_calibration else None
         self.pub = self.publisher(Heading, "mag/heading", SENSOR_QOS)
         self.subscribe(MagneticField, "imu/mag", self.on_mag, SENSOR_QOS)
         self.subscribe(NavSatFix, "gnss/fix", self.on_fix, DRIVER_QOS)
@@ -128,16 +155,18 @@ class MagCompassNode(NavNode):
         else:
             self.subscribe(FilterStatus, "nav/status", self.on_filter_status, STATE_QOS)
 
-    def _calibration(self) -> tuple[HardSoftIron, float]:
-        """Hard/soft iron and heading bias (rad) from the file or the inline parameters."""
+    def _calibration(self) -> tuple[HardSoftIron, float, float, bool]:
+        """Hard/soft iron, heading bias (rad), the calibration's own heading sigma (rad) and
+        whether one was given, from the file or the inline parameters."""
         p = self.p
         inline = {"hard_iron": list(p["calibration.hard_iron"]),
                   "soft_iron": np.reshape(p["calibration.soft_iron"], (3, 3)).tolist()}
         bias = math.radians(p["calibration.heading_bias_deg"])
         source = "calibration.*"
+        defaults = {s.name: s.default for s in self.PARAMS if s.name.startswith("calibration.")}
+        stored = any(p[k] != v for k, v in defaults.items())
         if p["calibration_file"]:
-            defaults = {s.name: s.default for s in self.PARAMS if s.name.startswith("calibration.")}
-            if any(p[k] != v for k, v in defaults.items()):
+            if stored:
                 raise ParameterError("parameter 'calibration_file': give the calibration either as "
                                      "a file or as calibration.* parameters, not both")
             path = Path(p["calibration_file"])
@@ -146,12 +175,14 @@ class MagCompassNode(NavNode):
             except ParamsFileError as err:
                 raise ParameterError(f"parameter 'calibration_file': {err}") from None
             d = d.get("mag_calibration", d) if isinstance(d, dict) else d
-            if not isinstance(d, dict) or set(d) - {"hard_iron", "soft_iron", "heading_bias"}:
+            if not isinstance(d, dict) or set(d) - _FILE_KEYS:
                 raise ParameterError(f"parameter 'calibration_file': {path} is not a dict of "
-                                     "hard_iron, soft_iron, heading_bias")
+                                     f"{', '.join(sorted(_FILE_KEYS))}")
             inline, bias, source = d, d.get("heading_bias", 0.0), f"calibration_file {path}"
+            stored = True
         try:
-            return HardSoftIron.from_dict(inline), float(bias)
+            return (HardSoftIron.from_dict(inline), float(bias),
+                    float(inline.get("heading_sigma", 0.0)), stored)
         except (ValueError, TypeError) as err:
             raise ParameterError(f"{source}: {err}") from None
 
@@ -235,9 +266,14 @@ class MagCompassNode(NavNode):
         except ValueError as err:
             self.diag.count(f"WMM unavailable: heading withheld ({err})")
             return
-        self.compass.detector.set_reference(wmm.total, wmm.inclination)
+        self.compass.set_field_model(wmm.total, wmm.inclination, wmm.horizontal, -wmm.down)
         reading, status = self.compass.update(t, m, self.attitude[1], self.attitude[2],
                                               wmm.declination)
+        if self.compass.field_calibration is not None:
+            self._field_calibration_news()
+        if self.compass.calibrating:
+            self.diag.count("magnetometer not calibrated yet: heading withheld", log=False)
+            return
         if reading is None:
             self.diag.count("magnetic disturbance: heading withheld")
             if status.reasons:
@@ -253,6 +289,20 @@ class MagCompassNode(NavNode):
         out.header.stamp = msg.header.stamp
         out.header.frame_id = self.p["frame_id"]
         self.pub.publish(out)
+
+
+    def _field_calibration_news(self) -> None:
+        """/diagnostics of the online calibration; a newly adopted one saved for the next run."""
+        cal = self.compass.field_calibration
+        self.diag.set_value("calibration", cal.state())
+        if cal.current is self._saved:
+            return
+        self._saved = cal.current
+        self.get_logger().info(f"mag_compass: {cal.state()}")
+        if self.p["online_calibration.save_file"]:
+            write_yaml({"mag_calibration": {**cal.current.calibration.to_dict(),
+                                            "heading_sigma": cal.current.heading_sigma}},
+                       self.p["online_calibration.save_file"])
 
 
 def main(args=None) -> int:

@@ -80,6 +80,23 @@ class MagErrors:
     offset_b: np.ndarray = field(default_factory=lambda: np.zeros(3))
     noise_std: float = 0.0
 
+    @classmethod
+    def uncalibrated_vehicle(cls, rng: np.random.Generator, noise_std: float) -> "MagErrors":
+        """Errors of a MEMS magnetometer in a car nobody calibrated, drawn from ``rng``.
+
+        Magnitudes as reported for automotive and robot installations (Gebre-Egziabher et
+        al. 2006, §"Error sources"; Caruso, "Applications of magnetic sensors for low cost
+        compass systems", IEEE PLANS 2000): a hard iron of about 10 uT per axis (of the order
+        of the horizontal field at high latitudes), soft iron of a few per cent (symmetric:
+        the induced field of linear steel), scale errors of 1 % and non-orthogonality of
+        0.5 % (the sensor's own, not symmetric) and zero offsets of 1 uT.
+        """
+        w = rng.normal(0.0, 0.02, (3, 3))
+        w = 0.5 * (w + w.T) + np.diag(rng.normal(0.0, 0.03, 3))
+        s = np.diag(rng.normal(0.0, 0.01, 3)) + rng.normal(0.0, 0.005, (3, 3)) * (1 - np.eye(3))
+        return cls(hard_iron_b=rng.normal(0.0, 10e-6, 3), soft_iron=w, scale_misalignment=s,
+                   offset_b=rng.normal(0.0, 1e-6, 3), noise_std=noise_std)
+
 
 @dataclass
 class MagMeasurements:

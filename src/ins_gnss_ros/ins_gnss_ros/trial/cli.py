@@ -58,6 +58,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--imu-orientation", type=float, default=0.0, metavar="DEG",
                    help="the IMU gives its own orientation (an AHRS), yaw to magnetic north "
                    "with this 1-sigma error (default: none)")
+    p.add_argument("--mag-iron", type=int, default=None, metavar="VEHICLE_SEED",
+                   help="imu/mag_raw from a magnetometer nobody calibrated: hard/soft iron, "
+                   "scale and offsets of a car installation drawn from VEHICLE_SEED (the same "
+                   "car on another drive: the same VEHICLE_SEED; default: an ideal sensor)")
     p.add_argument("--static", type=float, default=None, metavar="S",
                    help="car: standstill before the drive, s (0: rolling start; default 30)")
     p.add_argument("--gnss-rate", type=float, default=SimOptions.gnss_rate, help="Hz")
@@ -233,7 +237,7 @@ def cmd_simulate(args) -> int:
                     SimOptions(imu_grade=args.imu_grade, imu_topic=args.imu,
                                imu_rate=args.imu_rate, imu_stamp_jitter=args.imu_stamp_jitter,
                                imu_orientation_sigma=args.imu_orientation,
-                               start_static=args.static,
+                               mag_iron=args.mag_iron, start_static=args.static,
                                gnss_rate=args.gnss_rate, gnss_velocity=not args.no_gnss_vel,
                                gnss_covariance=not args.no_gnss_cov,
                                gnss_sigma_h=args.gnss_sigma_h, gnss_sigma_v=args.gnss_sigma_v,

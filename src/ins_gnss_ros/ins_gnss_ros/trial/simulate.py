@@ -102,6 +102,11 @@ class SimOptions:
         Magnetometer rate, Hz.
     mag_noise : float
         Magnetometer white noise, T.
+    mag_iron : int or None
+        Give the magnetometer the hard/soft-iron, scale and offset errors of an uncalibrated
+        car installation (:meth:`MagErrors.uncalibrated_vehicle`), drawn from this seed: the
+        vehicle's, so that the same car can make other drives (other trial seeds); None: an
+        ideal, calibrated sensor.
     log_rate, log_noise : float
         Speed-log rate (Hz) and white noise (m/s), sea scenario.
     log_lever_arm : tuple of 3 float
@@ -140,6 +145,7 @@ class SimOptions:
     array: tuple = (1.5, 1.0)
     mag_rate: float = 50.0
     mag_noise: float = 100e-9
+    mag_iron: int | None = None
     log_rate: float = 2.0
     log_noise: float = 0.05
     log_lever_arm: tuple = (0.0, 0.0, -2.0)
@@ -345,8 +351,10 @@ def _write_raw_gnss(writer, traj, options, seed):
 def _write_mag(writer, traj, options, seed):
     year = decimal_year(SIM_EPOCH_NS * 1e-9 + traj.t[0])
     earth_field = field_elements(traj.lat[0], traj.lon[0], traj.h[0], year).enu
-    mag = simulate_magnetometer(traj, earth_field, MagErrors(noise_std=options.mag_noise),
-                                rate=options.mag_rate, seed=seed)
+    errors = MagErrors(noise_std=options.mag_noise) if options.mag_iron is None else \
+        MagErrors.uncalibrated_vehicle(np.random.default_rng([options.mag_iron, 6]),
+                                       options.mag_noise)
+    mag = simulate_magnetometer(traj, earth_field, errors, rate=options.mag_rate, seed=seed)
     t_ns = bag.sec_to_ns(mag.t, SIM_EPOCH_NS)
     writer.write_all("imu/mag_raw", (msgs.mag_msg(t, b, options.mag_noise ** 2)
                                      for t, b in zip(t_ns, mag.field_b)))
