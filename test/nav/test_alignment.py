@@ -199,3 +199,31 @@ def test_levelled_start_and_yaw_rotation():
     st2, P2 = al.rotate_yaw(st, P, space, 90 * DEG, 0.001, 0.02)
     np.testing.assert_allclose(quat_to_euler(st2.q_nb)[2], 90 * DEG, atol=1e-9)
     assert P2[space["att"].stop - 1, space["att"].stop - 1] == pytest.approx(0.02 ** 2)
+
+
+def test_yaw_rotation_correlates_the_turned_velocity_and_distance_with_the_yaw():
+    """An INS that ran from rest with its yaw off by a: turning it by a + eps (a slightly
+    wrong alignment) leaves velocity and position errors that the covariance predicts from
+    the yaw error phi_U = -eps (its regression on phi_U: P[x, yaw] / P[yaw, yaw])."""
+    from ins_gnss_ros.nav.ekf import StateSpace
+    from ins_gnss_ros.nav.error_model import make_layout
+    from ins_gnss_ros.nav.measurements import position_residual_enu
+    from ins_gnss_ros.nav.strapdown import NavState, apply_correction
+
+    noise = se.filter_noise(se.MEMS_ADIS16405, "rw")
+    space = StateSpace(make_layout("15", noise))
+    P = al.initial_covariance(space, noise, 0.3, 0.1, 0.02)
+    a, eps, sigma = 150 * DEG, 0.03, 0.03
+    v_true, d_true = np.array([6.0, -3.0, 0.0]), np.array([15.0, -8.0, 0.0])
+    turn = quat_to_dcm(quat_from_euler(0.0, 0.0, -a))
+    rest = NavState(0.8, 0.1, 10.0, np.zeros(3), quat_from_euler(0.0, 0.0, 0.0), 0.0)
+    ins = apply_correction(rest, -turn @ d_true, np.zeros(3), np.zeros(3))
+    ins = NavState(ins.lat, ins.lon, ins.h, turn @ v_true, quat_from_euler(0.0, 0.0, -a), 5.0)
+    st, P2 = al.rotate_yaw(ins, P, space, a + eps, sigma, 0.0, (rest.lat, rest.lon, rest.h))
+    k = space["att"].stop - 1
+    phi_u = -eps
+    predicted = P2[:, k] / P2[k, k] * phi_u
+    np.testing.assert_allclose(st.v_enu - v_true, predicted[space["vel"]], atol=0.01)
+    d = position_residual_enu(st.lat, st.lon, st.h, rest.lat, rest.lon, rest.h)
+    np.testing.assert_allclose(d - d_true, predicted[space["pos"]], atol=0.02)
+    assert np.linalg.norm(d - d_true) > 0.4  # the test sees the turned distance's error

@@ -433,9 +433,11 @@ def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, rest_pos=None):
     P : (n, n) ndarray
     """
     rz = quat_from_rotvec([0.0, 0.0, delta])
+    run = np.zeros(3)  # the distance turned with the yaw, ENU m
     if rest_pos is not None:
         d = position_residual_enu(nav.lat, nav.lon, nav.h, *rest_pos)
-        nav = apply_correction(nav, d - quat_rotate(rz, d), np.zeros(3), np.zeros(3))
+        run = quat_rotate(rz, d)
+        nav = apply_correction(nav, d - run, np.zeros(3), np.zeros(3))
     nav = replace(nav, q_nb=quat_normalize(quat_mul(rz, nav.q_nb)),
                   v_enu=quat_rotate(rz, nav.v_enu))
     # The ENU-resolved errors turn with the solution (C' = Rz (I - [phi x]) C =
@@ -449,7 +451,17 @@ def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, rest_pos=None):
     k = space["att"].stop - 1
     P[k, :] = 0.0
     P[:, k] = 0.0
-    P[k, k] = max(sigma_floor, sigma) ** 2
+    # The velocity and the distance run since the rest were turned by the new yaw, so they
+    # carry its error: a yaw error phi_U leaves delta v = v x e_U phi_U (the velocity error
+    # equation, error_model.py, integrated over the accelerations since the rest) and
+    # delta p = run x e_U phi_U. With these correlations the first fixes after the alignment
+    # correct the yaw through the distance run, instead of taking the turned distance's error
+    # for a position error alone (fixes at 1 Hz after a course of several seconds).
+    g = np.zeros(space.size)
+    g[k] = 1.0
+    g[space["vel"]] = np.cross(nav.v_enu, [0.0, 0.0, 1.0])
+    g[space["pos"]] = np.cross(run, [0.0, 0.0, 1.0])
+    P += max(sigma_floor, sigma) ** 2 * np.outer(g, g)
     if "bg" in space:
         # While the yaw was unknown the mechanisation removed the horizontal Earth rate in the
         # wrong direction and the filter took the difference for gyro bias: widen the bias
