@@ -11,8 +11,9 @@ its horizontal magnitude and the WMM vertical component as its vertical one (the
 "heading-invariant" constraints of Gebre-Egziabher et al., "Calibration of strapdown
 magnetometers in magnetic field domain", J. Aerosp. Eng. 2006, with the magnitude split into
 its horizontal and vertical parts). The product c_z + W_zz B_z stays inseparable from yaw
-motion alone, so the soft-iron matrix W gets a Gaussian prior about the identity (a maximum a-posteriori fit): what the turns do not show stays at the
-prior, and its uncertainty stays in the result. W is general but for a rotation about the
+motion alone, so the soft-iron matrix W gets a Gaussian prior about the identity (a maximum
+a-posteriori fit): what the turns do not show stays at the prior, and its uncertainty stays in
+the result. W is general but for a rotation about the
 vertical: the sensor's non-orthogonality makes the distortion unsymmetric, and a rotation of the
 triad about a horizontal axis tilts the field, which the vertical constraint sees (a symmetric W
 leaves that as a heading error of the tilt times the field's vertical over horizontal ratio).
@@ -224,8 +225,8 @@ class FieldCalibration:
         self._tilt: list[tuple[float, float]] = []
         self.fit: FitResult | None = None      # the latest fit, used or not
         self.current = None if stored is None else \
-            FitResult(stored, np.zeros((_N_PARAMS, _N_PARAMS)), float(stored_heading_sigma), np.nan, 0, 1.0,
-                      0.0)
+            FitResult(stored, np.zeros((_N_PARAMS, _N_PARAMS)), float(stored_heading_sigma),
+                      np.nan, 0, 1.0, 0.0)
         self._stored = stored is not None
         self._new_samples = 0
         self._last_fit_t = -np.inf

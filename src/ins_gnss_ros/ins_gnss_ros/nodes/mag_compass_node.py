@@ -5,8 +5,8 @@ Per ``imu/mag`` sample (base_link axes, from the ``imu_preprocessor``) the
 (``mag_calibrate_cli`` output or inline parameters; with ``online_calibration.enabled`` fitted
 in the field as the vehicle turns, :mod:`ins_gnss_ros.magnetic.field_calibration`, nothing
 published until that fit's heading error is small enough, /diagnostics ``calibration`` saying
-what it waits for, and a given calibration taken as one from an earlier run), tilt-compensates with the latest roll and
-pitch (from ``ins/state``, or levelled from the accelerometer on ``imu/data`` where no INS runs)
+what it waits for, and a given calibration taken as one from an earlier run), tilt-compensates
+with the latest roll and pitch (from ``ins/state``, or levelled from the accelerometer on ``imu/data`` where no INS runs)
 and gates the sample with the :class:`~ins_gnss_ros.magnetic.disturbance.DisturbanceDetector`:
 while a disturbance is flagged nothing is published and /diagnostics says why. An ``ins/state``
 in DEAD_RECKONING that no filter has corrected yet (``correction_sequence`` 0: a strapdown
