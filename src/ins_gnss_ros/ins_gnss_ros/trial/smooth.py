@@ -15,8 +15,8 @@ holds
   sample (:func:`~ins_gnss_ros.nav.smoother.imu_rate_track`).
 
 The forward record is what bounds the memory: P, P- and Phi per epoch (3 n^2 doubles, 10 Hz or
-faster), kept once as the navigator's lists and once as the output's arrays while the output is
-made, then only as arrays (docs/results/postprocessing.md).
+faster), kept once (the navigator's output is a view of its record); the bag is read and the
+outputs written as streams (docs/results/postprocessing.md).
 """
 from __future__ import annotations
 
@@ -109,7 +109,7 @@ def smooth(bag_path, profile_path, out, outages=None, point=None, exports=(),
     forward = run.navigator.output()
     config = run.navigator.config
     increments = None if lever is None else run.navigator.increments.arrays()
-    # The navigator's record (lists of per-epoch arrays) is as large as its output: let it go.
+    # The output keeps the record (views of it); the rest of the navigator can go.
     run.navigator = None
     toc_forward = time.perf_counter()
     if forward.P is None:
