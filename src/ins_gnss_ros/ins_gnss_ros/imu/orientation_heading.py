@@ -65,17 +65,18 @@ class OrientationHeadings:
         self.period_ns = int(round(1e9 / rate_hz))
         self.c_bs = np.asarray(c_bs, float)
         self._next_ns = None
-        self.without_yaw = 0  # orientations given whose covariance vouches for no yaw
+        self.without_yaw = 0  # orientations looked at whose covariance vouches for no yaw
 
     def add(self, t_ns: int, q_ns, covariance):
         """The heading of a sample at t_ns (as :func:`orientation_heading`) when one is due and
         valid, else None."""
         if self._next_ns is not None and t_ns < self._next_ns:
             return None
+        # Looked at once a period, valid or not: the many drivers without an orientation
+        # cost nothing per sample at 1 kHz.
+        self._next_ns = t_ns + self.period_ns
         heading = orientation_heading(q_ns, covariance, self.c_bs)
-        if heading is not None:
-            self._next_ns = t_ns + self.period_ns
-        elif covariance[0] != -1.0 and any(c != 0.0 for c in covariance):
+        if heading is None and covariance[0] != -1.0 and any(c != 0.0 for c in covariance):
             # a covariance given (not "none" nor "unknown", which drivers without an
             # orientation leave) that rules the yaw out: worth a word on /diagnostics
             self.without_yaw += 1

@@ -196,6 +196,11 @@ class _BusPublisher:
     def publish(self, msg: Any) -> None:
         self._bus.publish(self.topic, msg)
 
+    @staticmethod
+    def wanted() -> bool:
+        """Always: a replay records every message published on the bus."""
+        return True
+
     def get_subscription_count(self) -> int:
         return len(self._bus._subscribers.get(self.topic, ()))
 
@@ -249,8 +254,13 @@ class _CountedPublisher:
         self._volatile = not (isinstance(qos, QoSProfile)
                               and qos.durability == DurabilityPolicy.TRANSIENT_LOCAL)
 
+    def wanted(self) -> bool:
+        """Whether a message published now reaches anyone: a node may skip building one
+        nobody would get."""
+        return not self._volatile or self._publisher.get_subscription_count() > 0
+
     def publish(self, msg) -> None:
-        if self._volatile and self._publisher.get_subscription_count() == 0:
+        if not self.wanted():
             return
         self._traffic[self._key] += 1
         self._publisher.publish(self._encode(msg))

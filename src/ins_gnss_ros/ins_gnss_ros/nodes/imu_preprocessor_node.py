@@ -93,7 +93,8 @@ class ImuPreprocessorNode(NavNode):
                 set_stamp_ns(delta.header.stamp, inc.t_ns)
                 delta.header.frame_id = self._frame_id
                 self.pub_delta.publish(delta)
-            self._publish_data(out.tag, out.t_ns, *out.rates)
+            if self.pub_data.wanted():  # the default graph has no imu/data subscriber
+                self._publish_data(out.tag, out.t_ns, *out.rates)
             if self.orientation is not None:
                 self._publish_heading(out.tag, out.t_ns)
 
