@@ -271,16 +271,27 @@ class Aiding:
         if not HEIGHT_RANGE[0] <= h <= HEIGHT_RANGE[1]:
             self.report("implausible gnss/fix altitude rejected")
             return self._seen("gnss/fix", t, False)
-        if not covariance_known or not np.all(np.diag(cov) > 0.0):
+        assumed = not covariance_known or not np.all(np.diag(cov) > 0.0)
+        if assumed:
             sigma = UNKNOWN_FIX_SIGMA[min(status, 2)]
             cov = np.diag([sigma ** 2, sigma ** 2, (2.0 * sigma) ** 2])
-            self.report(f"gnss/fix without covariance: {sigma:g} m assumed from its status",
-                        log=False)
+            self.report(f"gnss/fix without covariance: {sigma:g} m assumed from its status, "
+                        "weighted by the fixes' measured fix-to-fix noise", log=False)
         cov = _floored(cov, self.policy.position_sigma_floor)
         lat, lon = np.radians(lat_deg), np.radians(lon_deg)
         if self.datum is None:
             self.datum = (lat, lon, h)
         self._course.observe(t, lat, lon, h)
+        common_var = 0.0
+        if assumed:
+            # The assumed sigma is the receiver's unknown absolute accuracy, mostly an error
+            # the fixes share (slow: atmosphere, orbits); only their white part is news from
+            # fix to fix. The filter follows the fixes with that (nav/course.py measures it)
+            # and the shared part stays in the published covariance (GnssFix.common_var).
+            white = _floored(self._course.fix_to_fix(cov), self.policy.position_sigma_floor)
+            common_var = max(0.5 * float(cov[0, 0] + cov[1, 1] - white[0, 0] - white[1, 1]),
+                             0.0)
+            cov = white
         at_rest = self._rest.fix(t, lat, lon, h, self._course.fix_to_fix(cov))
         if self._without_velocity_before_start():
             if at_rest:
@@ -289,7 +300,7 @@ class Aiding:
                 self.report("gnss/fix held: telling rest from motion before levelling",
                             log=False)
                 return self._seen("gnss/fix", t, True)
-        self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov))
+        self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov, common_var))
         self._course_velocity(t, lat, lon, h, cov)
         return self._seen("gnss/fix", t, True)
 

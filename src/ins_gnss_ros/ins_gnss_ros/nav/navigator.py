@@ -94,6 +94,9 @@ class Navigator:
         self._integrity = Integrity(cfg)                # not rewound (integrity.py)
         self._recorder = Recorder(self._space, cfg.record, cfg.store_covariance)
         self._gaps = BridgedGaps(cfg.gap_accel_sigma, cfg.gap_rate_sigma)
+        # The fixes' common error (GnssFix.common_var) of the latest fix used, m^2: a property
+        # of the receiver, not of the run state, so a rewind keeps it.
+        self._fix_common_var = 0.0
 
     def add_imu(self, t, dtheta, dv):
         """Add IMU samples.
@@ -178,8 +181,16 @@ class Navigator:
 
     def covariance(self):
         """The covariance to publish (n, n), once :attr:`started`: the filter's P plus the
-        noise floors of forced measurement kinds (integrity.py)."""
-        return self._integrity.covariance(self._state.ekf.P, self._space)
+        noise floors of forced measurement kinds (integrity.py) and, on the horizontal
+        position, the error common to the fixes the filter follows (GnssFix.common_var: the
+        filter's position is relative to them)."""
+        P = self._integrity.covariance(self._state.ekf.P, self._space)
+        if self._fix_common_var > 0.0:
+            P = P.copy()
+            east = self._space["pos"].start
+            P[east, east] += self._fix_common_var
+            P[east + 1, east + 1] += self._fix_common_var
+        return P
 
     def updates_since(self, count):
         """The update results after the first `count` (as counted by :attr:`update_count`)."""
@@ -349,6 +360,7 @@ class Navigator:
     def _gnss_fix(self, m, st, epoch):
         if self._held_for_alignment(m, epoch):
             return
+        self._fix_common_var = m.common_var
         s = self._state
         v_ant = lever_arm_velocity(st.v_enu, st.q_nb, s.omega, self._lever, st.lat)
         innov = meas.gnss_position(self._space, st, m.lat, m.lon, m.h, m.cov_enu, self._lever,
