@@ -24,7 +24,7 @@ from ..magnetic.wmm import decimal_year, field_elements
 from .course import CourseFromFixes
 from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
 from .measurement_types import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, SpeedLog, \
-    WheelOdometry, ZeroVelocity
+    StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .navigator import Navigator
 from .rest_detector import RestDetector
@@ -123,8 +123,9 @@ class AidingPolicy:
                    phase_differences=p["use_phase_dd"])
 
 
-#: Longest the first fixes of a receiver without velocity wait for the rest detector, s (a
-#: noisy receiver confirms rest slowly: the filter then levels without the static gyro bias).
+#: Longest the first fixes of a receiver without velocity wait for the rest detector, s (an
+#: IMU whose blocks do not come, or do not settle: the filter then levels without the static
+#: gyro bias).
 REST_DECISION_S = 10.0
 
 #: Heading inputs -> the extra block of their own bias (None: a true heading, no bias).
@@ -190,6 +191,7 @@ class Aiding:
         self._rest = RestDetector(noise.accel_psd, noise.gyro_psd)
         self._wmm_declination = None  # at the datum, once a magnetic heading needs it
         self._first_held_t = math.nan  # the first fix held for the rest detector, s
+        self._rest_unconfirmed = False  # started on a still IMU before the fixes confirmed rest
         self.last_increment_t = math.inf  # end of the last increment, s
         self.wheel_still_since = math.inf  # stamp of the first of the zero wheel speeds, s
 
@@ -250,8 +252,14 @@ class Aiding:
         # it navigates they would be a risk, not an aid: a moored vessel heaving slowly in
         # waves passes the IMU's stillness test and its fixes do not move (the bundled vessel
         # trial).
+        # A filter that started on a still IMU before the fixes confirmed rest gets that
+        # confirmation once, also when a heading source aligned it meanwhile: it is the
+        # velocity of the static start, which the start could not wait for.
+        if math.isnan(self._rest.still_since):
+            self._rest_unconfirmed = False  # it moved: no rest to confirm
         if self._rest.increment(t, dtheta, dv, dt) and "gnss/vel" not in self.inputs and \
-                not self.navigator.heading_known:
+                (not self.navigator.heading_known or self._rest_unconfirmed):
+            self._rest_unconfirmed = False
             self.navigator.add_measurement(ZeroVelocity(t))
         return None if gap == CONTIGUOUS else gap
 
@@ -296,6 +304,11 @@ class Aiding:
         if self._without_velocity_before_start():
             if at_rest:
                 self.navigator.add_measurement(ZeroVelocity(t))  # levels as a static start
+            elif self._rest.imu_still(t):
+                # Levelling and the gyro bias need only the IMU's stillness: start now, with
+                # the velocity unknown until the fixes confirm rest.
+                self.navigator.add_measurement(StillImu(t))
+                self._rest_unconfirmed = True
             elif self._rest.undecided and t - self._held_since(t) < REST_DECISION_S:
                 self.report("gnss/fix held: telling rest from motion before levelling",
                             log=False)
@@ -312,10 +325,10 @@ class Aiding:
 
     def _without_velocity_before_start(self) -> bool:
         """No gnss/vel so far and the filter not yet levelled: the first fixes wait for the
-        rest detector, so that a static start takes its gyro bias from the stationary mean
-        (the navigator's levelling) as with a receiver that gives its speed (also with a
-        heading source: a turn-on bias of degrees per second left to the filter tilts the
-        levelled INS faster than fixes at rest correct it)."""
+        rest detector's IMU verdict, so that a static start takes its gyro bias from the
+        stationary mean (the navigator's levelling) as with a receiver that gives its speed
+        (also with a heading source: a turn-on bias of degrees per second left to the filter
+        tilts the levelled INS faster than fixes at rest correct it)."""
         return "gnss/vel" not in self.inputs and not self.navigator.started
 
     def _course_velocity(self, t: float, lat: float, lon: float, h: float,

@@ -98,6 +98,16 @@ class ZeroVelocity:
 
 
 @dataclass(frozen=True)
+class StillImu:
+    """The IMU alone was still up to time t (nav/rest_detector.py): the vehicle stands, or moves
+    steadily straight on. In both the specific force is gravity and the rate the Earth's, so a
+    start on it levels and takes the gyro bias of the stationary mean, but its velocity is
+    unknown until the fixes confirm rest (then ZeroVelocity). Used only before the start."""
+
+    t: float
+
+
+@dataclass(frozen=True)
 class SatelliteRanges:
     """Tight coupling: per-satellite pseudoranges (and optionally range rates) at GNSS time t.
 

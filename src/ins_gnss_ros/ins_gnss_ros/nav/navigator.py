@@ -41,7 +41,7 @@ from .imu_gaps import BridgedGaps
 from .integrity import Integrity
 from .lever_arm import lever_arm_velocity
 from .measurement_types import GNSS_TYPES, GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, \
-    SatelliteRanges, SpeedLog, WheelOdometry, ZeroVelocity
+    SatelliteRanges, SpeedLog, StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .propagation import extrapolate, propagate
 from .recording import Recorder
@@ -257,6 +257,8 @@ class Navigator:
                 s.gnss_speed = float(np.hypot(*m.v_enu[:2]))
             elif isinstance(m, ZeroVelocity):
                 s.t_rest = epoch
+            elif isinstance(m, StillImu):
+                s.t_still = epoch
             if not isinstance(m, GnssFix) or s.levelling.time < cfg.level_time or k == buf.first:
                 continue
             # At rest by the last GNSS speed, or by the velocity of the fix's own epoch.
@@ -269,7 +271,7 @@ class Navigator:
             sigma_vel = cfg.sigma_vel0 if at_rest or np.isfinite(speed) else UNKNOWN_SPEED_SIGMA
             P0 = initial_covariance(self._space, cfg.noise, cfg.sigma_pos0, sigma_vel,
                                     cfg.sigma_tilt0)
-            if at_rest:
+            if at_rest or epoch - s.t_still <= REST_HOLD:
                 take_static_gyro_bias(s.levelling, self._space, cfg.noise, P0, s.estimates)
             self._start(levelled_state(s.levelling, m.lat, m.lon, m.h, self._lever,
                                        s.gnss_speed, cfg.static_speed, float(buf.time(k - 1))),
@@ -452,6 +454,9 @@ class Navigator:
         self._zero_rate(st, epoch)
         self._update(meas.zero_velocity(self._space, st, m.sigma_v), epoch)
 
+    def _still_imu(self, m, st, epoch):
+        """Queued before the start, applied after it: the filter already started."""
+
     def _satellite_ranges(self, m, st, epoch):
         if self._held_for_alignment(m, epoch):
             return
@@ -468,7 +473,7 @@ class Navigator:
     _HANDLERS = {GnssFix: _gnss_fix, GnssVelocity: _gnss_velocity, HeadingFix: _heading,
                  PhaseDifferences: _phase_differences, SpeedLog: _speed_log,
                  WheelOdometry: _wheel_odometry, ZeroVelocity: _zero_velocity,
-                 SatelliteRanges: _satellite_ranges}
+                 StillImu: _still_imu, SatelliteRanges: _satellite_ranges}
 
     def _update(self, innov, epoch, aiding=True):
         """Gate and apply one measurement, forced in after `max_reject_time` s of continuous
