@@ -191,7 +191,7 @@ class Aiding:
         self._rest = RestDetector(noise.accel_psd, noise.gyro_psd)
         self._wmm_declination = None  # at the datum, once a magnetic heading needs it
         self._first_held_t = math.nan  # the first fix held for the rest detector, s
-        self._rest_unconfirmed = False  # started on a still IMU before the fixes confirmed rest
+        self._start_rest = False  # started in this still run before the fixes confirmed it
         self.last_increment_t = math.inf  # end of the last increment, s
         self.wheel_still_since = math.inf  # stamp of the first of the zero wheel speeds, s
 
@@ -252,15 +252,15 @@ class Aiding:
         # it navigates they would be a risk, not an aid: a moored vessel heaving slowly in
         # waves passes the IMU's stillness test and its fixes do not move (the bundled vessel
         # trial).
-        # A filter that started on a still IMU before the fixes confirmed rest gets that
-        # confirmation once, also when a heading source aligned it meanwhile: it is the
-        # velocity of the static start, which the start could not wait for.
-        if math.isnan(self._rest.still_since):
-            self._rest_unconfirmed = False  # it moved: no rest to confirm
+        # A filter that started on a still IMU before the fixes confirmed rest gets the
+        # updates of that rest once confirmed, also when a heading source aligned it
+        # meanwhile: they are the static start's velocity and gyro bias (its levelling took a
+        # second of data), which the start could not wait for; they end as the vehicle moves.
         if self._rest.increment(t, dtheta, dv, dt) and "gnss/vel" not in self.inputs and \
-                (not self.navigator.heading_known or self._rest_unconfirmed):
-            self._rest_unconfirmed = False
+                (not self.navigator.heading_known or self._start_rest):
             self.navigator.add_measurement(ZeroVelocity(t))
+        if math.isnan(self._rest.still_since):
+            self._start_rest = False  # it moved: the start's rest is over
         return None if gap == CONTIGUOUS else gap
 
     def fix(self, t: float, lat_deg: float, lon_deg: float, h: float, cov: np.ndarray,
@@ -308,7 +308,7 @@ class Aiding:
                 # Levelling and the gyro bias need only the IMU's stillness: start now, with
                 # the velocity unknown until the fixes confirm rest.
                 self.navigator.add_measurement(StillImu(t))
-                self._rest_unconfirmed = True
+                self._start_rest = True
             elif self._rest.undecided and t - self._held_since(t) < REST_DECISION_S:
                 self.report("gnss/fix held: telling rest from motion before levelling",
                             log=False)
