@@ -226,6 +226,7 @@ def test_a_still_imu_starts_the_filter_at_once_and_the_fixes_rest_confirms_its_v
         if t_started and t_rest_known is None and np.sqrt(nav.covariance()[vel, vel][0, 0]) < 0.1:
             t_rest_known = t
     assert t_started is not None and t_started <= 2.0, "waited for the fixes' verdict"
+    assert front.explain(20.0, imu_running=True) == "navigating"
     assert nav.heading_known and t_rest_known is not None and t_rest_known <= 12.0
     # the published horizontal covariance keeps the fixes' unknown absolute error
     P = nav.covariance()[:2, :2]
@@ -234,3 +235,12 @@ def test_a_still_imu_starts_the_filter_at_once_and_the_fixes_rest_confirms_its_v
     assert np.all(np.sqrt(np.diag(P)) >= 4.0) and err @ np.linalg.solve(P, err) < 25.0
     # ... while following the fixes much better than one of them (1 m): about their mean
     assert np.linalg.norm(err - offset) < 0.5
+
+
+def test_diagnostics_say_the_first_fixes_wait_for_the_imu():
+    nav = Navigator(navigator_config(resolve(PARAMS, {}), record=False))
+    front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
+    still_imu(front, 0.0, 0.3, np.zeros(3))  # one block: still, not yet for MIN_STILL_S
+    assert front.fix(0.3, 59.9, 30.3, 10.0, np.eye(3), 0, covariance_known=False)
+    assert not nav.started
+    assert front.explain(0.3, imu_running=True).startswith("aligning: gnss/fix held")

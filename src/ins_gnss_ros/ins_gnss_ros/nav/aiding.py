@@ -224,6 +224,8 @@ class Aiding:
                 return "aligning: no gnss/fix received yet"
             if fix.received == fix.refused:
                 return f"aligning: every gnss/fix refused ({fix.refused})"
+            if not nav.started and not math.isnan(self._first_held_t):
+                return "aligning: gnss/fix held until the IMU tells rest from motion (levelling)"
             return "aligning: " + (NO_HEADING if not nav.heading_known else "levelling")
         if self.forced:
             return ("dead reckoning (degraded): forced in, their noise floors not yet decayed: "
