@@ -11,6 +11,7 @@ from ins_gnss_ros.nav.aiding import Aiding, AidingPolicy, WheelPolicy
 from ins_gnss_ros.nav.filter_config import PARAMS, navigator_config
 from ins_gnss_ros.nav import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, WheelOdometry, \
     ZeroVelocity
+from ins_gnss_ros.nav.navigator import Navigator
 from ins_gnss_ros.params import ParameterError, resolve
 
 
@@ -51,10 +52,9 @@ def test_fixes_are_refused_floored_or_given_a_variance():
     assert np.allclose(np.diag(nav.measurements[-1].cov_enu), [25.0, 25.0, 100.0])
     assert events == ["gnss/fix without a fix ignored", "non-finite gnss/fix rejected",
                       "implausible gnss/fix altitude rejected",
-                      "gnss/fix without covariance: 5 m assumed from its status",
-                      "gnss/fix without covariance: 2 m assumed from its status",
-                      "gnss/fix without covariance: 1 m assumed from its status",
-                      "gnss/fix without covariance: 5 m assumed from its status"]
+                      *[f"gnss/fix without covariance: {sigma} m assumed from its status, "
+                        "weighted by the fixes' measured fix-to-fix noise"
+                        for sigma in (5, 2, 1, 5)]]
 
 
 def test_velocity_delay_heading_declination_and_range_choice():
@@ -153,3 +153,94 @@ def test_phase_differences_are_checked_and_then_replace_the_phase_heading():
     nav.heading_known = True
     assert front.heading(1.4, 0.3, 1e-4, None, source="mag/heading")   # other sources stay
     assert [type(m) for m in nav.measurements] == [PhaseDifferences, HeadingFix, HeadingFix]
+
+
+M_PER_DEG = 6.37e6 * np.pi / 180.0  # a sphere is enough for metres of offset
+
+
+def fixes_without_covariance(front, seconds, white, offset=(0.0, 0.0), rate=5.0, seed=2):
+    """A standing receiver's fixes without covariance: white noise of `white` m per axis plus
+    an `offset` (m east, north) common to all of them, which the front end is not told."""
+    rng = np.random.default_rng(seed)
+    lat0, lon0 = 59.9, 30.3
+    for k in range(round(seconds * rate)):
+        e, n = np.asarray(offset) + white * rng.standard_normal(2)
+        front.fix(k / rate, lat0 + n / M_PER_DEG, lon0 + e / (M_PER_DEG * np.cos(np.radians(lat0))),
+                  10.0, np.eye(3), 0, covariance_known=False)
+
+
+@pytest.mark.parametrize("white", [0.5, 5.0])
+def test_fixes_without_covariance_are_weighted_by_their_white_noise_the_rest_kept_common(white):
+    front, nav, _ = aiding()
+    fixes_without_covariance(front, 10.0, white)
+    last = [m for m in nav.measurements if isinstance(m, GnssFix)][-1]
+    weighted = np.diag(last.cov_enu)
+    # the receiver's own white variance, from its fixes (the median of 100 squares: +-30 %)
+    assert 0.6 * white ** 2 <= weighted[0] <= 1.4 * white ** 2 and weighted[0] == weighted[1]
+    assert weighted[2] == 100.0  # the vertical keeps the assumed 10 m
+    # what the fixes cannot show stays: the assumed 5 m in all, never beyond it
+    assert weighted[0] + last.common_var == pytest.approx(25.0, rel=0.4 if white > 1 else 1e-9)
+    assert weighted[0] + last.common_var <= 25.0 + 1e-9
+
+
+def still_imu(front, t0, t1, bias, rate=100.0, seed=4):
+    """A standing, level IMU from t0 to t1 (s): gravity, a gyro bias and the filter's white
+    noise; no Earth rate (a static start cannot tell it from the bias: Levelling.gyro_bias)."""
+    rng = np.random.default_rng(seed)
+    noise = front.navigator.config.noise
+    dt = 1.0 / rate
+    for k in range(round(t0 * rate) + 1, round(t1 * rate) + 1):
+        f = np.array([0.0, 0.0, 9.80665]) + np.sqrt(noise.accel_psd / dt) * rng.standard_normal(3)
+        w = bias + np.sqrt(noise.gyro_psd / dt) * rng.standard_normal(3)
+        front.increment(k * dt, w * dt, f * dt, dt)
+
+
+def test_a_still_imu_starts_the_filter_at_once_and_the_fixes_rest_confirms_its_velocity():
+    """The ground robot: IMU still, fixes without covariance (1 m white, a 3 m offset common to
+    all) at 2.5 Hz, a heading source; the product's navigator behind the front end."""
+    nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_adis16405_datasheet"}),
+                                     record=False))  # config/default.yaml's
+    front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
+    bias = np.radians([0.3, -0.2, 0.1])  # deg/s, a MEMS turn-on bias
+    rng = np.random.default_rng(5)
+    lat0, lon0, offset = 59.9, 30.3, np.array([3.0, -2.0])
+    t_started = t_rest_known = None
+    for k in range(1, 51):  # 20 s
+        t = k / 2.5
+        still_imu(front, t - 0.4, t, bias, seed=k)
+        e, n = offset + rng.standard_normal(2)
+        front.fix(t, lat0 + n / M_PER_DEG, lon0 + e / (M_PER_DEG * np.cos(np.radians(lat0))),
+                  10.0, np.eye(3), 0, covariance_known=False)
+        front.heading(t, 0.0, np.radians(3.0) ** 2, None)
+        if nav.started and t_started is None:
+            t_started = t
+            P = nav.covariance()
+            # levelled with the gyro bias of the still mean, within its sigma
+            bg = nav.space["bg"]
+            err_bg = nav.estimates["bg"] - bias
+            sigma_bg = np.sqrt(np.diag(P[bg, bg]))
+            assert np.all(sigma_bg < 0.5 * nav.config.noise.blocks["bg"].sigma0)
+            assert np.all(np.abs(err_bg) < 3.0 * sigma_bg)
+            vel = nav.space["vel"]
+            assert np.sqrt(P[vel, vel][0, 0]) > 10.0  # unknown: rest or steady straight motion
+        if t_started and t_rest_known is None and np.sqrt(nav.covariance()[vel, vel][0, 0]) < 0.1:
+            t_rest_known = t
+    assert t_started is not None and t_started <= 2.0, "waited for the fixes' verdict"
+    assert front.explain(20.0, imu_running=True) == "navigating"
+    assert nav.heading_known and t_rest_known is not None and t_rest_known <= 12.0
+    # the published horizontal covariance keeps the fixes' unknown absolute error
+    P = nav.covariance()[:2, :2]
+    lat, lon = np.degrees(nav.solution.lat), np.degrees(nav.solution.lon)
+    err = np.array([(lon - lon0) * M_PER_DEG * np.cos(np.radians(lat0)), (lat - lat0) * M_PER_DEG])
+    assert np.all(np.sqrt(np.diag(P)) >= 4.0) and err @ np.linalg.solve(P, err) < 25.0
+    # ... while following the fixes much better than one of them (1 m): about their mean
+    assert np.linalg.norm(err - offset) < 0.5
+
+
+def test_diagnostics_say_the_first_fixes_wait_for_the_imu():
+    nav = Navigator(navigator_config(resolve(PARAMS, {}), record=False))
+    front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
+    still_imu(front, 0.0, 0.3, np.zeros(3))  # one block: still, not yet for MIN_STILL_S
+    assert front.fix(0.3, 59.9, 30.3, 10.0, np.eye(3), 0, covariance_known=False)
+    assert not nav.started
+    assert front.explain(0.3, imu_running=True).startswith("aligning: gnss/fix held")

@@ -24,7 +24,7 @@ from ..magnetic.wmm import decimal_year, field_elements
 from .course import CourseFromFixes
 from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
 from .measurement_types import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, SpeedLog, \
-    WheelOdometry, ZeroVelocity
+    StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .navigator import Navigator
 from .rest_detector import RestDetector
@@ -123,8 +123,9 @@ class AidingPolicy:
                    phase_differences=p["use_phase_dd"])
 
 
-#: Longest the first fixes of a receiver without velocity wait for the rest detector, s (a
-#: noisy receiver confirms rest slowly: the filter then levels without the static gyro bias).
+#: Longest the first fixes of a receiver without velocity wait for the rest detector, s (an
+#: IMU whose blocks do not come, or do not settle: the filter then levels without the static
+#: gyro bias).
 REST_DECISION_S = 10.0
 
 #: Heading inputs -> the extra block of their own bias (None: a true heading, no bias).
@@ -190,6 +191,7 @@ class Aiding:
         self._rest = RestDetector(noise.accel_psd, noise.gyro_psd)
         self._wmm_declination = None  # at the datum, once a magnetic heading needs it
         self._first_held_t = math.nan  # the first fix held for the rest detector, s
+        self._start_rest = False  # started in this still run before the fixes confirmed it
         self.last_increment_t = math.inf  # end of the last increment, s
         self.wheel_still_since = math.inf  # stamp of the first of the zero wheel speeds, s
 
@@ -222,6 +224,8 @@ class Aiding:
                 return "aligning: no gnss/fix received yet"
             if fix.received == fix.refused:
                 return f"aligning: every gnss/fix refused ({fix.refused})"
+            if not nav.started and not math.isnan(self._first_held_t):
+                return "aligning: gnss/fix held until the IMU tells rest from motion (levelling)"
             return "aligning: " + (NO_HEADING if not nav.heading_known else "levelling")
         if self.forced:
             return ("dead reckoning (degraded): forced in, their noise floors not yet decayed: "
@@ -250,9 +254,15 @@ class Aiding:
         # it navigates they would be a risk, not an aid: a moored vessel heaving slowly in
         # waves passes the IMU's stillness test and its fixes do not move (the bundled vessel
         # trial).
+        # A filter that started on a still IMU before the fixes confirmed rest gets the
+        # updates of that rest once confirmed, also when a heading source aligned it
+        # meanwhile: they are the static start's velocity and gyro bias (its levelling took a
+        # second of data), which the start could not wait for; they end as the vehicle moves.
         if self._rest.increment(t, dtheta, dv, dt) and "gnss/vel" not in self.inputs and \
-                not self.navigator.heading_known:
+                (not self.navigator.heading_known or self._start_rest):
             self.navigator.add_measurement(ZeroVelocity(t))
+        if math.isnan(self._rest.still_since):
+            self._start_rest = False  # it moved: the start's rest is over
         return None if gap == CONTIGUOUS else gap
 
     def fix(self, t: float, lat_deg: float, lon_deg: float, h: float, cov: np.ndarray,
@@ -271,25 +281,41 @@ class Aiding:
         if not HEIGHT_RANGE[0] <= h <= HEIGHT_RANGE[1]:
             self.report("implausible gnss/fix altitude rejected")
             return self._seen("gnss/fix", t, False)
-        if not covariance_known or not np.all(np.diag(cov) > 0.0):
+        assumed = not covariance_known or not np.all(np.diag(cov) > 0.0)
+        if assumed:
             sigma = UNKNOWN_FIX_SIGMA[min(status, 2)]
             cov = np.diag([sigma ** 2, sigma ** 2, (2.0 * sigma) ** 2])
-            self.report(f"gnss/fix without covariance: {sigma:g} m assumed from its status",
-                        log=False)
+            self.report(f"gnss/fix without covariance: {sigma:g} m assumed from its status, "
+                        "weighted by the fixes' measured fix-to-fix noise", log=False)
         cov = _floored(cov, self.policy.position_sigma_floor)
         lat, lon = np.radians(lat_deg), np.radians(lon_deg)
         if self.datum is None:
             self.datum = (lat, lon, h)
         self._course.observe(t, lat, lon, h)
+        common_var = 0.0
+        if assumed:
+            # The assumed sigma is the receiver's unknown absolute accuracy, mostly an error
+            # the fixes share (slow: atmosphere, orbits); only their white part is news from
+            # fix to fix. The filter follows the fixes with that (nav/course.py measures it)
+            # and the shared part stays in the published covariance (GnssFix.common_var).
+            white = _floored(self._course.fix_to_fix(cov), self.policy.position_sigma_floor)
+            common_var = max(0.5 * float(cov[0, 0] + cov[1, 1] - white[0, 0] - white[1, 1]),
+                             0.0)
+            cov = white
         at_rest = self._rest.fix(t, lat, lon, h, self._course.fix_to_fix(cov))
         if self._without_velocity_before_start():
             if at_rest:
                 self.navigator.add_measurement(ZeroVelocity(t))  # levels as a static start
+            elif self._rest.imu_still(t):
+                # Levelling and the gyro bias need only the IMU's stillness: start now, with
+                # the velocity unknown until the fixes confirm rest.
+                self.navigator.add_measurement(StillImu(t))
+                self._start_rest = True
             elif self._rest.undecided and t - self._held_since(t) < REST_DECISION_S:
                 self.report("gnss/fix held: telling rest from motion before levelling",
                             log=False)
                 return self._seen("gnss/fix", t, True)
-        self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov))
+        self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov, common_var))
         self._course_velocity(t, lat, lon, h, cov)
         return self._seen("gnss/fix", t, True)
 
@@ -301,10 +327,10 @@ class Aiding:
 
     def _without_velocity_before_start(self) -> bool:
         """No gnss/vel so far and the filter not yet levelled: the first fixes wait for the
-        rest detector, so that a static start takes its gyro bias from the stationary mean
-        (the navigator's levelling) as with a receiver that gives its speed (also with a
-        heading source: a turn-on bias of degrees per second left to the filter tilts the
-        levelled INS faster than fixes at rest correct it)."""
+        rest detector's IMU verdict, so that a static start takes its gyro bias from the
+        stationary mean (the navigator's levelling) as with a receiver that gives its speed
+        (also with a heading source: a turn-on bias of degrees per second left to the filter
+        tilts the levelled INS faster than fixes at rest correct it)."""
         return "gnss/vel" not in self.inputs and not self.navigator.started
 
     def _course_velocity(self, t: float, lat: float, lon: float, h: float,

@@ -14,13 +14,19 @@ import numpy as np
 
 @dataclass(frozen=True)
 class GnssFix:
-    """Antenna position at GNSS time t (s): lat, lon (rad), h (m), covariance ENU (m^2)."""
+    """Antenna position at GNSS time t (s): lat, lon (rad), h (m), covariance ENU (m^2).
+
+    ``common_var`` (m^2 per horizontal axis) is the variance of an error all of the receiver's
+    fixes share that ``cov_enu`` leaves out (the unknown absolute accuracy of a receiver that
+    gives no covariance, whose fixes are weighted by their fix-to-fix noise): no measurement
+    can observe it, so it is not a filter state but part of the published covariance."""
 
     t: float
     lat: float
     lon: float
     h: float
     cov_enu: np.ndarray
+    common_var: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -89,6 +95,16 @@ class ZeroVelocity:
 
     t: float
     sigma_v: float = 0.02
+
+
+@dataclass(frozen=True)
+class StillImu:
+    """The IMU alone was still up to time t (nav/rest_detector.py): the vehicle stands, or moves
+    steadily straight on. In both the specific force is gravity and the rate the Earth's, so a
+    start on it levels and takes the gyro bias of the stationary mean, but its velocity is
+    unknown until the fixes confirm rest (then ZeroVelocity). Used only before the start."""
+
+    t: float
 
 
 @dataclass(frozen=True)

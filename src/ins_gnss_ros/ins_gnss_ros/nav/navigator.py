@@ -41,7 +41,7 @@ from .imu_gaps import BridgedGaps
 from .integrity import Integrity
 from .lever_arm import lever_arm_velocity
 from .measurement_types import GNSS_TYPES, GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, \
-    SatelliteRanges, SpeedLog, WheelOdometry, ZeroVelocity
+    SatelliteRanges, SpeedLog, StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .propagation import extrapolate, propagate
 from .recording import Recorder
@@ -94,6 +94,9 @@ class Navigator:
         self._integrity = Integrity(cfg)                # not rewound (integrity.py)
         self._recorder = Recorder(self._space, cfg.record, cfg.store_covariance)
         self._gaps = BridgedGaps(cfg.gap_accel_sigma, cfg.gap_rate_sigma)
+        # The fixes' common error (GnssFix.common_var) of the latest fix used, m^2: a property
+        # of the receiver, not of the run state, so a rewind keeps it.
+        self._fix_common_var = 0.0
 
     def add_imu(self, t, dtheta, dv):
         """Add IMU samples.
@@ -178,8 +181,16 @@ class Navigator:
 
     def covariance(self):
         """The covariance to publish (n, n), once :attr:`started`: the filter's P plus the
-        noise floors of forced measurement kinds (integrity.py)."""
-        return self._integrity.covariance(self._state.ekf.P, self._space)
+        noise floors of forced measurement kinds (integrity.py) and, on the horizontal
+        position, the error common to the fixes the filter follows (GnssFix.common_var: the
+        filter's position is relative to them)."""
+        P = self._integrity.covariance(self._state.ekf.P, self._space)
+        if self._fix_common_var > 0.0:
+            P = P.copy()
+            east = self._space["pos"].start
+            P[east, east] += self._fix_common_var
+            P[east + 1, east + 1] += self._fix_common_var
+        return P
 
     def updates_since(self, count):
         """The update results after the first `count` (as counted by :attr:`update_count`)."""
@@ -246,6 +257,8 @@ class Navigator:
                 s.gnss_speed = float(np.hypot(*m.v_enu[:2]))
             elif isinstance(m, ZeroVelocity):
                 s.t_rest = epoch
+            elif isinstance(m, StillImu):
+                s.t_still = epoch
             if not isinstance(m, GnssFix) or s.levelling.time < cfg.level_time or k == buf.first:
                 continue
             # At rest by the last GNSS speed, or by the velocity of the fix's own epoch.
@@ -258,7 +271,7 @@ class Navigator:
             sigma_vel = cfg.sigma_vel0 if at_rest or np.isfinite(speed) else UNKNOWN_SPEED_SIGMA
             P0 = initial_covariance(self._space, cfg.noise, cfg.sigma_pos0, sigma_vel,
                                     cfg.sigma_tilt0)
-            if at_rest:
+            if at_rest or epoch - s.t_still <= REST_HOLD:
                 take_static_gyro_bias(s.levelling, self._space, cfg.noise, P0, s.estimates)
             self._start(levelled_state(s.levelling, m.lat, m.lon, m.h, self._lever,
                                        s.gnss_speed, cfg.static_speed, float(buf.time(k - 1))),
@@ -349,6 +362,7 @@ class Navigator:
     def _gnss_fix(self, m, st, epoch):
         if self._held_for_alignment(m, epoch):
             return
+        self._fix_common_var = m.common_var
         s = self._state
         v_ant = lever_arm_velocity(st.v_enu, st.q_nb, s.omega, self._lever, st.lat)
         innov = meas.gnss_position(self._space, st, m.lat, m.lon, m.h, m.cov_enu, self._lever,
@@ -440,6 +454,9 @@ class Navigator:
         self._zero_rate(st, epoch)
         self._update(meas.zero_velocity(self._space, st, m.sigma_v), epoch)
 
+    def _still_imu(self, m, st, epoch):
+        """Queued before the start, applied after it: the filter already started."""
+
     def _satellite_ranges(self, m, st, epoch):
         if self._held_for_alignment(m, epoch):
             return
@@ -456,7 +473,7 @@ class Navigator:
     _HANDLERS = {GnssFix: _gnss_fix, GnssVelocity: _gnss_velocity, HeadingFix: _heading,
                  PhaseDifferences: _phase_differences, SpeedLog: _speed_log,
                  WheelOdometry: _wheel_odometry, ZeroVelocity: _zero_velocity,
-                 SatelliteRanges: _satellite_ranges}
+                 StillImu: _still_imu, SatelliteRanges: _satellite_ranges}
 
     def _update(self, innov, epoch, aiding=True):
         """Gate and apply one measurement, forced in after `max_reject_time` s of continuous

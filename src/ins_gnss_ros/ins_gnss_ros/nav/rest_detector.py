@@ -65,6 +65,11 @@ class RestDetector:
         IMU is still but the fixes have not yet confirmed rest."""
         return not self._any_block or (not math.isnan(self.still_since) and not self.at_rest)
 
+    def imu_still(self, t: float) -> bool:
+        """The IMU alone has been still for ``MIN_STILL_S`` by t (s): at rest or in steady
+        straight motion, which only the fixes tell apart."""
+        return t - self.still_since >= MIN_STILL_S  # False while still_since is NaN
+
     def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray, dt: float) -> bool:
         """Add an IMU increment over dt (s) ending at t (s). Returns True when it closed a
         still block while rest is confirmed (the caller's cue for a zero-velocity update)."""

@@ -41,6 +41,8 @@ class RunState:
         Horizontal speed of the last GNSS velocity, m/s (NaN before the first).
     t_rest : float
         Epoch of the last zero-velocity update.
+    t_still : float
+        Epoch of the last StillImu before the start.
     nav : NavState or None
         The solution (None until the first fix).
     ekf : ErrorStateEKF or None
@@ -71,6 +73,7 @@ class RunState:
     levelling: Levelling = field(default_factory=Levelling)
     gnss_speed: float = np.nan
     t_rest: float = -np.inf
+    t_still: float = -np.inf
     nav: NavState | None = None
     ekf: ErrorStateEKF | None = None
     estimates: dict = field(default_factory=dict)
