@@ -158,13 +158,48 @@ def navigator_trajectory(out):
                       att_cov=out.P[k][:, att, att])
 
 
-def run_smsfusion(path, datum, err_acc=None, err_gyro=None):
-    """smsfusion's AidedINS over the parquet file in its own conventions (NED, FRD, deg/s).
+def smsfusion_inputs(path):
+    """The parquet file's IMU, position and compass columns in smsfusion's conventions (NED,
+    FRD, deg/s) as arrays, with the sample rate and the aiding variances it is fed."""
+    frame = pd.read_parquet(path)
+    return {"time": frame.index.to_numpy(float),
+            "fs": 1.0 / float(np.median(np.diff(frame.index.to_numpy(float)))),
+            "acc": frame[["Ax_meas", "Ay_meas", "Az_meas"]].to_numpy(float),
+            "gyro": frame[["Gx_meas", "Gy_meas", "Gz_meas"]].to_numpy(float),
+            "pos": frame[["X_meas", "Y_meas", "Z_meas"]].to_numpy(float),
+            "head": frame["Gamma_meas"].to_numpy(float),
+            "pos_var": GNSS_SIGMA ** 2 * np.ones(3),
+            "head_var": float(np.degrees(COMPASS_SIGMA) ** 2)}
 
-    Cold start as in its documentation (levelling from the first accelerometer sample, heading
-    from the first compass reading, position from the first fix); position and compass aiding at
-    every sample with the published noise. The filter state after each update is the estimate
-    at that sample.
+
+def smsfusion_filter(inputs, err_acc=None, err_gyro=None):
+    """smsfusion's AidedINS for `inputs` (smsfusion_inputs), cold-started as in its
+    documentation (levelling from the first accelerometer sample, heading from the first compass
+    reading, position from the first fix); err_acc, err_gyro: its noise parameters, None for
+    its defaults (SMS Motion gen. 2)."""
+    import smsfusion as sf
+
+    x0 = np.zeros(16)
+    x0[0:3] = inputs["pos"][0]
+    x0[6:10] = sf.quaternion_from_euler([0.0, 0.0, inputs["head"][0]], degrees=True)
+    # Error state [dp, dv, da, dbg] (accelerometer bias ignored, smsfusion's default).
+    p0 = np.diag([GNSS_SIGMA ** 2] * 3 + [0.5 ** 2] * 3 + [np.radians(2.0) ** 2] * 3 + [1e-6] * 3)
+    kwargs = {} if err_acc is None else {"err_acc": err_acc, "err_gyro": err_gyro}
+    return sf.AidedINS(inputs["fs"], x0, p0, g=SIM_GRAVITY, cold_start=True, **kwargs)
+
+
+def smsfusion_update(ains, inputs, k):
+    """smsfusion's update at sample k: the IMU sample with position and compass aiding (the
+    published noise)."""
+    ains.update(inputs["acc"][k], inputs["gyro"][k], degrees=True, pos=inputs["pos"][k],
+                pos_var=inputs["pos_var"], head=inputs["head"][k], head_var=inputs["head_var"],
+                head_degrees=True)
+
+
+def run_smsfusion(path, datum, err_acc=None, err_gyro=None):
+    """smsfusion's AidedINS over the parquet file (smsfusion_filter, smsfusion_update) with
+    position and compass aiding at every sample. The filter state after each update is the
+    estimate at that sample.
 
     Parameters
     ----------
@@ -179,30 +214,16 @@ def run_smsfusion(path, datum, err_acc=None, err_gyro=None):
     Trajectory
         Time as in the file, ENU/FLU.
     """
-    import smsfusion as sf
-
-    frame = pd.read_parquet(path)
-    fs = 1.0 / float(np.median(np.diff(frame.index.to_numpy(float))))
-    acc = frame[["Ax_meas", "Ay_meas", "Az_meas"]].to_numpy(float)
-    gyro = frame[["Gx_meas", "Gy_meas", "Gz_meas"]].to_numpy(float)
-    pos = frame[["X_meas", "Y_meas", "Z_meas"]].to_numpy(float)
-    head = frame["Gamma_meas"].to_numpy(float)
-    x0 = np.zeros(16)
-    x0[0:3] = pos[0]
-    x0[6:10] = sf.quaternion_from_euler([0.0, 0.0, head[0]], degrees=True)
-    # Error state [dp, dv, da, dbg] (accelerometer bias ignored, smsfusion's default).
-    p0 = np.diag([GNSS_SIGMA ** 2] * 3 + [0.5 ** 2] * 3 + [np.radians(2.0) ** 2] * 3 + [1e-6] * 3)
-    kwargs = {} if err_acc is None else {"err_acc": err_acc, "err_gyro": err_gyro}
-    ains = sf.AidedINS(fs, x0, p0, g=SIM_GRAVITY, cold_start=True, **kwargs)
-    p_out, q_out = np.empty((len(pos), 3)), np.empty((len(pos), 4))
-    for k in range(len(pos)):
-        ains.update(acc[k], gyro[k], degrees=True, pos=pos[k],
-                    pos_var=GNSS_SIGMA ** 2 * np.ones(3), head=head[k],
-                    head_var=np.degrees(COMPASS_SIGMA) ** 2, head_degrees=True)
+    inputs = smsfusion_inputs(path)
+    ains = smsfusion_filter(inputs, err_acc, err_gyro)
+    n = len(inputs["time"])
+    p_out, q_out = np.empty((n, 3)), np.empty((n, 4))
+    for k in range(n):
+        smsfusion_update(ains, inputs, k)
         p_out[k] = ains.position()
         q_out[k] = ains.quaternion()
     lat, lon, h = local_ned_to_geodetic(p_out, datum)
-    return Trajectory(time=frame.index.to_numpy(float), lat=lat, lon=lon, height=h,
+    return Trajectory(time=inputs["time"], lat=lat, lon=lon, height=h,
                       q_nb=quat_ned_frd_to_enu_flu(q_out))
 
 

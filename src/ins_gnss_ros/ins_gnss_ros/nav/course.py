@@ -39,7 +39,9 @@ class CourseFromFixes:
     def __init__(self):
         self._window: list[tuple[float, np.ndarray, np.ndarray]] = []  # t, ECEF, cov ENU
         self._last3: deque = deque(maxlen=3)                           # t, ECEF
-        self._second_differences: deque = deque(maxlen=SCATTER_SAMPLES)  # (2,) squares, m^2
+        # (east^2, north^2) of each, Python floats, m^2: every fix asks for their median, and
+        # numpy's median of a hundred values cost more than the rest of a fix's front end.
+        self._second_differences: deque = deque(maxlen=SCATTER_SAMPLES)
 
     def clear(self) -> None:
         """Forget the fixes of the current window (the heading is known, or a velocity came)."""
@@ -50,7 +52,8 @@ class CourseFromFixes:
         no larger than the white variance the fixes show (once enough of them came)."""
         if len(self._second_differences) < MIN_SCATTER_SAMPLES:
             return cov
-        white = float(np.median(np.concatenate(self._second_differences))) / CHI2_1_MEDIAN / 6.0
+        white = _median([x for pair in self._second_differences for x in pair]) \
+            / CHI2_1_MEDIAN / 6.0
         out = cov.copy()
         out[:2, :2] = np.eye(2) * min(white, 0.5 * (cov[0, 0] + cov[1, 1]))
         return out
@@ -84,4 +87,12 @@ class CourseFromFixes:
         if abs((t2 - t1) - (t1 - t0)) > 0.1 * (t2 - t0):
             return  # a dropped fix: not equally spaced
         s = (ecef_to_enu_matrix(lat, lon) @ (r2 - 2.0 * r1 + r0))[:2]
-        self._second_differences.append(s * s)
+        self._second_differences.append(tuple((s * s).tolist()))
+
+
+def _median(values: list) -> float:
+    """np.median of finite floats, the same value (the mean of the two middle ones, (a + b) / 2,
+    for an even count)."""
+    v = sorted(values)
+    n = len(v)
+    return v[n // 2] if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2.0

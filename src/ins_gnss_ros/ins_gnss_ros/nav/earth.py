@@ -240,14 +240,23 @@ def geodetic_to_ecef(lat, lon, h, ell: Ellipsoid = WGS84) -> np.ndarray:
     ndarray, shape (..., 3)
         ECEF position, m.
     """
+    if np.ndim(lat) == np.ndim(lon) == np.ndim(h) == 0:
+        # One point (every GNSS fix of the front end): the same arithmetic on scalars, without
+        # the broadcasting and stacking that cost more than it.
+        return np.array(_geodetic_to_ecef(float(lat), float(lon), float(h), ell))
     lat, lon, h = np.broadcast_arrays(np.asarray(lat, float), np.asarray(lon, float),
                                       np.asarray(h, float))
+    return np.stack(_geodetic_to_ecef(lat, lon, h, ell), axis=-1)
+
+
+def _geodetic_to_ecef(lat, lon, h, ell):
+    """(x, y, z) of geodetic_to_ecef, scalars or arrays of one shape."""
     _, rn = radii(lat, ell)
     cl = np.cos(lat)
     x = (rn + h) * cl * np.cos(lon)
     y = (rn + h) * cl * np.sin(lon)
     z = (rn * (1.0 - ell.e2) + h) * np.sin(lat)
-    return np.stack([x, y, z], axis=-1)
+    return x, y, z
 
 
 def ecef_to_geodetic(xyz, ell: Ellipsoid = WGS84):
@@ -296,6 +305,11 @@ def ecef_to_enu_matrix(lat, lon) -> np.ndarray:
     ndarray, shape (..., 3, 3)
         One matrix per (lat, lon) pair, rad.
     """
+    if np.ndim(lat) == np.ndim(lon) == 0:
+        # One matrix (per GNSS fix): the same values without broadcasting and stacking.
+        sl, cl = np.sin(float(lat)), np.cos(float(lat))
+        so, co = np.sin(float(lon)), np.cos(float(lon))
+        return np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
     lat, lon = np.broadcast_arrays(np.asarray(lat, float), np.asarray(lon, float))
     sl, cl = np.sin(lat), np.cos(lat)
     so, co = np.sin(lon), np.cos(lon)

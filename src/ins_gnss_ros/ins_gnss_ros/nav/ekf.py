@@ -248,7 +248,7 @@ class ErrorStateEKF:
         S, nis, Kt, P = _kernels.kalman_update(np.ascontiguousarray(self.P, dtype=float), H, R,
                                               nu, gate, force, self.joseph, MIN_VARIANCE)
         ok = nis <= gate
-        result = UpdateResult(name, float(t), nu, np.diag(S).copy(), nis, gate, ok or force,
+        result = UpdateResult(name, float(t), nu, S.diagonal().copy(), nis, gate, ok or force,
                               "ok" if ok else ("forced" if force else "gated"))
         if result.accepted:
             self.x = self.x + Kt.T @ nu
