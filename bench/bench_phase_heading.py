@@ -9,10 +9,11 @@ pilot-tracked Galileo E1-C phase from lock), turned into ``gnss/observations`` a
 ``gnss/ephemeris`` messages as the ``gnss_simulator`` node publishes them (``nodes/gnss_messages``),
 and fed to a
 ``PhaseHeadingNode`` on the in-process bus. Nothing of the truth reaches the node, except with
-``--tilt-prior SIGMA_DEG``: then an ``ins/state`` in MODE_ALIGNING is published with every epoch,
-as an INS levelled by its accelerometers but not aligned in heading would: the true attitude with
-a slowly varying tilt error (first-order Gauss-Markov about East and North, σ = SIGMA_DEG each,
-correlation time ``TILT_TAU_S``) and a heading off by a random constant of up to ±180° per run.
+``--tilt-prior SIGMA_DEG``: then an ``ins/state`` in MODE_ALIGNING (corrected once) is published
+with every epoch, as an INS levelled by its accelerometers but not aligned in heading would: the
+true attitude with a slowly varying tilt error (first-order Gauss-Markov about East and North,
+σ = SIGMA_DEG each, correlation time ``TILT_TAU_S``) and a heading off by a random constant of up
+to ±180° per run.
 
 Per epoch a FIXED solution is *correct* when every double-difference ambiguity the solver holds
 equals the simulator's integer (DD of the true N of both antennas and both satellites), *wrong*
@@ -206,7 +207,8 @@ class AligningIns:
         q = quat_mul(quat_from_rotvec([0.0, 0.0, self.heading_error]),
                      quat_mul(quat_from_rotvec([*self.tilt, 0.0]), q_nb))
         msg = InsState(latitude=float(lat), longitude=float(lon), altitude=float(h),
-                       orientation=to_quaternion(q), mode=InsState.MODE_ALIGNING)
+                       orientation=to_quaternion(q), mode=InsState.MODE_ALIGNING,
+                       correction_sequence=1)  # levelled by a filter's correction
         msg.header.stamp = stamp
         msg.header.frame_id = "map"
         return msg

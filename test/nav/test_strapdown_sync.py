@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ins_gnss_ros.nav.increments import SensorErrors
+from ins_gnss_ros.nav.modes import ALIGNING, DEAD_RECKONING, NAVIGATING
 from ins_gnss_ros.nav.strapdown import NavState
 from ins_gnss_ros.nav.strapdown_sync import ClosedLoopStrapdown, Correction, StrapdownSync
 
@@ -58,14 +59,60 @@ def test_sync_corrects_against_the_matching_state_and_falls_back_when_out_of_ste
     solution = NavState(1.0, 0.5, 0.0, np.array([0.0, 0.2, 0.0]), LEVEL, 1.05)
     estimates = {"bg": np.array([1e-4, 0.0, 0.0])}
     assert sync.due(1.05, 1)
-    c, resent = sync.correction(1.05, lambda t: solution, estimates, 1)
+    c, resent = sync.correction(1.05, lambda t: solution, estimates, 1, True)
     assert not resent and c.t_ns == 1_050_000_000 and c.sequence == 1
     assert np.allclose(c.velocity_error, [0.0, -0.2, 0.0])
     assert np.array_equal(c.sensor.gyro_bias, estimates["bg"])
     assert np.array_equal(c.sensor.accel_scale, np.zeros(3))  # no such block: zero
     assert not sync.due(1.06, 1) and not sync.current(0) and sync.current(1)
     # nothing carries sequence 1 yet: no match until resend_after, then the newest state
-    assert sync.correction(1.5, lambda t: solution, estimates, 2) is None
-    c, resent = sync.correction(2.2, lambda t: solution, estimates, 2)
+    assert sync.correction(1.5, lambda t: solution, estimates, 2, True) is None
+    c, resent = sync.correction(2.2, lambda t: solution, estimates, 2, True)
     assert resent and c.t_ns == 1_090_000_000
     assert sync.synced_revision == 2 and not sync.due(3.0, 2) and sync.due(3.0, 3)
+
+
+def test_the_filter_is_reported_aligned_only_once_the_strapdown_applied_the_alignment():
+    """The filter aligns between two corrections: nav/status may say NAVIGATING only from the
+    strapdown state that carries the first correction made after the alignment, not while the
+    strapdown still publishes the unaligned state (or, after a restart, another filter's
+    sequences)."""
+    states = {}
+    sync = StrapdownSync(3.0, 0.0, 1.0, lambda key: (states[key], SensorErrors()))
+    solution = NavState(1.0, 0.5, 0.0, np.zeros(3), LEVEL, 0.0)
+
+    def state(k, sequence):
+        t = 1.0 + 0.01 * k
+        states[k] = NavState(1.0, 0.5, 0.0, np.zeros(3), LEVEL, t)
+        sync.add_state(int(round(t * 1e9)), sequence, k)
+        return t
+
+    t = state(0, 0)
+    sync.aligning()
+    sync.correction(t, lambda t: solution, {}, 1, aligned=False)  # levelling: sequence 1
+    t = state(1, 1)
+    assert sync.mode(ALIGNING) == ALIGNING and sync.waiting_for(ALIGNING) is None
+    # the filter aligned; the strapdown has not been told
+    assert sync.mode(NAVIGATING) == ALIGNING
+    assert "waiting to send" in sync.waiting_for(NAVIGATING)
+    c, _ = sync.correction(t, lambda t: solution, {}, 2, aligned=True)
+    assert c.sequence == 2 and sync.aligned_sequence == 2
+    state(2, 1)  # published before the correction arrived
+    assert sync.mode(NAVIGATING) == ALIGNING and sync.waiting_for(NAVIGATING).endswith(" 2")
+    state(3, 2)
+    assert sync.mode(NAVIGATING) == NAVIGATING and sync.mode(DEAD_RECKONING) == DEAD_RECKONING
+    assert sync.waiting_for(NAVIGATING) is None
+    # later corrections in flight do not take it back; aligning again does
+    t = state(4, 2)
+    assert sync.correction(t, lambda t: solution, {}, 3, aligned=True)[0].sequence == 3
+    t = state(5, 2)
+    assert sync.mode(NAVIGATING) == NAVIGATING
+    sync.aligning()
+    assert sync.mode(NAVIGATING) == ALIGNING
+    t = state(6, 3)
+    assert sync.correction(t, lambda t: solution, {}, 4, aligned=True)[0].sequence == 4
+    # a strapdown that outlived a filter restart carries sequences ahead of this filter's
+    state(7, 17)
+    assert sync.mode(NAVIGATING) == ALIGNING
+    state(8, 4)
+    assert sync.mode(NAVIGATING) == NAVIGATING

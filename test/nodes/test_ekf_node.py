@@ -124,6 +124,16 @@ def test_closed_loop_follows_truth_and_equals_offline_navigator(trial, ros_conte
 
     assert corrections and statuses
     assert statuses[-1].mode == FilterStatus.MODE_NAVIGATING
+    # The outputs agree about when the solution is aligned: nav/status says NAVIGATING from the
+    # first ins/state that carries the alignment's correction, never over an unaligned one.
+    t_nav = min(stamp_to_sec(m.header.stamp) for m in statuses
+                if m.mode == FilterStatus.MODE_NAVIGATING)
+    aligned = ekf.sync.aligned_sequence
+    first = min(stamp_to_sec(m.header.stamp) for m in states if m.correction_sequence >= aligned)
+    assert first <= t_nav < first + 0.05
+    assert all(m.correction_sequence >= aligned for m in states
+               if stamp_to_sec(m.header.stamp) >= t_nav)
+    assert states[0].mode == InsState.MODE_ALIGNING  # the strapdown before its first correction
     # strapdown vs truth over the last 60 s (after alignment and convergence)
     errors = []
     for msg in states:

@@ -422,7 +422,8 @@ def test_ins_prior_is_the_tilt_alone_while_the_ins_heading_is_unknown(ros_contex
         t, q, msgs, _ = epochs[k]
         if filter_status:
             bus.publish("nav/status", status[filter_status])
-        ins = InsState(latitude=LAT, longitude=LON, altitude=H, mode=mode)
+        ins = InsState(latitude=LAT, longitude=LON, altitude=H, mode=mode,
+                       correction_sequence=1)  # corrected by a filter: levelled
         ins.header.stamp = sec_to_stamp(1000.0 + t)
         # The heading is wrong where the node must not use it (and right where it may).
         yaw_error = 2.0 if kind == "tilt_prior" else 0.01

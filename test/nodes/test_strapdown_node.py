@@ -88,7 +88,7 @@ def test_gap_is_bridged_by_held_rates_and_a_long_gap_loses_the_imu(node):
     assert node.diag.counts["gap in increments: bridged by holding the rates"] == 1
     assert node.loop.state.t == pytest.approx(t0 + 1.0)
     assert np.abs(node.loop.state.v_enu).max() < 1e-3  # without holding: 4.8 m/s of free fall
-    assert published[-1].mode == InsState.MODE_DEAD_RECKONING
+    assert published[-1].mode == InsState.MODE_ALIGNING  # no correction yet
     node.on_delta(_delta(t0 + 5.0))                  # 4 s lost: the IMU was lost
     assert node.diag.counts["imu lost: gap in increments beyond max_imu_gap_s, new run"] == 1
     assert published[-1].mode == InsState.MODE_INVALID
@@ -104,6 +104,9 @@ def test_gap_is_bridged_by_held_rates_and_a_long_gap_loses_the_imu(node):
     node.on_delta(_delta(t0 + 5.0 + 2 * DT))
     assert published[-1].mode == InsState.MODE_NAVIGATING
     assert published[-1].correction_sequence == 2
+    for k in range(3, 214):  # 2.1 s without a correction: aligned once, dead reckoning now
+        node.on_delta(_delta(t0 + 5.0 + k * DT))
+    assert published[-1].mode == InsState.MODE_DEAD_RECKONING
 
 
 def test_publishes_ins_state_over_ros(node, probe, executor):
@@ -119,7 +122,7 @@ def test_publishes_ins_state_over_ros(node, probe, executor):
     for k in range(1, 4):
         pub.publish(_delta(10.0 + k * DT))
     spin_until(executor, lambda: len(states) == 3, what="3 ins/state")
-    assert states[-1].mode == InsState.MODE_DEAD_RECKONING  # no filter running
+    assert states[-1].mode == InsState.MODE_ALIGNING  # no filter running: never corrected
     assert states[-1].header.stamp == sec_to_stamp(10.03)
 
 

@@ -20,6 +20,12 @@ of that protocol:
 
 Every correction carries a sequence number and every strapdown state the sequence of the last
 correction applied to it: a state with the current sequence is the filter's solution.
+
+The graph's outputs agree about when the solution is aligned: the filter's heading alignment
+changes its own state at once, but the strapdown's (``ins/state``, hence ``nav/fix`` and
+``nav/odom``) only when the first correction made after it arrives, a few of its states later.
+:meth:`StrapdownSync.mode` reports the filter ALIGNING until a strapdown state acknowledges that
+correction (carries its sequence or a later one).
 """
 from __future__ import annotations
 
@@ -31,6 +37,7 @@ import numpy as np
 
 from .error_model import nav_error
 from .increments import BRIDGED, LOST, SENSOR_BLOCKS, SensorErrors, classify_gap, held_increments
+from .modes import ALIGNING
 from .strapdown import NavState, Strapdown
 
 __all__ = ["Correction", "ClosedLoopStrapdown", "StrapdownSync"]
@@ -213,6 +220,8 @@ class StrapdownSync:
         self.last_sync_t = -np.inf
         self.last_match_t = -np.inf
         self.synced_revision = 0
+        self.aligned_sequence = None  # the first correction made after the filter aligned
+        self.alignment_applied = False  # a strapdown state has acknowledged that correction
 
     def add_state(self, t_ns: int, sequence: int, item) -> None:
         """Keep a strapdown state (stamp ns, the correction sequence it carries, the caller's
@@ -220,6 +229,11 @@ class StrapdownSync:
         if self.states and t_ns < self.states[-1][0]:
             self.states.clear()  # the strapdown restarted or the bag looped
         self.states.append((t_ns, sequence, item))
+        # Bounded above too: a strapdown that outlived a restarted filter carries the sequences
+        # of the old one.
+        if self.aligned_sequence is not None and \
+                self.aligned_sequence <= sequence <= self.sequence:
+            self.alignment_applied = True
         while self.states and t_ns - self.states[0][0] > self.history_ns:
             self.states.popleft()
 
@@ -228,6 +242,27 @@ class StrapdownSync:
         one (a strapdown that has not been corrected yet carries sequence 0: its state is its
         start-up parameters, not the filter's solution)."""
         return sequence == self.sequence > 0
+
+    def aligning(self) -> None:
+        """The filter aligns (again): its solution is not an aligned one until the first
+        correction made after its next alignment reaches the strapdown."""
+        self.aligned_sequence, self.alignment_applied = None, False
+
+    def mode(self, filter_mode: str) -> str:
+        """The filter's mode (:mod:`ins_gnss_ros.nav.modes`) as the graph reports it on
+        nav/status and in nav/fix: ALIGNING until the strapdown has applied the alignment's
+        correction."""
+        return filter_mode if self.alignment_applied else ALIGNING
+
+    def waiting_for(self, filter_mode: str) -> str | None:
+        """What the reported mode waits for while the filter has aligned but the strapdown has
+        not yet applied the alignment (for /diagnostics), else None."""
+        if filter_mode == ALIGNING or self.alignment_applied:
+            return None
+        if self.aligned_sequence is None:
+            return "aligned: waiting to send the strapdown the alignment's ins/correction"
+        return (f"aligned: waiting for an ins/state carrying the alignment's ins/correction "
+                f"{self.aligned_sequence}")
 
     def invalidate(self) -> None:
         """The strapdown's states are no longer the filter's solution (it bridged or lost a gap
@@ -254,7 +289,8 @@ class StrapdownSync:
         return next((states[i] for i in range(hi - 1, lo - 1, -1)
                      if states[i][1] == self.sequence), None)
 
-    def correction(self, t: float, state_at, estimates: dict, revision: int):
+    def correction(self, t: float, state_at, estimates: dict, revision: int,
+                   aligned: bool):
         """The correction that puts the strapdown on the filter's solution, or None (nothing to
         compare with yet).
 
@@ -268,6 +304,9 @@ class StrapdownSync:
             The filter's running sensor-error estimates by block name (SENSOR_BLOCKS).
         revision : int
             The filter's revision (marks the corrections of the solution this one covers).
+        aligned : bool
+            The filter has aligned (its heading is known): the first such correction is the one
+            :meth:`mode` waits for.
 
         Returns
         -------
@@ -298,6 +337,8 @@ class StrapdownSync:
             # zero where the layout has none of the blocks
             sensor[name] = estimate - getattr(applied, name) if np.ndim(estimate) else np.zeros(3)
         self.sequence += 1
+        if aligned and self.aligned_sequence is None:
+            self.aligned_sequence = self.sequence
         self.synced_revision = revision
         self.last_sync_t = t
         return Correction(match[0], self.sequence, dp, dv, phi, SensorErrors(**sensor)), resent

@@ -26,7 +26,10 @@ orientation as sensor_msgs/Imu), ``nav/status`` (mode, coupling, every update wi
 NIS and verdict), ``nav/datum`` (latched) and, with ``publish_tf``, ``/tf`` map -> base_link
 and ``/tf_static`` base_link -> gnss_0 (REP-105, nodes/tf_messages.py);
 /diagnostics says why the filter is not navigating (what it waits for), the datum and, per
-aiding input, its rate, staleness and refusals.
+aiding input, its rate, staleness and refusals. The mode on nav/status and in nav/fix is the
+filter's, but ALIGNING from its heading alignment until the strapdown's ``ins/state`` carries the
+correction made after it (``StrapdownSync.mode``): the outputs agree about when the solution is
+aligned, and nav/status says NAVIGATING with the first such ins/state.
 
 Inputs are translated by :class:`.ekf_inputs.EkfInputs`, as the offline replay translates
 them. Services (``~/reset``, ``~/set_pose``, ``~/set_datum``, ``~/to_ll``, ``~/from_ll``):
@@ -57,7 +60,7 @@ from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
 from tf2_msgs.msg import TFMessage
 
 from ..io import new, ns_to_stamp, stamp_to_ns, stamp_to_sec
-from ..nav import NAVIGATING, Navigator
+from ..nav import ALIGNING, NAVIGATING, Navigator
 from ..nav.aiding import Aiding, AidingPolicy
 from ..nav.error_model import LAYOUTS
 from ..nav.filter_config import PARAMS, navigator_config
@@ -143,6 +146,7 @@ class EkfNode(EkfServices, NavNode):
 
     def on_ins_state(self, msg: InsState) -> None:
         stamp = stamp_to_ns(msg.header.stamp)
+        was_applied = self.sync.alignment_applied
         self.sync.add_state(stamp, msg.correction_sequence, msg)
         self.after_filter()
         t = stamp * 1e-9
@@ -150,7 +154,9 @@ class EkfNode(EkfServices, NavNode):
                 and t - self.last_output_t >= 1.0 / self.p["output_rate_hz"]:
             self.last_output_t = t
             self.publish_solution(nav_state_from_msg(msg), msg)
-        if t - self.last_status_t >= 1.0:  # the mode is reported even when nothing updates
+        # The mode is reported even when nothing updates, and at once when this state is the
+        # first to carry the alignment.
+        if t - self.last_status_t >= 1.0 or (self.sync.alignment_applied and not was_applied):
             self.publish_status(t, [])
 
     # -- synchronisation and outputs -----------------------------------------------------------
@@ -173,10 +179,13 @@ class EkfNode(EkfServices, NavNode):
 
     def after_filter(self) -> None:
         nav = self.navigator
+        if nav.mode == ALIGNING:
+            self.sync.aligning()
         self.report_updates()
         if not nav.started or not self.sync.due(nav.solution.t, nav.revision):
             return
-        result = self.sync.correction(nav.solution.t, nav.state_at, nav.estimates, nav.revision)
+        result = self.sync.correction(nav.solution.t, nav.state_at, nav.estimates, nav.revision,
+                                      aligned=nav.mode != ALIGNING)
         if result is None:
             return
         c, resent = result
@@ -229,12 +238,14 @@ class EkfNode(EkfServices, NavNode):
             elif u.reason == "forced":
                 self.diag.count(f"{u.name} forced in: degraded until confirmed")
         self.aiding.note_updates(updates)
-        self.diag.set_state(DiagnosticStatus.OK if nav.mode == NAVIGATING else DiagnosticStatus.WARN,
-                            self.aiding.explain(t, imu_running=np.isfinite(self.aiding.last_increment_t)))
+        mode = self.sync.mode(nav.mode)
+        explanation = self.aiding.explain(t, imu_running=np.isfinite(self.aiding.last_increment_t))
+        self.diag.set_state(DiagnosticStatus.OK if mode == NAVIGATING else DiagnosticStatus.WARN,
+                            self.sync.waiting_for(nav.mode) or explanation)
         for name, stats in self.aiding.inputs.items():
             self.diag.set_value(name, stats.summary(t))
         self.pub_status.publish(status_msg(
-            t, MODES[nav.mode], self.aiding.use_ranges, updates,
+            t, MODES[mode], self.aiding.use_ranges, updates,
             (nav.space, nav.covariance()) if nav.started else None,
             self.accepted, self.rejected))
 
@@ -245,7 +256,8 @@ class EkfNode(EkfServices, NavNode):
         status, service = (NavSatStatus.STATUS_FIX, 0) if self.aiding.use_ranges \
             else self.inputs.fix_input
         self.pub_fix.publish(fix_msg(ins.header.stamp, st, P[S["pos"], S["pos"]],
-                                     fix_status(self.navigator.mode == NAVIGATING, status),
+                                     fix_status(self.sync.mode(self.navigator.mode) == NAVIGATING,
+                                                status),
                                      service, p["base_link_frame"]))
         # one navigation-rate sample of gyro and accelerometer white noise (the rate and the
         # specific force are not filter states)

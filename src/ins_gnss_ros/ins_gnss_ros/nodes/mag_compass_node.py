@@ -9,7 +9,7 @@ what it waits for, and a given calibration taken as one from an earlier run), ti
 with the latest roll and pitch (from ``ins/state``, or levelled from the accelerometer on ``imu/data`` where no INS runs)
 and gates the sample with the :class:`~ins_gnss_ros.magnetic.disturbance.DisturbanceDetector`:
 while a disturbance is flagged nothing is published and /diagnostics says why. An ``ins/state``
-in DEAD_RECKONING that no filter has corrected yet (``correction_sequence`` 0: a strapdown
+in ALIGNING that no filter has corrected yet (``correction_sequence`` 0: a strapdown
 integrating from its initial-attitude parameters) has no known roll and pitch: nothing is
 published from it. The roll/pitch error of the attitude source (``roll_std_deg``,
 ``pitch_std_deg``, or the larger tilt σ the ekf reports on ``nav/status``) enters the variance
@@ -209,7 +209,7 @@ class MagCompassNode(NavNode):
             return
         # However level it looks, the attitude of a strapdown no filter has corrected is its
         # initial-attitude parameters plus drift.
-        self._uncorrected = msg.mode == InsState.MODE_DEAD_RECKONING and \
+        self._uncorrected = msg.mode == InsState.MODE_ALIGNING and \
             msg.correction_sequence == 0
         if self._uncorrected:
             self.attitude = None

@@ -217,13 +217,15 @@ class PhaseHeadingNode(NavNode):
                               math.radians(msg.longitude), msg.altitude)
 
     def on_ins_state(self, msg: InsState) -> None:
-        # ALIGNING: levelled, heading unknown; DEAD_RECKONING: maybe never levelled (a strapdown
-        # without any correction integrates from its initial attitude parameters).
+        # ALIGNING: levelled, heading unknown, unless no filter has corrected it yet (sequence 0:
+        # a strapdown integrating from its initial attitude parameters); DEAD_RECKONING: not
+        # taken as levelled.
         mode = msg.mode
         if mode == InsState.MODE_INVALID or not self.pipeline.ins_state(
                 stamp_to_sec(msg.header.stamp), msg.latitude, msg.longitude, msg.altitude,
                 quat(msg.orientation),
-                levelled=mode in (InsState.MODE_NAVIGATING, InsState.MODE_ALIGNING),
+                levelled=mode == InsState.MODE_NAVIGATING or (
+                    mode == InsState.MODE_ALIGNING and msg.correction_sequence > 0),
                 heading_known=mode == InsState.MODE_NAVIGATING):
             self.diag.count("invalid ins/state ignored")
 

@@ -6,7 +6,9 @@ epoch and re-mechanises the increments since, so a filter running late never cor
 epoch. Sensor-error estimates in a correction (bias and scale-factor increments) are accumulated
 and applied to every increment from that epoch on, unless ``apply_sensor_corrections`` is false
 (when the ``imu_preprocessor`` applies them instead: exactly one of the two must).
-Without corrections the node keeps navigating (dead reckoning) and says so in ``mode``.
+Until its first correction the node says ``MODE_ALIGNING`` (its state is its start-up
+parameters); without corrections since, it keeps navigating (dead reckoning) and says so in
+``mode``.
 
 A gap in ``imu/delta`` (samples lost before or in the ``imu_preprocessor``) of up to
 ``max_imu_gap_s`` is bridged by holding the rates of the increment after it over the whole gap,
@@ -117,9 +119,12 @@ class StrapdownNode(NavNode):
         set_vector3(msg.accel_bias, loop.sensor.accel_bias)
         set_vector3(msg.gyro_scale_factor, loop.sensor.gyro_scale)
         set_vector3(msg.accel_scale_factor, loop.sensor.accel_scale)
+        # Before its first correction the state is the start-up parameters, not aligned by any
+        # filter (ALIGNING); without corrections since, it was aligned once (DEAD_RECKONING).
         silent = state.t - loop.last_correction_t > self.p["dead_reckoning_after_s"]
-        msg.mode = InsState.MODE_INVALID if loop.lost else (
-            InsState.MODE_DEAD_RECKONING if silent else InsState.MODE_NAVIGATING)
+        msg.mode = InsState.MODE_INVALID if loop.lost else \
+            InsState.MODE_ALIGNING if loop.correction_sequence == 0 else \
+            InsState.MODE_DEAD_RECKONING if silent else InsState.MODE_NAVIGATING
         msg.correction_sequence = loop.correction_sequence
         self.pub.publish(msg)
 
