@@ -83,3 +83,24 @@ def test_refused_layouts_and_payloads():
     with pytest.raises(cdr.CdrLayoutError, match="missing: delta_angle.x.*, dt, header"):
         cdr.encode_columns("ins_gnss_msgs/msg/ImuDelta", {"header.stamp.sec": 1},
                    {"header.frame_id": "x"})
+
+
+def test_field_reader_reads_rclpy_payloads_of_any_frame_id():
+    """field_reader's values are the fields of rclpy's own serialisation of the message,
+    whatever the length of its string; a payload of another layout is a CdrLayoutError."""
+    paths = ("header.stamp.sec", "header.stamp.nanosec", "orientation_covariance",
+             "angular_velocity.x", "linear_acceleration.z")
+    read = cdr.field_reader("sensor_msgs/msg/Imu", paths)
+    for k, frame in enumerate(("", "imu", "imu_link_with_a_long_name")):
+        msg = msgs.imu_msg(T0 + k, RNG.normal(size=3), RNG.normal(size=3), frame)
+        msg.orientation_covariance = RNG.normal(size=9)
+        sec, nanosec, *cov, wx, fz = read(serialize_message(msg))
+        assert (sec, nanosec) == (msg.header.stamp.sec, msg.header.stamp.nanosec)
+        assert cov == msg.orientation_covariance.tolist()
+        assert (wx, fz) == (msg.angular_velocity.x, msg.linear_acceleration.z)
+    good = serialize_message(msg)
+    for bad in (good[:100], b"\x00\x00" + good[2:], good[:12] + b"\xff\xff\xff\x7f" + good[16:]):
+        with pytest.raises(cdr.CdrLayoutError):
+            read(bad)
+    with pytest.raises(cdr.CdrLayoutError):
+        cdr.field_reader("sensor_msgs/msg/Imu", ("angular_velocity.x", "header.stamp.sec"))

@@ -26,3 +26,82 @@ def test_gga_rtk_fixed_is_gbas_and_float_is_not():
     assert [status(q) for q in (0, 1, 2, 4, 5)] == [S.STATUS_NO_FIX, S.STATUS_FIX,
                                                      S.STATUS_SBAS_FIX, S.STATUS_GBAS_FIX,
                                                      S.STATUS_SBAS_FIX]
+
+
+def _epochs(k, seed=0):
+    """k random epochs near a datum: lat, lon, h, v_enu, q_nb, P (15 states)."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=(k, 4))
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    a = rng.normal(size=(k, 15, 15))
+    return (0.7 + rng.normal(size=k) * 1e-3, 0.2 + rng.normal(size=k) * 1e-3,
+            rng.uniform(0, 3000, k), rng.normal(size=(k, 3)) * 100, q,
+            a @ a.transpose(0, 2, 1))
+
+
+def test_column_payloads_are_the_messages_of_each_epoch():
+    """fix_payloads, odom_payloads and ins_state_payloads (many epochs at once) decode, by
+    rclpy's own deserializer, into the messages fix_msg, odom_msg and fill_ins_state build for
+    each epoch alone, bit for bit."""
+    import numpy as np
+    from geometry_msgs.msg import Vector3
+    from ins_gnss_msgs.msg import InsState
+    from nav_msgs.msg import Odometry
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import NavSatFix
+
+    from ins_gnss_ros.io import messages_equal, ns_to_stamp
+    from ins_gnss_ros.nav.ekf import StateSpace
+    from ins_gnss_ros.nav.error_model import make_layout
+    from ins_gnss_ros.nav.strapdown import NavState
+    from ins_gnss_ros.nodes.convert import fill_ins_state, ins_state_payloads
+    from ins_gnss_ros.nodes.nav_messages import fix_msg, fix_payloads, odom_msg, odom_payloads
+
+    k = 50
+    lat, lon, h, v, q, P = _epochs(k)
+    space = StateSpace(make_layout("15"))
+    datum = (0.7, 0.2, 100.0)
+    stamps = 1_767_225_600_000_000_000 + np.arange(k) * 76_923_077
+    status = np.arange(k) % 2
+    fixes = fix_payloads(stamps, lat, lon, h, P[:, space["pos"], space["pos"]], status,
+                         "base_link")
+    odoms = odom_payloads(stamps, lat, lon, h, v, q, P, space, datum, 1e-6, ("map", "base_link"))
+    states = ins_state_payloads(stamps, lat, lon, h, v, q, InsState.MODE_NAVIGATING)
+    for i in range(k):
+        st = NavState(lat[i], lon[i], h[i], v[i], q[i], int(stamps[i]) * 1e-9)
+        stamp = ns_to_stamp(stamps[i])
+        assert messages_equal(deserialize_message(fixes[i], NavSatFix), fix_msg(
+            stamp, st, P[i][space["pos"], space["pos"]], int(status[i]), frame_id="base_link"))
+        assert messages_equal(deserialize_message(odoms[i], Odometry), odom_msg(
+            stamp, st, P[i], space, datum, Vector3(), 1e-6, ("map", "base_link")))
+        state = InsState()
+        fill_ins_state(state, st)
+        state.header.stamp, state.header.frame_id = stamp, "map"
+        state.mode, state.correction_sequence = InsState.MODE_NAVIGATING, 1
+        assert messages_equal(deserialize_message(states[i], InsState), state)
+
+
+def test_odom_twist_is_the_velocity_in_base_link():
+    """nav/odom's twist rotated back into ENU by the orientation is the solution's velocity,
+    and the datum itself is the map origin."""
+    import numpy as np
+    from nav_msgs.msg import Odometry
+    from rclpy.serialization import deserialize_message
+
+    from ins_gnss_ros.nav.ekf import StateSpace
+    from ins_gnss_ros.nav.error_model import make_layout
+    from ins_gnss_ros.nav.rotations import quat_to_dcm
+    from ins_gnss_ros.nodes.nav_messages import odom_payloads
+
+    lat, lon, h, v, q, P = _epochs(20, seed=1)
+    lat[0], lon[0], h[0] = 0.7, 0.2, 100.0
+    odoms = [deserialize_message(d, Odometry) for d in odom_payloads(
+        np.arange(20), lat, lon, h, v, q, P, StateSpace(make_layout("15")), (0.7, 0.2, 100.0),
+        0.0)]
+    for i, odom in enumerate(odoms):
+        tw = odom.twist.twist.linear
+        assert np.allclose(quat_to_dcm(q[i]) @ [tw.x, tw.y, tw.z], v[i], atol=1e-9)
+    p = odoms[0].pose.pose.position
+    assert np.allclose([p.x, p.y, p.z], 0.0, atol=1e-6)

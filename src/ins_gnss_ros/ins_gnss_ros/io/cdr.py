@@ -25,7 +25,8 @@ order once; two users lay it out:
   instead of one Python object each: the per-message cost of rclpy and rosbags dominated the
   offline replay (docs/results/replay.md). Column names are dotted field paths
   (``header.stamp.sec``, ``delta_angle.x``); a fixed-size array is one column of shape (n,);
-  names with a ``#`` are layout fields that are not message fields.
+  names with a ``#`` are layout fields that are not message fields. :func:`field_reader` reads
+  chosen columns of one payload at a time, for a stream.
 
 Hosts are little endian (x86-64, aarch64): numeric sequences are copied to and from
 ``array.array`` bytes as they are.
@@ -63,6 +64,8 @@ _CODES = {
 }
 #: numpy dtype of each code (booleans and octets are uint8 columns).
 _DTYPES = {code: np.dtype("<" + ("u1" if code in "?c" else code)) for code in _CODES.values()}
+#: struct code of each column dtype (booleans and octets read as uint8).
+_CODE_OF_DTYPE = {dtype.str: code for code, dtype in _DTYPES.items() if code not in "?c"}
 #: Field kinds; the element of an ARRAY or SEQUENCE is a struct code, STRING or a class.
 PRIMITIVE, STRING, MESSAGE, ARRAY, SEQUENCE = "primitive", "string", "message", "array", \
     "sequence"
@@ -577,6 +580,57 @@ def decode_columns(msgtype: str, payloads) -> dict:
             for name, column in out.items():
                 column[rows[sel]] = view[name]
     return out
+
+
+@lru_cache(maxsize=None)
+def field_reader(msgtype: str, paths: tuple):
+    """A function taking one little-endian CDR payload of a type with at most one string to
+    the values of its numeric fields ``paths`` (dotted, as :func:`column_layout` names them,
+    in field order), as one flat tuple of Python numbers (an array field gives its elements).
+
+    For a stream read message by message (the offline replay's IMU samples): one
+    :class:`struct.Struct` per string length instead of a message object.
+
+    Raises
+    ------
+    CdrLayoutError
+        The type has no fixed layout, more than one string, or ``paths`` not in field order;
+        the function raises it for a payload that is not of this type.
+    """
+    if len(_string_paths(msgtype)) > 1:
+        raise CdrLayoutError(f"{msgtype}: more than one string, the layout varies")
+    offset = _first_string_offset(msgtype)
+    structs: dict[int, struct.Struct] = {}
+
+    def layout(length: int) -> struct.Struct:
+        dtype = column_layout(msgtype, () if offset is None else (max(length - 1, 0),))
+        fmt, pos = ["<"], 0
+        for path in paths:
+            sub, at = dtype.fields[path][:2]
+            if at < pos:
+                raise CdrLayoutError(f"{msgtype}: {path} is not in field order")
+            count = sub.shape[0] if sub.shape else 1
+            fmt.append(f"{at - pos}x{count}{_CODE_OF_DTYPE[sub.base.str]}")
+            pos = at + sub.itemsize
+        fmt.append(f"{dtype.itemsize - pos}x")
+        return struct.Struct("".join(fmt))
+
+    layout(1)   # the paths are checked now
+
+    def read(data) -> tuple:
+        try:
+            length = 1 if offset is None else _U32.unpack_from(data, offset)[0]
+            if data[:4] != _CDR_LE or not 1 <= length <= len(data):
+                raise CdrLayoutError(f"{msgtype}: not a little-endian plain CDR payload of "
+                                     "this type")
+            s = structs.get(length)
+            if s is None:
+                s = structs[length] = layout(length)
+            return s.unpack_from(data)
+        except struct.error as err:
+            raise CdrLayoutError(f"{msgtype}: payload too short ({err})") from None
+
+    return read
 
 
 def encode_columns(msgtype: str, columns: dict, strings: dict | None = None) -> list:

@@ -55,6 +55,15 @@ def set_stamp_sec(stamp: Time, t: float) -> None:
     stamp.sec, stamp.nanosec = sec, nanosec
 
 
+def sec_to_stamp_ns(t) -> np.ndarray:
+    """Integer ns (int64 array) of the stamps :func:`set_stamp_sec` writes for times ``t`` (s,
+    array_like): whole seconds and the rounded fraction, which can differ by a few hundred ns
+    from :func:`sec_to_ns`'s rounding of the whole time (for messages encoded in columns)."""
+    t = np.asarray(t, float)
+    sec = np.floor(t)
+    return sec.astype(np.int64) * NS + np.round((t - sec) * 1e9).astype(np.int64)
+
+
 def ns_to_stamp(t_ns: int) -> Time:
     """A new stamp of integer ns (any integer type, numpy's too)."""
     stamp = Time()

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from .earth import ecef_to_enu, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
+from .earth import ecef_to_enu_matrix, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
 
 #: Heights a datum may have, m (the ellipsoidal heights of the Earth's surface and of aircraft).
 HEIGHT_RANGE = (-1000.0, 1e5)
@@ -29,9 +29,16 @@ def datum_from_degrees(lat_deg: float, lon_deg: float, h: float) -> tuple[float,
     return math.radians(lat_deg), math.radians(lon_deg), float(h)
 
 
-def to_map(datum, lat: float, lon: float, h: float) -> np.ndarray:
-    """ENU position (m) in the frame around ``datum`` of the point at lat, lon (rad), h (m)."""
-    return ecef_to_enu(geodetic_to_ecef(lat, lon, h), *datum)
+def to_map(datum, lat, lon, h) -> np.ndarray:
+    """ENU position (m, shape (..., 3)) in the frame around ``datum`` of the point(s) at lat,
+    lon (rad), h (m).
+
+    Each point's rotation is its own vector-matrix product, so a point has the same map
+    position alone and among many (the offline path converts a whole run at once, the nodes
+    one epoch at a time): one matrix product of all points rounds differently in BLAS.
+    """
+    d = geodetic_to_ecef(lat, lon, h) - geodetic_to_ecef(*datum)
+    return np.matmul(d[..., None, :], ecef_to_enu_matrix(datum[0], datum[1]).T)[..., 0, :]
 
 
 def from_map(datum, enu) -> tuple[float, float, float]:

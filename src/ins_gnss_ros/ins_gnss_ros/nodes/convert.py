@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from geometry_msgs.msg import Quaternion, Vector3
 
-from ..io import set_stamp_sec, stamp_to_sec
+from ..io import NS, encode_columns, set_stamp_sec, stamp_to_sec
 from ..nav.increments import SensorErrors, increment_problem
 from ..nav.strapdown import NavState
 
@@ -51,6 +51,31 @@ def fill_ins_state(msg, state: NavState) -> None:
     set_vector3(msg.velocity, state.v_enu)
     q = msg.orientation
     q.w, q.x, q.y, q.z = state.q_nb.tolist()
+
+
+def ins_state_payloads(stamp_ns, lat, lon, h, v_enu, q_nb, mode, angular_velocity=0.0,
+                       errors: SensorErrors | None = None, correction_sequence: int = 1) -> list:
+    """CDR payloads of k ins_gnss_msgs/InsState (frame "map") at once, the fields
+    :func:`fill_ins_state` and the sensor-error fields hold: stamps (ns), lat, lon, h (k,),
+    v_enu (k, 3), q_nb (k, 4), mode (k,) InsState modes or one for all, angular_velocity
+    (k, 3) or zero, ``errors`` of (k, 3) arrays or None (zero); specific force zero."""
+    sec, nanosec = np.divmod(np.asarray(stamp_ns, np.int64), NS)
+    columns = {"header.stamp.sec": sec, "header.stamp.nanosec": nanosec, "latitude": lat,
+               "longitude": lon, "altitude": h, "mode": mode,
+               "correction_sequence": correction_sequence}
+    fields = {"velocity": v_enu, "angular_velocity": angular_velocity,
+              "specific_force": 0.0, "gyro_bias": 0.0, "accel_bias": 0.0,
+              "gyro_scale_factor": 0.0, "accel_scale_factor": 0.0}
+    if errors is not None:
+        fields.update(gyro_bias=errors.gyro_bias, accel_bias=errors.accel_bias,
+                      gyro_scale_factor=errors.gyro_scale, accel_scale_factor=errors.accel_scale)
+    for name, value in fields.items():
+        value = np.asarray(value, float)
+        for k, axis in enumerate("xyz"):
+            columns[f"{name}.{axis}"] = value[..., k] if value.ndim else value
+    for k, axis in enumerate("wxyz"):
+        columns["orientation." + axis] = q_nb[:, k]
+    return encode_columns("ins_gnss_msgs/msg/InsState", columns, {"header.frame_id": "map"})
 
 
 def increment_of(msg) -> tuple[str | None, np.ndarray, np.ndarray]:

@@ -9,7 +9,7 @@ from ins_gnss_msgs.msg import FilterStatus, MeasurementUpdate
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
 
-from ..io import new, sec_to_stamp
+from ..io import NS, encode_columns, new, sec_to_stamp
 from ..nav import ALIGNING, DEAD_RECKONING, NAVIGATING
 from ..nav.local_frame import to_map
 from ..nav.rotations import quat_to_dcm
@@ -47,6 +47,18 @@ def fix_msg(stamp: Time, st: NavState, cov_pos: np.ndarray, status: int, service
     return fix
 
 
+def fix_payloads(stamp_ns, lat, lon, h, cov_pos, status, frame_id: str = "base_link") -> list:
+    """The CDR payloads of :func:`fix_msg` for k epochs at once (``service`` 0): stamps (ns),
+    lat, lon (rad), h (m) (k,), ``cov_pos`` (k, 3, 3), ``status`` (k,) or one for all."""
+    sec, nanosec = np.divmod(np.asarray(stamp_ns, np.int64), NS)
+    return encode_columns("sensor_msgs/msg/NavSatFix", {
+        "header.stamp.sec": sec, "header.stamp.nanosec": nanosec, "status.status": status,
+        "status.service": 0, "latitude": np.degrees(lat), "longitude": np.degrees(lon),
+        "altitude": h, "position_covariance": np.reshape(cov_pos, (-1, 9)),
+        "position_covariance_type": NavSatFix.COVARIANCE_TYPE_KNOWN},
+        {"header.frame_id": frame_id})
+
+
 def datum_msg(stamp: Time, datum: tuple, frame_id: str) -> NavSatFix:
     """nav/datum: the origin of the map frame (lat rad, lon rad, h m) as a NavSatFix in it."""
     msg = new(NavSatFix)
@@ -82,23 +94,53 @@ def odom_msg(stamp: Time, st: NavState, P: np.ndarray, S, datum: tuple,
     filter state: its variance (rad^2/s^2) is given. ``frames``: (map, base_link) names."""
     odom = new(Odometry)
     odom.header.stamp, (odom.header.frame_id, odom.child_frame_id) = stamp, frames
-    enu = to_map(datum, st.lat, st.lon, st.h)
+    enu, linear, pose_cov, twist_cov = _odom_numbers(st.lat, st.lon, st.h, st.v_enu, st.q_nb,
+                                                     P, S, datum, rate_variance)
     odom.pose.pose.position.x, odom.pose.pose.position.y, odom.pose.pose.position.z = \
         (float(x) for x in enu)
     odom.pose.pose.orientation = to_quaternion(st.q_nb)
-    pose_cov = np.zeros((6, 6))
-    pose_cov[:3, :3] = P[S["pos"], S["pos"]]
-    pose_cov[3:, 3:] = P[S["att"], S["att"]]  # small-angle errors about ENU axes
     odom.pose.covariance = pose_cov.flatten().tolist()
-    # Odometry twists are in the child frame (base_link).
-    c_bn = quat_to_dcm(st.q_nb).T
-    odom.twist.twist.linear = to_vector3(c_bn @ st.v_enu)
-    twist_cov = np.zeros((6, 6))
-    twist_cov[:3, :3] = c_bn @ P[S["vel"], S["vel"]] @ c_bn.T
+    odom.twist.twist.linear = to_vector3(linear)
     odom.twist.twist.angular = angular_velocity
-    twist_cov[3:, 3:] = np.eye(3) * rate_variance
     odom.twist.covariance = twist_cov.flatten().tolist()
     return odom
+
+
+def odom_payloads(stamp_ns, lat, lon, h, v_enu, q_nb, P, S, datum: tuple,
+                  rate_variance: float, frames: tuple[str, str] = ("map", "base_link")) -> list:
+    """The CDR payloads of :func:`odom_msg` for k epochs at once (angular velocity zero):
+    stamps (ns), lat, lon, h (k,), v_enu (k, 3), q_nb (k, 4), P (k, n, n)."""
+    enu, linear, pose_cov, twist_cov = _odom_numbers(lat, lon, h, v_enu, q_nb, P, S, datum,
+                                                     rate_variance)
+    sec, nanosec = np.divmod(np.asarray(stamp_ns, np.int64), NS)
+    columns = {"header.stamp.sec": sec, "header.stamp.nanosec": nanosec,
+               "pose.covariance": pose_cov.reshape(-1, 36),
+               "twist.covariance": twist_cov.reshape(-1, 36)}
+    for k, axis in enumerate("xyz"):
+        columns["pose.pose.position." + axis] = enu[:, k]
+        columns["twist.twist.linear." + axis] = linear[:, k]
+        columns["twist.twist.angular." + axis] = 0.0
+    for k, axis in enumerate("wxyz"):
+        columns["pose.pose.orientation." + axis] = q_nb[:, k]
+    return encode_columns("nav_msgs/msg/Odometry", columns,
+                          {"header.frame_id": frames[0], "child_frame_id": frames[1]})
+
+
+def _odom_numbers(lat, lon, h, v_enu, q_nb, P, S, datum, rate_variance) -> tuple:
+    """nav/odom's map position, body-frame velocity and pose and twist covariances (6 x 6) of
+    one epoch or of epochs stacked on the leading axes. Stacked products only: an epoch gets
+    the same bits alone (the ekf node) and among many (the offline path)."""
+    enu = to_map(datum, lat, lon, h)
+    # Odometry twists are in the child frame (base_link).
+    c_bn = np.swapaxes(quat_to_dcm(q_nb), -1, -2)
+    linear = (c_bn @ np.asarray(v_enu, float)[..., None])[..., 0]
+    pose_cov = np.zeros(np.shape(P)[:-2] + (6, 6))
+    pose_cov[..., :3, :3] = P[..., S["pos"], S["pos"]]
+    pose_cov[..., 3:, 3:] = P[..., S["att"], S["att"]]  # small-angle errors about ENU axes
+    twist_cov = np.zeros_like(pose_cov)
+    twist_cov[..., :3, :3] = c_bn @ P[..., S["vel"], S["vel"]] @ np.swapaxes(c_bn, -1, -2)
+    twist_cov[..., 3:, 3:] = np.eye(3) * rate_variance
+    return enu, linear, pose_cov, twist_cov
 
 
 def status_msg(t: float, mode: int, tight: bool, updates, covariance, accepted: int,

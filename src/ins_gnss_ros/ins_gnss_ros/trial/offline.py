@@ -36,6 +36,14 @@ OFFLINE_TOPICS = ("/imu/delta", "/imu/data_raw", "/gnss/fix", "/gnss/vel", "/gns
                   "/mag/heading", "/log/speed", "/wheel/odom", "/gnss/observations")
 
 
+#: The imu/data_raw type and the fields of it the offline path reads, in field order.
+IMU_TYPE = "sensor_msgs/msg/Imu"
+IMU_FIELDS = ("header.stamp.sec", "header.stamp.nanosec", "orientation.x", "orientation.y",
+              "orientation.z", "orientation.w", "orientation_covariance", "angular_velocity.x",
+              "angular_velocity.y", "angular_velocity.z", "linear_acceleration.x",
+              "linear_acceleration.y", "linear_acceleration.z")
+
+
 def offline_parameters(profile) -> tuple[dict, dict]:
     """The profile's ``imu_preprocessor`` and ``ekf`` sections resolved against the nodes'
     parameter specifications (defaults filled in, values checked); a ProfileError names the
@@ -163,6 +171,9 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
             counts.withheld[row.topic] += 1
             continue
         counts.played[row.topic] += 1
+        if row.topic == "/imu/data_raw":
+            feed.raw(row, bag_path)
+            continue
         handler = feed.handlers.get(row.topic)
         if handler is not None:
             handler(bagio.decode_message(row, bag_path))
@@ -181,11 +192,12 @@ class _Feeder:
         from ins_gnss_ros.nodes.ekf_inputs import EkfInputs
 
         self.increment_of = increment_of
+        self.read_imu = bagio.field_reader(IMU_TYPE, IMU_FIELDS)
         # imu/heading: the imu_preprocessor node's, from the raw samples' own orientation
         self.orientation, self.declination = orientation_headings_from_params(
             pre_p, preprocessor.calibration.c_bs) if ekf_p["use_imu_heading"] else (None, None)
         self.aiding, self.preprocessor, self.events = aiding, preprocessor, events
-        self.handlers = {"/imu/delta": self.delta, "/imu/data_raw": self.raw}
+        self.handlers = {"/imu/delta": self.delta}
         inputs = EkfInputs(aiding, ekf_p, lambda text, log=True: events.update([text]))
         for topic, (_, handler) in inputs.handlers().items():
             self.handlers["/" + topic] = handler
@@ -201,17 +213,25 @@ class _Feeder:
         problem, dtheta, dv = self.increment_of(msg)
         self.increment(problem, bagio.stamp_to_sec(msg.header.stamp), dtheta, dv, msg.dt)
 
-    def raw(self, msg):
-        w, f = msg.angular_velocity, msg.linear_acceleration
-        stamp = bagio.stamp_to_ns(msg.header.stamp)
+    def raw(self, row, bag_path):
+        """An imu/data_raw row, its fields read straight from the payload (IMU_FIELDS): a
+        message object per sample cost more than the imu_preprocessor's work on it."""
+        if row.msgtype != IMU_TYPE:
+            raise bagio.BagError(f"{bag_path}: {row.topic} carries {row.msgtype}, not {IMU_TYPE}")
+        try:
+            sec, nanosec, ox, oy, oz, ow, *values = self.read_imu(row.data)
+        except bagio.CdrLayoutError as err:
+            raise bagio.BagError(f"{bag_path}: message on {row.topic} at {row.t_ns} ns does not "
+                                 f"decode ({err})") from None
+        orientation_covariance, w, f = values[:9], tuple(values[9:12]), tuple(values[12:])
+        stamp = sec * bagio.NS + nanosec
         # A recorded stream arrives as it was stamped: the arrival clock is the stamp.
-        for out in self.preprocessor.add(stamp, stamp, (w.x, w.y, w.z), (f.x, f.y, f.z)):
+        for out in self.preprocessor.add(stamp, stamp, w, f):
             if out.rates is None:
                 self.events[f"imu sample rejected: {out.reason}"] += 1
             elif self.orientation is not None:
-                o = msg.orientation
-                heading = self.orientation.add(out.t_ns, (o.w, o.x, o.y, o.z),
-                                               msg.orientation_covariance)
+                heading = self.orientation.add(out.t_ns, (ow, ox, oy, oz),
+                                               np.array(orientation_covariance))
                 if heading is not None:
                     self.aiding.heading(out.t_ns * 1e-9, *heading, self.declination,
                                         source="imu/heading")
@@ -221,18 +241,28 @@ class _Feeder:
 
 
 def write_ordered(writer, messages) -> Counter:
-    """Write (t_ns, topic, msg) in stamp order into an ``ordered`` BagWriter as they come;
-    returns the counts per topic."""
+    """Write (t_ns, topic, msgtype, payload) in stamp order into an ``ordered`` BagWriter as
+    they come; returns the counts per topic."""
     counts = Counter()
-    for t_ns, topic, msg in messages:
-        writer.write(topic, msg, t_ns)
+    for t_ns, topic, msgtype, data in messages:
+        writer.write_raw(topic, msgtype, t_ns, data)
         counts[bagio.resolve(topic)] += 1
     return counts
 
 
+#: Epochs whose messages are encoded at once: the payloads of a block are a few MB.
+OUTPUT_BLOCK = 4096
+
+
 def output_messages(result, config, datum, frames, prefix="", sensor_errors=False) -> Iterator:
     """ins/state, nav/odom, nav/fix, /tf at every epoch of a recorded pass, nav/status once a
-    second and /tf_static at the first, as (t_ns, topic, msg) in stamp order.
+    second and /tf_static at the first, as (t_ns, topic, type name, CDR payload) in stamp
+    order: the messages the nodes would publish for the solution.
+
+    The per-epoch messages are encoded for a block of epochs at once
+    (:func:`~ins_gnss_ros.io.cdr.encode_columns`), not built as message objects: a long run
+    has hundreds of thousands of them, and an rclpy object with its CDR cost about 100 us
+    each. /tf and nav/status (sequences) are built as objects.
 
     Parameters
     ----------
@@ -252,16 +282,16 @@ def output_messages(result, config, datum, frames, prefix="", sensor_errors=Fals
     sensor_errors : bool
         Fill the sensor-error fields of ins/state from ``result.estimates``.
     """
-    from geometry_msgs.msg import Vector3
     from ins_gnss_msgs.msg import InsState
     from sensor_msgs.msg import NavSatStatus
 
-    from ins_gnss_ros.io import msg_stamp_ns, ns_to_stamp, sec_to_ns
+    from ins_gnss_ros.io import msgtype_of, ns_to_stamp, sec_to_ns, sec_to_stamp_ns, serialize
     from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, NAVIGATING, NavState
     from ins_gnss_ros.nav.increments import SensorErrors
     from ins_gnss_ros.nav.odom_frame import OdomTrack
-    from ins_gnss_ros.nodes.convert import fill_ins_state, set_vector3
-    from ins_gnss_ros.nodes.nav_messages import MODES, fix_msg, fix_status, odom_msg, status_msg
+    from ins_gnss_ros.nodes.convert import ins_state_payloads
+    from ins_gnss_ros.nodes.nav_messages import (MODES, fix_payloads, fix_status, odom_payloads,
+                                                 status_msg)
     from ins_gnss_ros.nodes.tf_messages import solution_tf, static_tf
 
     ins_modes = {ALIGNING: InsState.MODE_ALIGNING, NAVIGATING: InsState.MODE_NAVIGATING,
@@ -274,11 +304,15 @@ def output_messages(result, config, datum, frames, prefix="", sensor_errors=Fals
     accepted = rejected = 0
     next_status = -np.inf
     topic = {name: prefix + name for name in ("ins/state", "nav/fix", "nav/odom", "nav/status")}
+    types = {"ins/state": "ins_gnss_msgs/msg/InsState", "nav/fix": "sensor_msgs/msg/NavSatFix",
+             "nav/odom": "nav_msgs/msg/Odometry"}
     ekf_p, pre_p = frames.ekf_p, frames.pre_p
     names = (ekf_p["map_frame"], ekf_p["base_link_frame"])
     publish_tf = ekf_p["publish_tf"] and not prefix
     odom = (ekf_p["odom_frame"], OdomTrack()) if ekf_p["use_wheel_odometry"] else None
-    t0_ns = sec_to_ns(float(result.t[0]))
+    # The messages carry the stamp set_stamp_sec gives the epoch's time; /tf is logged at the
+    # epoch's ns (the two roundings differ by up to a few hundred ns at epoch scale).
+    stamps_ns, epochs_ns = sec_to_stamp_ns(result.t), sec_to_ns(result.t)
     # As the imu_preprocessor and ekf nodes publish them: each its own, once (with the first
     # epoch's messages).
     statics = []
@@ -287,48 +321,49 @@ def output_messages(result, config, datum, frames, prefix="", sensor_errors=Fals
              (pre_p["imu_frame"], (0.0, 0.0, 0.0), frames.c_bs)),
             (names[1], ekf_p["publish_tf"], (ekf_p["gnss_frame"], ekf_p["lever_arm"], np.eye(3)))):
         if publish and not prefix:
-            statics.append((t0_ns, "/tf_static", static_tf(ns_to_stamp(t0_ns), parent, [child])))
-    for k in range(len(result.t)):
-        t = float(result.t[k])
-        st = NavState(result.lat[k], result.lon[k], result.h[k], result.v_enu[k],
-                      result.q_nb[k], t)
-        P = result.P[k]
-        t_ns = sec_to_ns(t)
-        stamp = ns_to_stamp(t_ns)
+            msg = static_tf(ns_to_stamp(epochs_ns[0]), parent, [child])
+            statics.append((int(epochs_ns[0]), "/tf_static", msgtype_of(msg), serialize(msg)))
+    navigating = fix_status(True, NavSatStatus.STATUS_FIX)
+    not_navigating = fix_status(False, NavSatStatus.STATUS_FIX)
+    for first in range(0, len(result.t), OUTPUT_BLOCK):
+        k = slice(first, first + OUTPUT_BLOCK)
+        lat, lon, h, v, q, P = (result.lat[k], result.lon[k], result.h[k], result.v_enu[k],
+                                result.q_nb[k], result.P[k])
         mode = result.mode[k]
-        state = InsState()
-        state.header.stamp, state.header.frame_id = stamp, "map"
-        fill_ins_state(state, st)
-        if sensor_errors:
-            errors = SensorErrors.of_estimates({name: v[k] for name, v in
-                                                result.estimates.items()})
-            set_vector3(state.gyro_bias, errors.gyro_bias)
-            set_vector3(state.accel_bias, errors.accel_bias)
-            set_vector3(state.gyro_scale_factor, errors.gyro_scale)
-            set_vector3(state.accel_scale_factor, errors.accel_scale)
-        state.mode = ins_modes[mode]
-        state.correction_sequence = 1  # the filter's own, corrected solution
-        # Each at its header stamp, /tf at the epoch's (the ns roundings of a stamp and of t
-        # differ by up to a few hundred ns at epoch scale): sorted, ties in this order.
-        logged = statics if k == 0 else []
-        logged.append((msg_stamp_ns(state), topic["ins/state"], state))
+        stamp = stamps_ns[k]
+        errors = SensorErrors.of_estimates({name: values[k] for name, values in
+                                            result.estimates.items()}) if sensor_errors else None
         # The input's augmentation is not kept per epoch: a NAVIGATING solution is a FIX here.
-        fix = fix_msg(stamp, st, P[space["pos"], space["pos"]],
-                      fix_status(mode == NAVIGATING, NavSatStatus.STATUS_FIX), frame_id=names[1])
-        logged.append((msg_stamp_ns(fix), topic["nav/fix"], fix))
+        payloads = [(topic["ins/state"], types["ins/state"], ins_state_payloads(
+                        stamp, lat, lon, h, v, q, [ins_modes[m] for m in mode], errors=errors)),
+                    (topic["nav/fix"], types["nav/fix"], fix_payloads(
+                        stamp, lat, lon, h, P[:, space["pos"], space["pos"]],
+                        np.where(mode == NAVIGATING, navigating, not_navigating), names[1]))]
         if datum is not None:
-            odom_out = odom_msg(stamp, st, P, space, datum, Vector3(), rate_var, names)
-            logged.append((msg_stamp_ns(odom_out), topic["nav/odom"], odom_out))
-            if publish_tf:
-                logged.append((t_ns, "/tf", solution_tf(stamp, st, datum, *names, odom)))
-        if t >= next_status:
-            next_status = t + 1.0
-            since = []
-            while u < len(updates) and updates[u].t <= t:
-                since.append(updates[u])
-                u += 1
-            accepted += sum(x.accepted for x in since)
-            rejected += sum(not x.accepted for x in since)
-            status = status_msg(t, MODES[mode], False, since, (space, P), accepted, rejected)
-            logged.append((msg_stamp_ns(status), topic["nav/status"], status))
-        yield from sorted(logged, key=itemgetter(0))
+            payloads.append((topic["nav/odom"], types["nav/odom"], odom_payloads(
+                stamp, lat, lon, h, v, q, P, space, datum, rate_var, names)))
+        for i in range(len(lat)):
+            e = first + i
+            stamp_ns = int(stamps_ns[e])
+            # Each at its log time, ties in this order (sorted below).
+            logged = statics if e == 0 else []
+            logged += [(stamp_ns, name, msgtype, data[i]) for name, msgtype, data in payloads]
+            t = float(result.t[e])
+            if publish_tf and datum is not None:
+                st = NavState(lat[i], lon[i], h[i], v[i], q[i], t)
+                msg = solution_tf(ns_to_stamp(stamp_ns), st, datum, *names, odom)
+                logged.append((int(epochs_ns[e]), "/tf", "tf2_msgs/msg/TFMessage",
+                               serialize(msg)))
+            if t >= next_status:
+                next_status = t + 1.0
+                since = []
+                while u < len(updates) and updates[u].t <= t:
+                    since.append(updates[u])
+                    u += 1
+                accepted += sum(x.accepted for x in since)
+                rejected += sum(not x.accepted for x in since)
+                status = status_msg(t, MODES[mode[i]], False, since, (space, result.P[e]),
+                                    accepted, rejected)
+                logged.append((stamp_ns, topic["nav/status"], "ins_gnss_msgs/msg/FilterStatus",
+                               serialize(status)))
+            yield from sorted(logged, key=itemgetter(0))

@@ -145,25 +145,22 @@ def smooth(bag_path, profile_path, out, outages=None, point=None, exports=(),
 
 def _point_messages(topic, result, lever, t, dtheta, dv) -> Iterator:
     """InsState of the body point at `lever` at every IMU sample of a recorded pass, as
-    (t_ns, topic, msg) in stamp order."""
+    (t_ns, topic, type name, CDR payload) in stamp order, encoded a block of samples at once
+    (an IMU-rate track has millions)."""
     from ins_gnss_msgs.msg import InsState
 
     from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
     from ins_gnss_ros.nav.smoother import imu_rate_track
-    from ins_gnss_ros.nodes.convert import set_vector3
+    from ins_gnss_ros.nodes.convert import ins_state_payloads
+    from ins_gnss_ros.trial.offline import OUTPUT_BLOCK
 
     dense = imu_rate_track(result, result.estimates, t, dtheta, dv)
     lat, lon, h = lever_arm_position(dense.lat, dense.lon, dense.h, dense.q_nb, lever)
     v = lever_arm_velocity(dense.v_enu, dense.q_nb, dense.omega_b, lever, dense.lat)
     stamps = bagio.sec_to_ns(dense.t)
-    for k in range(len(dense.t)):
-        msg = InsState()
-        msg.header.stamp, msg.header.frame_id = bagio.ns_to_stamp(int(stamps[k])), "map"
-        msg.latitude, msg.longitude, msg.altitude = float(lat[k]), float(lon[k]), float(h[k])
-        set_vector3(msg.velocity, v[k])
-        o = msg.orientation
-        o.w, o.x, o.y, o.z = dense.q_nb[k].tolist()
-        set_vector3(msg.angular_velocity, dense.omega_b[k])
-        msg.mode = InsState.MODE_NAVIGATING
-        msg.correction_sequence = 1
-        yield int(stamps[k]), topic, msg
+    for first in range(0, len(dense.t), OUTPUT_BLOCK):
+        k = slice(first, first + OUTPUT_BLOCK)
+        payloads = ins_state_payloads(stamps[k], lat[k], lon[k], h[k], v[k], dense.q_nb[k],
+                                      InsState.MODE_NAVIGATING, dense.omega_b[k])
+        for t_ns, data in zip(stamps[k].tolist(), payloads):
+            yield t_ns, topic, "ins_gnss_msgs/msg/InsState", data
