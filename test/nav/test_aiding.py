@@ -12,6 +12,7 @@ from ins_gnss_ros.nav.filter_config import PARAMS, navigator_config
 from ins_gnss_ros.nav import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, WheelOdometry, \
     ZeroVelocity
 from ins_gnss_ros.nav.navigator import Navigator
+from ins_gnss_ros.nav.recording import published_covariance
 from ins_gnss_ros.params import ParameterError, resolve
 
 
@@ -199,7 +200,7 @@ def test_a_still_imu_starts_the_filter_at_once_and_the_fixes_rest_confirms_its_v
     """The ground robot: IMU still, fixes without covariance (1 m white, a 3 m offset common to
     all) at 2.5 Hz, a heading source; the product's navigator behind the front end."""
     nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_adis16405_datasheet"}),
-                                     record=False))  # config/default.yaml's
+                                     record=True))  # config/default.yaml's
     front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
     bias = np.radians([0.3, -0.2, 0.1])  # deg/s, a MEMS turn-on bias
     rng = np.random.default_rng(5)
@@ -235,6 +236,12 @@ def test_a_still_imu_starts_the_filter_at_once_and_the_fixes_rest_confirms_its_v
     assert np.all(np.sqrt(np.diag(P)) >= 4.0) and err @ np.linalg.solve(P, err) < 25.0
     # ... while following the fixes much better than one of them (1 m): about their mean
     assert np.linalg.norm(err - offset) < 0.5
+    # the record keeps the common part per epoch, so that the offline path (trial/offline.py)
+    # publishes what the ekf node does
+    out = nav.output()
+    assert out.fix_common_var[-1] > 0.0
+    np.testing.assert_allclose(
+        published_covariance(out.P[-1], nav.space, out.fix_common_var[-1])[:2, :2], P)
 
 
 def test_diagnostics_say_the_first_fixes_wait_for_the_imu():

@@ -24,13 +24,17 @@ class NavigatorOutput(Track):
     q_nb : (k, 4)
     mode : (k,) str
     P : (k, n, n) or None
-        Covariance after the updates of the epoch.
+        Covariance after the updates of the epoch (the filter's: relative to the fixes it
+        follows; :func:`published_covariance` adds what they share).
     P_prior : (k, n, n) or None
         Covariance before them.
     phi : (k, n, n) or None
         Transition matrix from the previous epoch (identity at the first).
     dx : (k, n)
         Sum of the corrections fed back at the epoch.
+    fix_common_var : (k,)
+        The error common to the fixes the filter followed at the epoch, m^2 per horizontal
+        axis (GnssFix.common_var).
     estimates : dict of str to (k, size)
         Running sensor / clock / extra estimates after the epoch.
     space : StateSpace
@@ -42,6 +46,7 @@ class NavigatorOutput(Track):
     P_prior: np.ndarray | None
     phi: np.ndarray | None
     dx: np.ndarray
+    fix_common_var: np.ndarray
     estimates: dict
     space: StateSpace
     updates: list
@@ -50,6 +55,21 @@ class NavigatorOutput(Track):
         """Standard deviations of a block per epoch, (k, size)."""
         s = self.space[block]
         return np.sqrt(np.diagonal(self.P, axis1=1, axis2=2)[:, s])
+
+
+def published_covariance(P, space, fix_common_var):
+    """The covariance to publish of one epoch's (n, n) or a block of epochs' (k, n, n) filter
+    covariance P: the error common to the fixes the filter follows (fix_common_var, m^2 per
+    horizontal axis, a scalar or (k,)) added to the horizontal position, as the filter's
+    position is relative to them (GnssFix.common_var). P itself is not changed."""
+    var = np.asarray(fix_common_var, float)
+    if not np.any(var > 0.0):
+        return P
+    P = P.copy()
+    east = space["pos"].start
+    P[..., east, east] += var
+    P[..., east + 1, east + 1] += var
+    return P
 
 
 def point_track(out, lever_b, lat=None, lon=None, h=None, q_nb=None):
@@ -134,25 +154,28 @@ class Recorder:
         """Number of epochs recorded."""
         return self._out.n
 
-    def epoch(self, state, phi, P_prior):
-        """Record a new epoch: the run state after the propagation, with its Phi and P-."""
+    def epoch(self, state, phi, P_prior, fix_common_var):
+        """Record a new epoch: the run state after the propagation, with its Phi and P-, and
+        the fixes' common variance (m^2) of the moment."""
         if not self._record:
             return
         nav = state.nav
         values = {"t": nav.t, "lat": nav.lat, "lon": nav.lon, "h": nav.h, "v": nav.v_enu,
                   "q": nav.q_nb, "mode": state.mode, "dx": np.zeros(self.space.size),
-                  **self._estimate_values(state)}
+                  "fix_common_var": fix_common_var, **self._estimate_values(state)}
         if self._store_covariance:
             values.update(P=state.ekf.P, Pp=P_prior, phi=phi)
         self._out.append(values)
 
-    def correct(self, state, dx):
-        """Replace the current epoch's record by the corrected state (after an update)."""
+    def correct(self, state, dx, fix_common_var):
+        """Replace the current epoch's record by the corrected state (after an update) and the
+        fixes' common variance (m^2) it was made with."""
         if not self._record:
             return
         o, nav = self._out, state.nav
         for name, value in (("lat", nav.lat), ("lon", nav.lon), ("h", nav.h),
                             ("v", nav.v_enu), ("q", nav.q_nb), ("mode", state.mode),
+                            ("fix_common_var", fix_common_var),
                             *self._estimate_values(state).items()):
             o.set_last(name, value)
         o.last("dx")[:] += dx
@@ -231,5 +254,6 @@ class Recorder:
             v_enu=o.view("v").reshape(n, 3), q_nb=o.view("q").reshape(n, 4),
             mode=o.view("mode").astype(str), P=o.view("P") if full else None,
             P_prior=o.view("Pp") if full else None, phi=o.view("phi") if full else None,
-            dx=o.view("dx").reshape(n, self.space.size), estimates=est,
+            dx=o.view("dx").reshape(n, self.space.size),
+            fix_common_var=o.view("fix_common_var"), estimates=est,
             space=self.space, updates=list(self._updates))

@@ -289,6 +289,7 @@ def output_messages(result, config, datum, frames, prefix="", sensor_errors=Fals
     from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, NAVIGATING, NavState
     from ins_gnss_ros.nav.increments import SensorErrors
     from ins_gnss_ros.nav.odom_frame import OdomTrack
+    from ins_gnss_ros.nav.recording import published_covariance
     from ins_gnss_ros.nodes.convert import ins_state_payloads
     from ins_gnss_ros.nodes.nav_messages import (MODES, fix_payloads, fix_status, odom_payloads,
                                                  status_msg)
@@ -327,8 +328,11 @@ def output_messages(result, config, datum, frames, prefix="", sensor_errors=Fals
     not_navigating = fix_status(False, NavSatStatus.STATUS_FIX)
     for first in range(0, len(result.t), OUTPUT_BLOCK):
         k = slice(first, first + OUTPUT_BLOCK)
-        lat, lon, h, v, q, P = (result.lat[k], result.lon[k], result.h[k], result.v_enu[k],
-                                result.q_nb[k], result.P[k])
+        lat, lon, h, v, q = (result.lat[k], result.lon[k], result.h[k], result.v_enu[k],
+                             result.q_nb[k])
+        # As the ekf node publishes it (Navigator.covariance), but without the noise floors
+        # of forced kinds, which are not recorded per epoch.
+        P = published_covariance(result.P[k], space, result.fix_common_var[k])
         mode = result.mode[k]
         stamp = stamps_ns[k]
         errors = SensorErrors.of_estimates({name: values[k] for name, values in
@@ -362,7 +366,7 @@ def output_messages(result, config, datum, frames, prefix="", sensor_errors=Fals
                     u += 1
                 accepted += sum(x.accepted for x in since)
                 rejected += sum(not x.accepted for x in since)
-                status = status_msg(t, MODES[mode[i]], False, since, (space, result.P[e]),
+                status = status_msg(t, MODES[mode[i]], False, since, (space, P[i]),
                                     accepted, rejected)
                 logged.append((stamp_ns, topic["nav/status"], "ins_gnss_msgs/msg/FilterStatus",
                                serialize(status)))
