@@ -188,8 +188,11 @@ def test_ctrl_c_stops_the_graph_without_a_traceback(workdir, tmp_path, command, 
     if command[0] == "replay":
         argv += [str(workdir / "bag"), "--out", str(tmp_path / "out"), *command[1:]]
     argv += ["--config", str(workdir / "profile.yaml")]
+    # A job of its own with SIGINT at its default, like a shell's foreground job (a suite
+    # started in the background, `make test &`, has SIGINT ignored, and children inherit it).
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)  # a job of its own, like a shell's
+                            start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 30
         while not _children(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
