@@ -231,7 +231,7 @@ class _Feeder:
                 self.events[f"imu sample rejected: {out.reason}"] += 1
             elif self.orientation is not None:
                 heading = self.orientation.add(out.t_ns, (ow, ox, oy, oz),
-                                               np.array(orientation_covariance))
+                                               orientation_covariance)
                 if heading is not None:
                     self.aiding.heading(out.t_ns * 1e-9, *heading, self.declination,
                                         source="imu/heading")
