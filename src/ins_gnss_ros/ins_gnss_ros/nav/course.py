@@ -13,6 +13,7 @@ velocity in it (an acceleration a adds a dt^2, so the estimate errs on the large
 """
 from __future__ import annotations
 
+import statistics
 from collections import deque
 
 import numpy as np
@@ -40,7 +41,8 @@ class CourseFromFixes:
         self._window: list[tuple[float, np.ndarray, np.ndarray]] = []  # t, ECEF, cov ENU
         self._last3: deque = deque(maxlen=3)                           # t, ECEF
         # (east^2, north^2) of each, Python floats, m^2: every fix asks for their median, and
-        # numpy's median of a hundred values cost more than the rest of a fix's front end.
+        # numpy's median of a hundred values cost more than the rest of a fix's front end
+        # (statistics.median gives the same value).
         self._second_differences: deque = deque(maxlen=SCATTER_SAMPLES)
 
     def clear(self) -> None:
@@ -52,7 +54,7 @@ class CourseFromFixes:
         no larger than the white variance the fixes show (once enough of them came)."""
         if len(self._second_differences) < MIN_SCATTER_SAMPLES:
             return cov
-        white = _median([x for pair in self._second_differences for x in pair]) \
+        white = statistics.median([x for pair in self._second_differences for x in pair]) \
             / CHI2_1_MEDIAN / 6.0
         out = cov.copy()
         out[:2, :2] = np.eye(2) * min(white, 0.5 * (cov[0, 0] + cov[1, 1]))
@@ -88,11 +90,3 @@ class CourseFromFixes:
             return  # a dropped fix: not equally spaced
         s = (ecef_to_enu_matrix(lat, lon) @ (r2 - 2.0 * r1 + r0))[:2]
         self._second_differences.append(tuple((s * s).tolist()))
-
-
-def _median(values: list) -> float:
-    """np.median of finite floats, the same value (the mean of the two middle ones, (a + b) / 2,
-    for an even count)."""
-    v = sorted(values)
-    n = len(v)
-    return v[n // 2] if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2.0
