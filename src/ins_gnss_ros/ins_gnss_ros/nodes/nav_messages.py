@@ -15,6 +15,7 @@ from ..nav.rotations import quat_to_dcm
 from ..nav.strapdown import NavState
 from .convert import to_quaternion, to_vector3
 
+
 def fix_status(navigating: bool, input_status: int) -> int:
     """nav/fix status (REP-145 readers take it as the solution's quality): NO_FIX unless the
     filter is NAVIGATING (aligning and dead reckoning are not fixes), else the augmentation of
