@@ -371,7 +371,7 @@ def test_float_policy_and_ins_prior(ros_context, bus, static_two):
         for t, q, msgs, _ in epochs[:8]:
             if use_ins:
                 ins = InsState(latitude=LAT, longitude=LON, altitude=H,
-                               mode=InsState.MODE_NAVIGATING)
+                               mode=InsState.MODE_NAVIGATING, correction_sequence=1)
                 ins.header.stamp = sec_to_stamp(1000.0 + t)
                 ins.orientation = to_quaternion(quat_mul(q, quat_from_euler(0.0, 0.0, 0.01)))
                 bus2.publish("ins/state", ins)
