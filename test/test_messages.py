@@ -73,6 +73,16 @@ def test_message_round_trips_through_serialization(name):
 
 
 @pytest.mark.slow
+def test_the_mode_constants_of_state_correction_and_status_agree():
+    """The strapdown says the mode the ekf sends in InsCorrection and reports in FilterStatus
+    (nodes/convert.py MODE_VALUES maps all three)."""
+    modes = {name: [(k, v) for k, v in vars(_message_class(name)).items()
+                    if k.startswith("MODE_")]
+             for name in ("InsState", "InsCorrection", "FilterStatus")}
+    assert modes["InsState"] == modes["FilterStatus"]
+    assert modes["InsCorrection"] == modes["InsState"][:3]  # a filter never sends INVALID
+
+
 def test_interface_package_builds_from_source(tmp_path):
     """Configure, build and install src/ins_gnss_msgs with CMake against the venv's ROS wheels."""
     if shutil.which("cmake") is None:

@@ -134,6 +134,20 @@ def test_closed_loop_follows_truth_and_equals_offline_navigator(trial, ros_conte
     assert all(m.correction_sequence >= aligned for m in states
                if stamp_to_sec(m.header.stamp) >= t_nav)
     assert states[0].mode == InsState.MODE_ALIGNING  # the strapdown before its first correction
+    # ins/state says the filter's mode: levelled at rest and corrected (zero-velocity fixes)
+    # for 20 s, the filter is ALIGNING until the car moves; so is the strapdown until it applies
+    # the alignment's correction, with nav/status.
+    assert {m.mode for m in corrections if m.sequence < aligned} == {InsCorrection.MODE_ALIGNING}
+    assert corrections[aligned - 1].mode == InsCorrection.MODE_NAVIGATING
+    levelled = [m for m in states if 0 < m.correction_sequence < aligned]
+    assert levelled and all(m.mode == InsState.MODE_ALIGNING for m in states
+                            if m.correction_sequence < aligned)
+    t_moving = traj.t[np.argmax(np.linalg.norm(traj.v_enu, axis=1) > 0.0)]
+    assert stamp_to_sec(levelled[-1].header.stamp) - T0 > t_moving  # the whole static start
+    assert min(stamp_to_sec(m.header.stamp) for m in states
+               if m.mode == InsState.MODE_NAVIGATING) == first
+    assert all(m.mode != InsState.MODE_ALIGNING for m in states
+               if stamp_to_sec(m.header.stamp) >= first)
     # strapdown vs truth over the last 60 s (after alignment and convergence)
     errors = []
     for msg in states:

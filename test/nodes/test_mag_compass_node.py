@@ -315,6 +315,33 @@ def test_bad_input_is_counted_and_no_heading_from_it(graph):
     assert len(g.headings) == 1 and g.headings[0].azimuth == pytest.approx(np.pi / 2, abs=1e-9)
 
 
+def test_heading_from_every_ins_state_a_filter_has_levelled(graph):
+    """The strapdown says the filter's mode: ALIGNING after the first correction (levelled at
+    rest, heading unknown) and DEAD_RECKONING (degraded) both come with a levelled attitude;
+    only a state no filter has corrected (sequence 0) has none."""
+    from ins_gnss_msgs.msg import InsState
+
+    from ins_gnss_ros.nodes.convert import to_quaternion
+
+    m = _earth_field().enu  # level, yaw 0: body = ENU
+    g = graph()
+    for k, (mode, sequence) in enumerate([(InsState.MODE_ALIGNING, 0),
+                                          (InsState.MODE_ALIGNING, 1),
+                                          (InsState.MODE_DEAD_RECKONING, 2),
+                                          (InsState.MODE_NAVIGATING, 3)]):
+        state = InsState(latitude=LAT0, longitude=LON0, altitude=H0, mode=mode,
+                         correction_sequence=sequence,
+                         orientation=to_quaternion([1.0, 0.0, 0.0, 0.0]))
+        state.header.stamp = _stamp(0.1 * k)
+        g.send("ins/state", state)
+        g.mag(0.1 * k + 0.01, m)
+    assert g.node.diag.counts["ins/state not corrected by a filter yet (roll/pitch unknown): "
+                              "heading withheld"] == 1
+    assert [_key(h.header.stamp) for h in g.headings] == \
+        [_key(_stamp(0.1 * k + 0.01)) for k in (1, 2, 3)]
+    assert all(h.azimuth == pytest.approx(np.pi / 2, abs=1e-9) for h in g.headings)
+
+
 def test_wmm_outside_its_life_span_withholds_heading(graph):
     g = graph(decimal_year=2035.0)
     g.ins(0.0, 0.0, 0.0, 0.0)

@@ -371,7 +371,7 @@ def test_float_policy_and_ins_prior(ros_context, bus, static_two):
         for t, q, msgs, _ in epochs[:8]:
             if use_ins:
                 ins = InsState(latitude=LAT, longitude=LON, altitude=H,
-                               mode=InsState.MODE_NAVIGATING)
+                               mode=InsState.MODE_NAVIGATING, correction_sequence=1)
                 ins.header.stamp = sec_to_stamp(1000.0 + t)
                 ins.orientation = to_quaternion(quat_mul(q, quat_from_euler(0.0, 0.0, 0.01)))
                 bus2.publish("ins/state", ins)
@@ -387,11 +387,11 @@ def test_float_policy_and_ins_prior(ros_context, bus, static_two):
 
 def test_ins_prior_is_the_tilt_alone_while_the_ins_heading_is_unknown(ros_context, bus,
                                                                       static_two):
-    # The whole ins/state attitude is the prior only while it is NAVIGATING and the ekf's
-    # nav/status (if any) knows the heading to ins_prior.sigma_deg; otherwise (ins/state
-    # ALIGNING; the strapdown NAVIGATING under an ekf still ALIGNING or with a wide heading σ)
-    # only its roll and pitch, and the fixes stay right. The tilt σ is the parameter's 0.5 deg
-    # or the ekf's larger one.
+    # The whole ins/state attitude is the prior only while it is NAVIGATING or DEAD_RECKONING
+    # and the ekf's nav/status (if any) knows the heading to ins_prior.sigma_deg; otherwise
+    # (ins/state ALIGNING; an ekf ALIGNING or with a wide heading σ) only its roll and pitch,
+    # and the fixes stay right; nothing from a state no filter has corrected (sequence 0). The
+    # tilt σ is the parameter's 0.5 deg or the ekf's larger one.
     from ins_gnss_msgs.msg import FilterStatus, InsState
 
     epochs, ephs = static_two
@@ -413,17 +413,23 @@ def test_ins_prior_is_the_tilt_alone_while_the_ins_heading_is_unknown(ros_contex
                                    state_std=[1.0, 0.03, 0.02, 0.1]),
               "narrow": FilterStatus(mode=FilterStatus.MODE_NAVIGATING, state_names=names,
                                      state_std=[1.0, 0.001, 0.001, 0.01])}
-    cases = [(InsState.MODE_ALIGNING, None, "tilt_prior", math.radians(0.5)),
-             (InsState.MODE_NAVIGATING, None, "attitude_prior", None),
-             (InsState.MODE_NAVIGATING, "aligning", "tilt_prior", math.radians(0.5)),
-             (InsState.MODE_NAVIGATING, "wide", "tilt_prior", 0.03),
-             (InsState.MODE_NAVIGATING, "narrow", "attitude_prior", None)]
-    for k, (mode, filter_status, kind, sigma) in enumerate(cases):
+    # (ins/state mode, its correction sequence (0: no filter has levelled it), nav/status, prior)
+    cases = [(InsState.MODE_ALIGNING, 1, None, "tilt_prior", math.radians(0.5)),
+             (InsState.MODE_NAVIGATING, 1, None, "attitude_prior", None),
+             (InsState.MODE_NAVIGATING, 1, "aligning", "tilt_prior", math.radians(0.5)),
+             (InsState.MODE_NAVIGATING, 1, "wide", "tilt_prior", 0.03),
+             (InsState.MODE_NAVIGATING, 1, "narrow", "attitude_prior", None),
+             # a degraded filter (forced measurements, constraints only) still corrects it
+             (InsState.MODE_DEAD_RECKONING, 1, "narrow", "attitude_prior", None),
+             (InsState.MODE_DEAD_RECKONING, 1, "wide", "tilt_prior", 0.03),
+             # last: the epochs above pair with their headings (this one may give none)
+             (InsState.MODE_ALIGNING, 0, None, None, None)]
+    for k, (mode, sequence, filter_status, kind, sigma) in enumerate(cases):
         t, q, msgs, _ = epochs[k]
         if filter_status:
             bus.publish("nav/status", status[filter_status])
         ins = InsState(latitude=LAT, longitude=LON, altitude=H, mode=mode,
-                       correction_sequence=1)  # corrected by a filter: levelled
+                       correction_sequence=sequence)
         ins.header.stamp = sec_to_stamp(1000.0 + t)
         # The heading is wrong where the node must not use it (and right where it may).
         yaw_error = 2.0 if kind == "tilt_prior" else 0.01
@@ -432,7 +438,7 @@ def test_ins_prior_is_the_tilt_alone_while_the_ins_heading_is_unknown(ros_contex
         for m in msgs:
             bus.publish("gnss/observations", m)
         bus.drain()
-        assert list(priors[-1]) == [kind]
+        assert list(priors[-1]) == ([kind] if kind else [])
         if kind == "tilt_prior":
             C, s = priors[-1][kind]
             np.testing.assert_allclose(C[2], quat_to_dcm(q)[2], atol=1e-9)

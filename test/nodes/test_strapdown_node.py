@@ -49,7 +49,7 @@ def test_stationary_and_late_correction_recover_truth(node):
     for k in range(1, 101):
         node.on_delta(_delta(t0 + k * DT))
     # The filter found, for the epoch 0.5 s ago, a 10 m north position error.
-    corr = InsCorrection(sequence=1)
+    corr = InsCorrection(sequence=1, mode=InsCorrection.MODE_NAVIGATING)
     corr.header.stamp = sec_to_stamp(t0 + 0.5)
     corr.position_error.y = 10.0
     node.on_correction(corr)
@@ -92,13 +92,13 @@ def test_gap_is_bridged_by_held_rates_and_a_long_gap_loses_the_imu(node):
     node.on_delta(_delta(t0 + 5.0))                  # 4 s lost: the IMU was lost
     assert node.diag.counts["imu lost: gap in increments beyond max_imu_gap_s, new run"] == 1
     assert published[-1].mode == InsState.MODE_INVALID
-    old = InsCorrection(sequence=1)
+    old = InsCorrection(sequence=1, mode=InsCorrection.MODE_NAVIGATING)
     old.header.stamp = sec_to_stamp(t0 + 0.5)
     node.on_correction(old)
     assert node.diag.counts["correction older than this run ignored"] == 1
     node.on_delta(_delta(t0 + 5.0 + DT))
     assert published[-1].mode == InsState.MODE_INVALID
-    new = InsCorrection(sequence=2)
+    new = InsCorrection(sequence=2, mode=InsCorrection.MODE_NAVIGATING)
     new.header.stamp = sec_to_stamp(t0 + 5.0)
     node.on_correction(new)
     node.on_delta(_delta(t0 + 5.0 + 2 * DT))
@@ -107,6 +107,41 @@ def test_gap_is_bridged_by_held_rates_and_a_long_gap_loses_the_imu(node):
     for k in range(3, 214):  # 2.1 s without a correction: aligned once, dead reckoning now
         node.on_delta(_delta(t0 + 5.0 + k * DT))
     assert published[-1].mode == InsState.MODE_DEAD_RECKONING
+
+
+def test_ins_state_says_the_mode_of_the_filter_that_corrected_it(node):
+    """A filter levelled at rest corrects the strapdown while it is still ALIGNING: ins/state
+    says ALIGNING (levelled: sequence > 0) until a correction made NAVIGATING, and
+    DEAD_RECKONING for one made degraded. A correction with a mode no filter has is
+    rejected."""
+    from ins_gnss_msgs.msg import InsCorrection, InsState
+
+    published = []
+    node.pub.publish = published.append
+    t0 = 1000.0
+
+    def correct(sequence, mode, k):
+        msg = InsCorrection(sequence=sequence, mode=mode)
+        msg.header.stamp = sec_to_stamp(t0 + k * DT)
+        node.on_correction(msg)
+
+    for k in range(1, 51):
+        node.on_delta(_delta(t0 + k * DT))
+    assert (published[-1].mode, published[-1].correction_sequence) == (InsState.MODE_ALIGNING, 0)
+    correct(1, InsCorrection.MODE_ALIGNING, 50)
+    node.on_delta(_delta(t0 + 51 * DT))
+    assert (published[-1].mode, published[-1].correction_sequence) == (InsState.MODE_ALIGNING, 1)
+    correct(2, InsCorrection.MODE_NAVIGATING, 51)
+    node.on_delta(_delta(t0 + 52 * DT))
+    assert published[-1].mode == InsState.MODE_NAVIGATING
+    correct(3, InsCorrection.MODE_DEAD_RECKONING, 52)
+    node.on_delta(_delta(t0 + 53 * DT))
+    assert published[-1].mode == InsState.MODE_DEAD_RECKONING
+    correct(4, 7, 53)
+    node.on_delta(_delta(t0 + 54 * DT))
+    assert node.diag.counts["correction with an unknown mode rejected"] == 1
+    assert (published[-1].mode, published[-1].correction_sequence) == \
+        (InsState.MODE_DEAD_RECKONING, 3)
 
 
 def test_publishes_ins_state_over_ros(node, probe, executor):

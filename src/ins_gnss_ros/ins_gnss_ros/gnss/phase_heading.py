@@ -239,9 +239,8 @@ class PhaseHeading:
         return True
 
     def filter_status(self, aligning: bool, att_std) -> None:
-        """The filter's view of the INS attitude: whether it is still ALIGNING (the INS reports
-        itself navigating whenever it is corrected, also while the filter, levelled at rest, has
-        yet to find the heading) and its attitude σ (ENU error angles [rad], NaN: unknown)."""
+        """The filter's view of the INS attitude: whether it is still ALIGNING (as ``ins/state``
+        says; either suffices) and its attitude σ (ENU error angles [rad], NaN: unknown)."""
         tilt = max(att_std[0], att_std[1]) if all(math.isfinite(a) for a in att_std[:2]) else 0.0
         # A heading σ larger than the full prior assumes makes that prior overconfident (no σ
         # reported, NaN: trust the mode).

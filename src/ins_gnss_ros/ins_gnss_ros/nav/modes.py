@@ -24,6 +24,9 @@ never change the mode.
 """
 ALIGNING, NAVIGATING, DEAD_RECKONING = "ALIGNING", "NAVIGATING", "DEAD_RECKONING"
 MODES = (ALIGNING, NAVIGATING, DEAD_RECKONING)
+#: Never the navigator's: the strapdown's state once its IMU was lost, until the filter has
+#: re-synchronised it (:meth:`~ins_gnss_ros.nav.strapdown_sync.ClosedLoopStrapdown.mode`).
+INVALID = "INVALID"
 
 
 def after_accepted(mode, degraded):

@@ -26,6 +26,11 @@ changes its own state at once, but the strapdown's (``ins/state``, hence ``nav/f
 ``nav/odom``) only when the first correction made after it arrives, a few of its states later.
 :meth:`StrapdownSync.mode` reports the filter ALIGNING until a strapdown state acknowledges that
 correction (carries its sequence or a later one).
+
+Every correction also carries the filter's mode when it was made, and the strapdown's state is in
+that mode (:meth:`ClosedLoopStrapdown.mode`): the filter corrects the strapdown while it is still
+ALIGNING (levelled, heading not yet known) and while it is DEAD_RECKONING (degraded, or aided by
+constraints only), and a corrected state is not a NAVIGATING one then.
 """
 from __future__ import annotations
 
@@ -37,7 +42,7 @@ import numpy as np
 
 from .error_model import nav_error
 from .increments import BRIDGED, LOST, SENSOR_BLOCKS, SensorErrors, classify_gap, held_increments
-from .modes import ALIGNING
+from .modes import ALIGNING, DEAD_RECKONING, INVALID, NAVIGATING
 from .strapdown import NavState, Strapdown
 
 __all__ = ["Correction", "ClosedLoopStrapdown", "StrapdownSync"]
@@ -59,6 +64,8 @@ class Correction:
     attitude_error : (3,) rad, ENU (the phi convention of :mod:`ins_gnss_ros.nav.strapdown`)
     sensor : SensorErrors
         Increments to the sensor errors the strapdown applies; zero where the filter has no state.
+    mode : str
+        The filter's mode (:mod:`.modes`) when it made the correction.
     """
 
     t_ns: int
@@ -67,6 +74,7 @@ class Correction:
     velocity_error: np.ndarray
     attitude_error: np.ndarray
     sensor: SensorErrors
+    mode: str
 
 
 @dataclass
@@ -108,6 +116,7 @@ class ClosedLoopStrapdown:
         self.t_start = np.inf  # start of the first increment of this run, s
         self.last_correction_t = -np.inf
         self.correction_sequence = 0
+        self.filter_mode = ALIGNING  # the filter's at the last correction applied
         self.lost = False  # the IMU was lost (gap beyond max_gap), no correction since
         self.last_compensated = None  # (dtheta, dv, dt) of the latest step, sensor-corrected
 
@@ -189,9 +198,23 @@ class ClosedLoopStrapdown:
             for step in later:
                 self._step(step.dtheta, step.dv, step.dt)
         self.correction_sequence = c.sequence
+        self.filter_mode = c.mode
         self.last_correction_t = t_c
         self.lost = False
         return event
+
+    def mode(self, silent_after: float) -> str:
+        """The mode of the state (:mod:`.modes`), the worst that applies: INVALID while the IMU
+        is lost (no correction since); ALIGNING before the first correction (the state is the
+        start-up parameters) and while the filter's last one was made ALIGNING (levelled, the
+        heading unknown); DEAD_RECKONING when the filter's last one was, or when none came for
+        ``silent_after`` s (no filter vouches for the state since); else NAVIGATING."""
+        if self.lost:
+            return INVALID
+        if self.filter_mode == NAVIGATING and \
+                self.state.t - self.last_correction_t > silent_after:
+            return DEAD_RECKONING
+        return self.filter_mode
 
 
 class StrapdownSync:
@@ -289,8 +312,7 @@ class StrapdownSync:
         return next((states[i] for i in range(hi - 1, lo - 1, -1)
                      if states[i][1] == self.sequence), None)
 
-    def correction(self, t: float, state_at, estimates: dict, revision: int,
-                   aligned: bool):
+    def correction(self, t: float, state_at, estimates: dict, revision: int, mode: str):
         """The correction that puts the strapdown on the filter's solution, or None (nothing to
         compare with yet).
 
@@ -304,9 +326,10 @@ class StrapdownSync:
             The filter's running sensor-error estimates by block name (SENSOR_BLOCKS).
         revision : int
             The filter's revision (marks the corrections of the solution this one covers).
-        aligned : bool
-            The filter has aligned (its heading is known): the first such correction is the one
-            :meth:`mode` waits for.
+        mode : str
+            The filter's mode (:mod:`.modes`), carried by the correction; the first correction
+            made in another mode than ALIGNING (the heading known) is the one :meth:`mode` waits
+            for.
 
         Returns
         -------
@@ -337,8 +360,9 @@ class StrapdownSync:
             # zero where the layout has none of the blocks
             sensor[name] = estimate - getattr(applied, name) if np.ndim(estimate) else np.zeros(3)
         self.sequence += 1
-        if aligned and self.aligned_sequence is None:
+        if mode != ALIGNING and self.aligned_sequence is None:
             self.aligned_sequence = self.sequence
         self.synced_revision = revision
         self.last_sync_t = t
-        return Correction(match[0], self.sequence, dp, dv, phi, SensorErrors(**sensor)), resent
+        return Correction(match[0], self.sequence, dp, dv, phi, SensorErrors(**sensor),
+                          mode), resent

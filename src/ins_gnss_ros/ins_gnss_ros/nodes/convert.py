@@ -10,10 +10,17 @@ from __future__ import annotations
 
 import numpy as np
 from geometry_msgs.msg import Quaternion, Vector3
+from ins_gnss_msgs.msg import InsState
 
 from ..io import NS, encode_columns, set_stamp_sec, stamp_to_sec
 from ..nav.increments import SensorErrors, increment_problem
+from ..nav.modes import ALIGNING, DEAD_RECKONING, INVALID, NAVIGATING
 from ..nav.strapdown import NavState
+
+#: Mode (:mod:`..nav.modes`) -> the MODE_* value of InsState, FilterStatus and InsCorrection (the
+#: same values, test/test_messages.py; InsCorrection has no INVALID).
+MODE_VALUES = {ALIGNING: InsState.MODE_ALIGNING, NAVIGATING: InsState.MODE_NAVIGATING,
+               DEAD_RECKONING: InsState.MODE_DEAD_RECKONING, INVALID: InsState.MODE_INVALID}
 
 
 def vec(v: Vector3) -> np.ndarray:

@@ -6,7 +6,8 @@ by :func:`ins_gnss_ros.nav.filter_config.navigator_config` (the offline replay r
 three). It keeps the ``strapdown`` node on the filter's solution by state synchronisation
 (:class:`ins_gnss_ros.nav.strapdown_sync.StrapdownSync`): whenever the filter has corrected its
 solution, the strapdown's ``ins/state`` of a common epoch is compared with the filter's solution and the
-difference goes out as an ``ins/correction`` referred to that epoch.
+difference goes out as an ``ins/correction`` referred to that epoch, with the filter's mode
+(the strapdown's ``ins/state`` reports it: ALIGNING while the filter levels and aligns).
 
 Coupling: ``loose`` uses ``gnss/fix`` and ``gnss/vel``; ``tight`` uses the pseudoranges and
 Dopplers of ``gnss/observations`` with the broadcast orbits of ``gnss/ephemeris`` (receiver clock
@@ -69,10 +70,10 @@ from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import StrapdownSync
 from .base import DRIVER_QOS, LATCHED_QOS, SENSOR_QOS, STATE_QOS, TF_QOS, TF_STATIC_QOS, \
     NavNode, ParameterError, run
-from .convert import increment_of, nav_state_from_msg, sensor_errors_of, set_vector3
+from .convert import MODE_VALUES, increment_of, nav_state_from_msg, sensor_errors_of, set_vector3
 from .ekf_inputs import EkfInputs
 from .ekf_services import EkfServices
-from .nav_messages import MODES, datum_msg, fix_msg, fix_status, imu_msg, odom_msg, status_msg
+from .nav_messages import datum_msg, fix_msg, fix_status, imu_msg, odom_msg, status_msg
 from .tf_messages import FRAME_PARAMS, solution_tf, static_tf
 
 #: QoS of the inputs that are not sensor streams (EkfInputs.handlers gives the topics).
@@ -185,7 +186,7 @@ class EkfNode(EkfServices, NavNode):
         if not nav.started or not self.sync.due(nav.solution.t, nav.revision):
             return
         result = self.sync.correction(nav.solution.t, nav.state_at, nav.estimates, nav.revision,
-                                      aligned=nav.mode != ALIGNING)
+                                      nav.mode)
         if result is None:
             return
         c, resent = result
@@ -201,6 +202,7 @@ class EkfNode(EkfServices, NavNode):
             nav.revision += self.converging
         corr = new(InsCorrection)
         corr.sequence = c.sequence
+        corr.mode = MODE_VALUES[c.mode]
         corr.header.stamp, corr.header.frame_id = ns_to_stamp(c.t_ns), "map"
         set_vector3(corr.position_error, c.position_error)
         set_vector3(corr.velocity_error, c.velocity_error)
@@ -245,7 +247,7 @@ class EkfNode(EkfServices, NavNode):
         for name, stats in self.aiding.inputs.items():
             self.diag.set_value(name, stats.summary(t))
         self.pub_status.publish(status_msg(
-            t, MODES[mode], self.aiding.use_ranges, updates,
+            t, MODE_VALUES[mode], self.aiding.use_ranges, updates,
             (nav.space, nav.covariance()) if nav.started else None,
             self.accepted, self.rejected))
 

@@ -10,15 +10,10 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
 
 from ..io import NS, encode_columns, new, sec_to_stamp
-from ..nav import ALIGNING, DEAD_RECKONING, NAVIGATING
 from ..nav.local_frame import to_map
 from ..nav.rotations import quat_to_dcm
 from ..nav.strapdown import NavState
 from .convert import to_quaternion, to_vector3
-
-#: Navigator mode -> FilterStatus mode.
-MODES = {ALIGNING: FilterStatus.MODE_ALIGNING, NAVIGATING: FilterStatus.MODE_NAVIGATING,
-         DEAD_RECKONING: FilterStatus.MODE_DEAD_RECKONING}
 
 
 def fix_status(navigating: bool, input_status: int) -> int:

@@ -7,9 +7,10 @@ detection, double differences, length-constrained LAMBDA with ratio test, held a
 Inputs: ``gnss/observations`` of every antenna, ``gnss/ephemeris`` (GPS, Galileo, BeiDou
 Keplerian orbits), ``gnss/fix`` and ``ins/state`` (the master antenna's position for the lines
 of sight, while younger than ``position_max_age_s``), ``ins/state`` attitude as the prior of the
-ambiguity search (the whole attitude when NAVIGATING and the ekf's ``nav/status`` neither
-ALIGNING nor with a heading σ above ``ins_prior.sigma_deg``; roll and pitch only otherwise, or
-with ``ins_prior.heading`` false). With 2 antennas a fix from scratch from fewer than 6 double
+ambiguity search once a filter has corrected it (``correction_sequence`` > 0: levelled; the
+whole attitude when neither it nor the ekf's ``nav/status`` is ALIGNING and the heading σ there
+is not above ``ins_prior.sigma_deg``; roll and pitch only otherwise, or with
+``ins_prior.heading`` false). With 2 antennas a fix from scratch from fewer than 6 double
 differences is held once the same integers passed the ratio test at ``fix_confirm_epochs``
 consecutive epochs; with 3-4 antennas the fixed baselines must fit the antenna geometry under
 one attitude (the core's rigid-body test).
@@ -217,16 +218,15 @@ class PhaseHeadingNode(NavNode):
                               math.radians(msg.longitude), msg.altitude)
 
     def on_ins_state(self, msg: InsState) -> None:
-        # ALIGNING: levelled, heading unknown, unless no filter has corrected it yet (sequence 0:
-        # a strapdown integrating from its initial attitude parameters); DEAD_RECKONING: not
-        # taken as levelled.
+        # Levelled once a filter has corrected it (sequence 0: a strapdown integrating from its
+        # initial attitude parameters; the filter corrects only after levelling); the heading
+        # found unless ALIGNING (DEAD_RECKONING: found, drifting; nav/status's sigma says how
+        # far).
         mode = msg.mode
         if mode == InsState.MODE_INVALID or not self.pipeline.ins_state(
                 stamp_to_sec(msg.header.stamp), msg.latitude, msg.longitude, msg.altitude,
-                quat(msg.orientation),
-                levelled=mode == InsState.MODE_NAVIGATING or (
-                    mode == InsState.MODE_ALIGNING and msg.correction_sequence > 0),
-                heading_known=mode == InsState.MODE_NAVIGATING):
+                quat(msg.orientation), levelled=msg.correction_sequence > 0,
+                heading_known=mode != InsState.MODE_ALIGNING):
             self.diag.count("invalid ins/state ignored")
 
     def on_filter_status(self, msg: FilterStatus) -> None:

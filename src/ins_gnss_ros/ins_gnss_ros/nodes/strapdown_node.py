@@ -6,9 +6,11 @@ epoch and re-mechanises the increments since, so a filter running late never cor
 epoch. Sensor-error estimates in a correction (bias and scale-factor increments) are accumulated
 and applied to every increment from that epoch on, unless ``apply_sensor_corrections`` is false
 (when the ``imu_preprocessor`` applies them instead: exactly one of the two must).
-Until its first correction the node says ``MODE_ALIGNING`` (its state is its start-up
-parameters); without corrections since, it keeps navigating (dead reckoning) and says so in
-``mode``.
+The ``mode`` of ``ins/state`` is the filter's mode carried by the last correction applied
+(``MODE_ALIGNING`` before the first: the state is the start-up parameters; with
+``correction_sequence`` > 0 the filter has levelled it, the heading may still be unknown); with no
+correction for ``dead_reckoning_after_s`` the node keeps navigating and says
+``MODE_DEAD_RECKONING`` instead of ``MODE_NAVIGATING``.
 
 A gap in ``imu/delta`` (samples lost before or in the ``imu_preprocessor``) of up to
 ``max_imu_gap_s`` is bridged by holding the rates of the increment after it over the whole gap,
@@ -25,12 +27,15 @@ from ins_gnss_msgs.msg import ImuDelta, InsCorrection, InsState
 
 from ..io import new, stamp_to_ns, stamp_to_sec
 from ..nav.conventions import yaw_from_azimuth
+from ..nav.modes import MODES
 from ..nav.rotations import quat_from_euler
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import ClosedLoopStrapdown, Correction
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, run
-from .convert import fill_ins_state, increment_of, sensor_errors_of, set_vector3, vec
+from .convert import MODE_VALUES, fill_ins_state, increment_of, sensor_errors_of, set_vector3, vec
 
+#: InsCorrection mode -> the filter's mode (:mod:`..nav.modes`).
+_CORRECTION_MODES = {MODE_VALUES[mode]: mode for mode in MODES}
 #: ClosedLoopStrapdown events -> diagnostics.
 _EVENTS = {"lost": "imu lost: gap in increments beyond max_imu_gap_s, new run",
            "bridged": "gap in increments: bridged by holding the rates",
@@ -41,7 +46,7 @@ def correction_from_msg(msg: InsCorrection) -> Correction:
     """ins_gnss_msgs/InsCorrection -> Correction."""
     return Correction(stamp_to_ns(msg.header.stamp), msg.sequence,
                       vec(msg.position_error), vec(msg.velocity_error), vec(msg.attitude_error),
-                      sensor_errors_of(msg))
+                      sensor_errors_of(msg), _CORRECTION_MODES[msg.mode])
 
 
 class StrapdownNode(NavNode):
@@ -99,6 +104,9 @@ class StrapdownNode(NavNode):
         if not all(np.all(np.isfinite(e)) for e in errors):
             self.diag.count("non-finite correction rejected")
             return
+        if msg.mode not in _CORRECTION_MODES:
+            self.diag.count("correction with an unknown mode rejected")
+            return
         event = self.loop.correct(correction_from_msg(msg))
         if event == "older than this run":
             self.diag.count("correction older than this run ignored", log=False)
@@ -119,12 +127,7 @@ class StrapdownNode(NavNode):
         set_vector3(msg.accel_bias, loop.sensor.accel_bias)
         set_vector3(msg.gyro_scale_factor, loop.sensor.gyro_scale)
         set_vector3(msg.accel_scale_factor, loop.sensor.accel_scale)
-        # Before its first correction the state is the start-up parameters, not aligned by any
-        # filter (ALIGNING); without corrections since, it was aligned once (DEAD_RECKONING).
-        silent = state.t - loop.last_correction_t > self.p["dead_reckoning_after_s"]
-        msg.mode = InsState.MODE_INVALID if loop.lost else \
-            InsState.MODE_ALIGNING if loop.correction_sequence == 0 else \
-            InsState.MODE_DEAD_RECKONING if silent else InsState.MODE_NAVIGATING
+        msg.mode = MODE_VALUES[loop.mode(self.p["dead_reckoning_after_s"])]
         msg.correction_sequence = loop.correction_sequence
         self.pub.publish(msg)
 

@@ -282,21 +282,17 @@ def output_messages(result, config, datum, frames, prefix="", sensor_errors=Fals
     sensor_errors : bool
         Fill the sensor-error fields of ins/state from ``result.estimates``.
     """
-    from ins_gnss_msgs.msg import InsState
     from sensor_msgs.msg import NavSatStatus
 
     from ins_gnss_ros.io import msgtype_of, ns_to_stamp, sec_to_ns, sec_to_stamp_ns, serialize
-    from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, NAVIGATING, NavState
+    from ins_gnss_ros.nav import NAVIGATING, NavState
     from ins_gnss_ros.nav.increments import SensorErrors
     from ins_gnss_ros.nav.odom_frame import OdomTrack
     from ins_gnss_ros.nav.recording import published_covariance
-    from ins_gnss_ros.nodes.convert import ins_state_payloads
-    from ins_gnss_ros.nodes.nav_messages import (MODES, fix_payloads, fix_status, odom_payloads,
-                                                 status_msg)
+    from ins_gnss_ros.nodes.convert import MODE_VALUES, ins_state_payloads
+    from ins_gnss_ros.nodes.nav_messages import fix_payloads, fix_status, odom_payloads, status_msg
     from ins_gnss_ros.nodes.tf_messages import solution_tf, static_tf
 
-    ins_modes = {ALIGNING: InsState.MODE_ALIGNING, NAVIGATING: InsState.MODE_NAVIGATING,
-                 DEAD_RECKONING: InsState.MODE_DEAD_RECKONING}
     if len(result.t) == 0:
         return
     space, updates = result.space, result.updates
@@ -338,7 +334,7 @@ def output_messages(result, config, datum, frames, prefix="", sensor_errors=Fals
                                             result.estimates.items()}) if sensor_errors else None
         # The input's augmentation is not kept per epoch: a NAVIGATING solution is a FIX here.
         payloads = [(topic["ins/state"], types["ins/state"], ins_state_payloads(
-                        stamp, lat, lon, h, v, q, [ins_modes[m] for m in mode], errors=errors)),
+                        stamp, lat, lon, h, v, q, [MODE_VALUES[m] for m in mode], errors=errors)),
                     (topic["nav/fix"], types["nav/fix"], fix_payloads(
                         stamp, lat, lon, h, P[:, space["pos"], space["pos"]],
                         np.where(mode == NAVIGATING, navigating, not_navigating), names[1]))]
@@ -365,7 +361,7 @@ def output_messages(result, config, datum, frames, prefix="", sensor_errors=Fals
                     u += 1
                 accepted += sum(x.accepted for x in since)
                 rejected += sum(not x.accepted for x in since)
-                status = status_msg(t, MODES[mode[i]], False, since, (space, P[i]),
+                status = status_msg(t, MODE_VALUES[mode[i]], False, since, (space, P[i]),
                                     accepted, rejected)
                 logged.append((stamp_ns, topic["nav/status"], "ins_gnss_msgs/msg/FilterStatus",
                                serialize(status)))
