@@ -34,7 +34,7 @@ from typing import Any, Iterable, Iterator
 from ..params_io import ParamsFileError, load_yaml_file
 from .cdr import Unsupported, codec
 from .mcap_reader import McapReader, RawMessage
-from .messages import MessageTypeError, msg_class, msgtype_of
+from .messages import MessageTypeError, msg_class, msgtype_of, template
 from .stamps import msg_stamp_ns
 
 #: Package whose .msg files are registered in the typestore besides the ROS 2 Jazzy ones.
@@ -91,10 +91,17 @@ def serialize(msg) -> bytes:
     BagError
         A type with wide strings, which the layout does not cover.
     """
+    return _writing(type(msg))[1](msg)
+
+
+@lru_cache(maxsize=None)
+def _writing(cls) -> tuple:
+    """(type name, encoder) of an rclpy message class, looked up once per class (a replay
+    records a few hundred thousand messages of a dozen types)."""
     try:
-        return codec(type(msg)).encode(msg)
+        return msgtype_of(template(cls)), codec(cls).encode
     except Unsupported as err:
-        raise BagError(f"cannot write {msgtype_of(msg)}: {err}") from None
+        raise BagError(f"cannot write {msgtype_of(template(cls))}: {err}") from None
 
 
 def decode_message(raw: RawMessage, path="bag"):
@@ -150,8 +157,9 @@ class BagWriter:
 
     def write(self, topic: str, msg, t_ns: int | None = None) -> None:
         """Queue ``msg`` on ``topic`` at log time ``t_ns`` (default: its header stamp)."""
-        self.write_raw(topic, msgtype_of(msg), msg_stamp_ns(msg) if t_ns is None else t_ns,
-                       serialize(msg))
+        msgtype, encode = _writing(type(msg))
+        self.write_raw(topic, msgtype, msg_stamp_ns(msg) if t_ns is None else t_ns,
+                       encode(msg))
 
     def write_raw(self, topic: str, msgtype: str, t_ns: int, data: bytes) -> None:
         """Queue a serialised (CDR) message of type ``msgtype`` on ``topic`` at ``t_ns``."""

@@ -258,11 +258,14 @@ class Aiding:
         # updates of that rest once confirmed, also when a heading source aligned it
         # meanwhile: they are the static start's velocity and gyro bias (its levelling took a
         # second of data), which the start could not wait for; they end as the vehicle moves.
-        if self._rest.increment(t, dtheta, dv, dt) and "gnss/vel" not in self.inputs and \
-                (not self.navigator.heading_known or self._start_rest):
-            self.navigator.add_measurement(ZeroVelocity(t))
-        if math.isnan(self._rest.still_since):
-            self._start_rest = False  # it moved: the start's rest is over
+        # Rest stands in for the receiver's speed: once gnss/vel has come, nothing asks the
+        # detector again (here or in fix), so it is no longer fed.
+        if "gnss/vel" not in self.inputs:
+            if self._rest.increment(t, dtheta, dv, dt) and \
+                    (not self.navigator.heading_known or self._start_rest):
+                self.navigator.add_measurement(ZeroVelocity(t))
+            if math.isnan(self._rest.still_since):
+                self._start_rest = False  # it moved: the start's rest is over
         return None if gap == CONTIGUOUS else gap
 
     def fix(self, t: float, lat_deg: float, lon_deg: float, h: float, cov: np.ndarray,
@@ -302,7 +305,8 @@ class Aiding:
             common_var = max(0.5 * float(cov[0, 0] + cov[1, 1] - white[0, 0] - white[1, 1]),
                              0.0)
             cov = white
-        at_rest = self._rest.fix(t, lat, lon, h, self._course.fix_to_fix(cov))
+        at_rest = "gnss/vel" not in self.inputs and \
+            self._rest.fix(t, lat, lon, h, self._course.fix_to_fix(cov))
         if self._without_velocity_before_start():
             if at_rest:
                 self.navigator.add_measurement(ZeroVelocity(t))  # levels as a static start

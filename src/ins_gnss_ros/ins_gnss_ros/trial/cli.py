@@ -37,15 +37,26 @@ class _Parser(argparse.ArgumentParser):
         sys.exit(EXIT_BAD_INPUT)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from ins_gnss_ros.sim.scenarios import SCENARIOS
-    from ins_gnss_ros.trial.importers import IMPORTERS
-    from ins_gnss_ros.trial.simulate import SimOptions
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of ``trial`` with every subcommand, and the arguments of ``command`` only.
 
+    A subcommand's arguments import what their choices and defaults come from (the simulators,
+    the importers: seconds): only the subcommand being run pays for it (None: none does, as
+    for ``trial --help``).
+    """
     parser = _Parser(prog="trial", description="Simulate, import, replay and evaluate trials.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    for name, (help_text, add_arguments, _) in SUBCOMMANDS.items():
+        p = sub.add_parser(name, help=help_text)
+        if name == command:
+            add_arguments(p)
+    return parser
 
-    p = sub.add_parser("simulate", help="write a simulated trial as a bag")
+
+def _simulate_args(p):
+    from ins_gnss_ros.sim.scenarios import SCENARIOS
+    from ins_gnss_ros.trial.simulate import SimOptions
+
     p.add_argument("--scenario", choices=sorted(SCENARIOS), required=True)
     p.add_argument("--duration", type=float, default=120.0, help="s")
     p.add_argument("--seed", type=int, default=0)
@@ -89,7 +100,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "IMU (e.g. 2.7x1.2)")
     p.add_argument("--out", required=True, help="new bag folder")
 
-    p = sub.add_parser("import", help="convert recorded data into a bag")
+
+def _import_args(p):
+    from ins_gnss_ros.trial.importers import IMPORTERS
+
     p.add_argument("kind", choices=sorted(IMPORTERS))
     p.add_argument("src", help="; ".join(f"{k}: {v[1]}" for k, v in sorted(IMPORTERS.items())))
     p.add_argument("--truth-pos", default=None,
@@ -105,8 +119,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "as imu/data_raw")
     p.add_argument("--out", required=True, help="new bag folder")
 
-    p = sub.add_parser("replay", help="run the node graph of a profile over a bag")
-    _replay_args(p)
+
+def _replay_args(p):
+    _replay_options(p)
     p.add_argument("bag")
     p.add_argument("--out", required=True, help="new output folder")
     p.add_argument("--rate", type=float, default=None,
@@ -124,8 +139,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "gnss/observations, gnss/fix and gnss/vel are withheld (in-process "
                         "replay only)")
 
-    p = sub.add_parser("smooth", help="post-process a bag: the profile's forward filter, then "
-                       "the RTS smoother")
+
+def _smooth_args(p):
     p.add_argument("bag")
     p.add_argument("--config", required=True, help="params file (config/PROFILE.yaml)")
     p.add_argument("--out", required=True, help="new output folder")
@@ -138,11 +153,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="progress bar (default: when stderr is a terminal)")
 
-    p = sub.add_parser("export", help="write a run's solutions as CSV, KML, RTKLIB .pos")
+
+def _export_args(p):
     p.add_argument("out", help="replay or smooth output folder")
     p.add_argument("--formats", default="csv,kml,pos", help="comma-separated csv, kml, pos")
 
-    p = sub.add_parser("evaluate", help="error statistics, plots and report of a replay")
+
+def _evaluate_args(p):
     p.add_argument("out", help="replay output folder")
     p.add_argument("--truth", default=None, help="bag with truth/state (default: the input bag)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -164,13 +181,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also the relative position error over windows of S s, linear trend "
                         "removed (SAR apertures)")
 
-    p = sub.add_parser("compare", help="are two replays' outputs identical, message by message")
+
+def _compare_args(p):
     p.add_argument("a", help="replay output folder (or bag folder)")
     p.add_argument("b", help="the other one")
     p.add_argument("--with-diagnostics", action="store_true", help="compare /diagnostics too")
 
-    p = sub.add_parser("batch", help="many replays or Monte Carlo seeds on dask.distributed")
-    _replay_args(p)
+
+def _batch_args(p):
+    _replay_options(p)
     p.add_argument("--out", required=True, help="new folder for the runs and batch.json")
     p.add_argument("--scenario", default=None, help="Monte Carlo: simulate this scenario per seed")
     p.add_argument("--seeds", type=int, default=10, help="Monte Carlo: number of seeds")
@@ -182,13 +201,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", default=None, help="address of a running dask scheduler")
     p.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes")
 
-    p = sub.add_parser("run", help="start the profile's graph on real sensors, supervised")
+
+def _run_args(p):
     p.add_argument("--config", required=True, help="params file (config/PROFILE.yaml)")
     p.add_argument("--max-restarts", type=int, default=5, help="per node, then give up")
-    return parser
 
 
-def _replay_args(p):
+def _replay_options(p):
     p.add_argument("--config", required=True, help="params file (config/PROFILE.yaml)")
     p.add_argument("--outages", default=None, help="LEN:PERIOD[:FIRST] s of GNSS withheld")
     p.add_argument("--init-from-truth", action="store_true",
@@ -199,9 +218,12 @@ def _replay_args(p):
 
 def main(argv=None) -> int:
     try:
-        # Parsing imports the simulators: a Ctrl-C then is an interruption like any other.
-        args = build_parser().parse_args(argv)
-        return COMMANDS[args.command](args)
+        argv = sys.argv[1:] if argv is None else list(argv)
+        # trial takes no option of its own but -h: its first other word names the subcommand.
+        command = next((word for word in argv if not word.startswith("-")), None)
+        # Parsing may import the simulators: a Ctrl-C then is an interruption like any other.
+        args = build_parser(command).parse_args(argv)
+        return SUBCOMMANDS[args.command][2](args)
     except KeyboardInterrupt:
         print("trial: interrupted", file=sys.stderr)
         return 130
@@ -262,9 +284,6 @@ def cmd_import(args) -> int:
 
 
 def cmd_replay(args) -> int:
-    from ins_gnss_ros.trial.offline import replay_offline
-    from ins_gnss_ros.trial.processes import replay_processes
-    from ins_gnss_ros.trial.replay import replay
     from ins_gnss_ros.trial.run_folder import counts_table
 
     if args.processes and args.rate is None:
@@ -280,10 +299,15 @@ def cmd_replay(args) -> int:
         if args.processes or args.init_from_truth:
             raise ValueError("--offline runs no nodes: it takes neither --processes nor "
                              "--init-from-truth")
+        from ins_gnss_ros.trial.offline import replay_offline
+
         summary = replay_offline(args.bag, args.config, args.out, outages=args.outages,
                                 progress=_progress(args))
     else:
-        run = replay_processes if args.processes else replay
+        if args.processes:
+            from ins_gnss_ros.trial.processes import replay_processes as run
+        else:
+            from ins_gnss_ros.trial.replay import replay as run
         kwargs = {"rate": args.rate} if args.processes else {"faults": args.faults,
                                                              "satellites": args.satellites}
         summary = run(args.bag, args.config, args.out, outages=args.outages,
@@ -376,8 +400,20 @@ def cmd_run(args) -> int:
     return Supervisor(profile, max_restarts=args.max_restarts).run()
 
 
-COMMANDS = {"simulate": cmd_simulate, "import": cmd_import, "replay": cmd_replay,
-            "smooth": cmd_smooth, "export": cmd_export, "evaluate": cmd_evaluate, "compare": cmd_compare, "batch": cmd_batch, "run": cmd_run}
+#: Subcommand -> (help, function adding its arguments to its parser, function running it).
+SUBCOMMANDS = {
+    "simulate": ("write a simulated trial as a bag", _simulate_args, cmd_simulate),
+    "import": ("convert recorded data into a bag", _import_args, cmd_import),
+    "replay": ("run the node graph of a profile over a bag", _replay_args, cmd_replay),
+    "smooth": ("post-process a bag: the profile's forward filter, then the RTS smoother",
+               _smooth_args, cmd_smooth),
+    "export": ("write a run's solutions as CSV, KML, RTKLIB .pos", _export_args, cmd_export),
+    "evaluate": ("error statistics, plots and report of a replay", _evaluate_args, cmd_evaluate),
+    "compare": ("are two replays' outputs identical, message by message", _compare_args,
+                cmd_compare),
+    "batch": ("many replays or Monte Carlo seeds on dask.distributed", _batch_args, cmd_batch),
+    "run": ("start the profile's graph on real sensors, supervised", _run_args, cmd_run),
+}
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -125,8 +125,9 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
 
     def record(topic, msg):
         if msg is not feeding[0]:
-            writer.write(topic, msg, bagio.msg_stamp_ns(msg) if hasattr(msg, "header")
-                         else bus.now_ns)
+            header = getattr(msg, "header", None)
+            writer.write(topic, msg, bus.now_ns if header is None
+                         else bagio.stamp_to_ns(header.stamp))
             counts.recorded[topic] += 1
 
     bus.recorders.append(record)
