@@ -139,10 +139,11 @@ class Navigator:
     def add_measurement(self, m):
         """Add a time-stamped measurement (measurement_types.py); one older than the current
         state is applied at its epoch by re-running the stored IMU data (within `history` s)."""
-        if "td" in self._space or \
+        if self._state.nav is None or "td" in self._space or \
                 m.t <= self._imu.last_time - self.config.history + self.config.cov_interval:
-            # The epoch depends on the time-offset estimate of the caught-up state; near the
-            # history's end the checkpoints it still keeps decide "too old".
+            # Before the start, the measurements before m may start the filter (after which m
+            # can be too old); the epoch depends on the time-offset estimate of the caught-up
+            # state; near the history's end the checkpoints it still keeps decide "too old".
             self._catch_up()
         epoch = self._epoch_of(m)
         if self._state.nav is not None and epoch < self._state.nav.t:
