@@ -339,7 +339,7 @@ class Navigator:
         phi = propagate(s, self._imu.rows(i, j), cfg.noise, cfg.cov_interval, self._gaps,
                         self._space)
         s.next_sample = j
-        self._recorder.epoch(s, phi, s.ekf.P.copy(), self._fix_common_var)
+        self._recorder.epoch(s, phi, s.ekf.P, self._fix_common_var)  # stored as a copy
         if s.mode != ALIGNING:
             if cfg.nhc_sigma is not None and s.nav.t - s.t_nhc >= cfg.nhc_interval - 1e-9:
                 s.t_nhc = s.nav.t
