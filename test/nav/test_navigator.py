@@ -13,6 +13,7 @@ from ins_gnss_ros.nav.earth import radii
 from ins_gnss_ros.nav.ekf import ExtraState
 from ins_gnss_ros.nav.error_model import nav_error
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
+from ins_gnss_ros.nav.recording import published_covariance
 from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, \
     GnssVelocity, Navigator, NavigatorConfig, point_track
 from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405, filter_noise
@@ -361,6 +362,12 @@ def test_gnss_step_forced_in_keeps_an_honest_covariance(sim, end):
     assert np.all(mode[t < 60.0] == NAVIGATING)
     if end == 70.0:  # the fixes came back: so did the solution
         assert abs(nav_error(nav.solution, truth_state(traj, nav.solution.t))[0][1]) < 1.0
+    # The record keeps the floor per epoch, so that the offline path (trial/offline.py)
+    # publishes the covariance the ekf node does.
+    out = nav.output()
+    assert np.max(out.published_var[-1, nav.space["pos"]]) > 1.0
+    np.testing.assert_allclose(published_covariance(out.P[-1], out.published_var[-1]),
+                               nav.covariance())
 
 
 def test_divergence_recovers_through_the_forced_update(sim):

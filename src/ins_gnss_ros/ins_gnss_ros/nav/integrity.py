@@ -138,17 +138,14 @@ class Integrity:
             epoch - first >= cfg.suspect_time and epoch - last <= cfg.suspect_time
             for first, last in self.rejecting.values())
 
-    def covariance(self, P, space):
-        """The covariance to publish: the filter's P (n, n) plus, on the state blocks each
-        forced kind measures directly, the noise floor it keeps."""
-        if not self.floors:
-            return P
-        P = P.copy()
+    def variances(self, space):
+        """What the noise floors add to the diagonal of the covariance published, (n,): on the
+        state blocks each forced kind measures directly, the floor it keeps."""
+        var = np.zeros(space.size)
         for floor in self.floors.values():
             for name in floor.blocks:
-                s = space[name]
-                P[s, s] += np.diag(floor.variances(3))
-        return P
+                var[space[name]] += floor.variances(3)
+        return var
 
     def _within_floor(self, ekf, innov, floor):
         """Beyond the gate of H P H^T + R, but within that of H P H^T + R + F (the floor)."""

@@ -220,13 +220,21 @@ class Navigator:
     lever_arm_b = property(lambda self: self._lever, doc="GNSS antenna relative to the IMU, FLU, m.")
 
     def covariance(self):
-        """The covariance to publish (n, n), once :attr:`started`: the filter's P plus the
-        noise floors of forced measurement kinds (integrity.py) and, on the horizontal
-        position, the error common to the fixes the filter follows (GnssFix.common_var: the
-        filter's position is relative to them)."""
+        """The covariance to publish (n, n), once :attr:`started`: the filter's P plus
+        :meth:`_published_var` on its diagonal (recorded per epoch, so that the offline path
+        publishes the same)."""
         self._catch_up()
-        return published_covariance(self._integrity.covariance(self._state.ekf.P, self._space),
-                                    self._space, self._fix_common_var)
+        return published_covariance(self._state.ekf.P, self._published_var())
+
+    def _published_var(self):
+        """What the published covariance adds to the diagonal of P, (n,): the noise floors of
+        forced measurement kinds (integrity.py) and, on the horizontal position, the error
+        common to the fixes the filter follows (GnssFix.common_var: the filter's position is
+        relative to them)."""
+        var = self._integrity.variances(self._space)
+        east = self._space["pos"].start
+        var[east:east + 2] += self._fix_common_var
+        return var
 
     def updates_since(self, count):
         """The update results after the first `count` (as counted by :attr:`update_count`)."""
@@ -331,7 +339,7 @@ class Navigator:
         """Start the filter at solution nav with covariance P0 (the first epoch)."""
         s = self._state
         s.nav, s.ekf, s.t_epoch = nav, ErrorStateEKF(self._space, self.config.noise, P0), nav.t
-        self._recorder.epoch(s, np.eye(self._space.size), P0, self._fix_common_var)
+        self._recorder.epoch(s, np.eye(self._space.size), P0, self._published_var())
 
     def _segment(self, i, j):
         """Mechanise samples i..j-1 and propagate the covariance to the end of the segment."""
@@ -339,7 +347,7 @@ class Navigator:
         phi = propagate(s, self._imu.rows(i, j), cfg.noise, cfg.cov_interval, self._gaps,
                         self._space)
         s.next_sample = j
-        self._recorder.epoch(s, phi, s.ekf.P, self._fix_common_var)  # stored as a copy
+        self._recorder.epoch(s, phi, s.ekf.P, self._published_var())  # stored as a copy
         if s.mode != ALIGNING:
             if cfg.nhc_sigma is not None and s.nav.t - s.t_nhc >= cfg.nhc_interval - 1e-9:
                 s.t_nhc = s.nav.t
@@ -543,7 +551,7 @@ class Navigator:
         s.nav = apply_correction(s.nav, dx[S["pos"]], dx[S["vel"]], dx[S["att"]])
         for name in s.estimates:
             s.estimates[name] = s.estimates[name] + dx[S[name]]
-        self._recorder.correct(s, dx, self._fix_common_var)
+        self._recorder.correct(s, dx, self._published_var())
 
     def _rotate_yaw(self, delta, sigma):
         """The heading alignment (alignment.rotate_yaw): from here on NAVIGATING."""
@@ -551,4 +559,4 @@ class Navigator:
         s.nav, s.ekf.P = rotate_yaw(s.nav, s.ekf.P, self._space, delta, sigma,
                                     self.config.sigma_yaw_align, s.rest_pos)
         s.heading_known, s.mode, s.t_last_aid = True, NAVIGATING, s.nav.t
-        self._recorder.correct(s, np.zeros(self._space.size), self._fix_common_var)
+        self._recorder.correct(s, np.zeros(self._space.size), self._published_var())

@@ -32,9 +32,9 @@ class NavigatorOutput(Track):
         Transition matrix from the previous epoch (identity at the first).
     dx : (k, n)
         Sum of the corrections fed back at the epoch.
-    fix_common_var : (k,)
-        The error common to the fixes the filter followed at the epoch, m^2 per horizontal
-        axis (GnssFix.common_var).
+    published_var : (k, n)
+        What the published covariance adds to the diagonal of P at the epoch
+        (:func:`published_covariance`; Navigator.covariance).
     estimates : dict of str to (k, size)
         Running sensor / clock / extra estimates after the epoch.
     space : StateSpace
@@ -46,7 +46,7 @@ class NavigatorOutput(Track):
     P_prior: np.ndarray | None
     phi: np.ndarray | None
     dx: np.ndarray
-    fix_common_var: np.ndarray
+    published_var: np.ndarray
     estimates: dict
     space: StateSpace
     updates: list
@@ -57,18 +57,18 @@ class NavigatorOutput(Track):
         return np.sqrt(np.diagonal(self.P, axis1=1, axis2=2)[:, s])
 
 
-def published_covariance(P, space, fix_common_var):
+def published_covariance(P, published_var):
     """The covariance to publish of one epoch's (n, n) or a block of epochs' (k, n, n) filter
-    covariance P: the error common to the fixes the filter follows (fix_common_var, m^2 per
-    horizontal axis, a scalar or (k,)) added to the horizontal position, as the filter's
-    position is relative to them (GnssFix.common_var). P itself is not changed."""
-    var = np.asarray(fix_common_var, float)
+    covariance P: P with the variances published_var ((n,) or (k, n)) added to its diagonal.
+    They are what the filter's P leaves out (Navigator.covariance): the noise floors of forced
+    measurement kinds (integrity.py) and, on the horizontal position, the error common to the
+    fixes the filter follows (GnssFix.common_var). P itself is not changed."""
+    var = np.asarray(published_var, float)
     if not np.any(var > 0.0):
         return P
     P = P.copy()
-    east = space["pos"].start
-    P[..., east, east] += var
-    P[..., east + 1, east + 1] += var
+    diagonal = np.arange(P.shape[-1])
+    P[..., diagonal, diagonal] += var
     return P
 
 
@@ -159,28 +159,28 @@ class Recorder:
         """Number of epochs recorded."""
         return self._out.n
 
-    def epoch(self, state, phi, P_prior, fix_common_var):
+    def epoch(self, state, phi, P_prior, published_var):
         """Record a new epoch: the run state after the propagation, with its Phi and P-, and
-        the fixes' common variance (m^2) of the moment."""
+        what the published covariance adds to P's diagonal at the moment (n,)."""
         if not self._record:
             return
         nav = state.nav
         values = {"t": nav.t, "lat": nav.lat, "lon": nav.lon, "h": nav.h, "v": nav.v_enu,
                   "q": nav.q_nb, "mode": state.mode, "dx": np.zeros(self.space.size),
-                  "fix_common_var": fix_common_var, **self._estimate_values(state)}
+                  "published_var": published_var, **self._estimate_values(state)}
         if self._store_covariance:
             values.update(P=state.ekf.P, Pp=P_prior, phi=phi)
         self._out.append(values)
 
-    def correct(self, state, dx, fix_common_var):
-        """Replace the current epoch's record by the corrected state (after an update) and the
-        fixes' common variance (m^2) it was made with."""
+    def correct(self, state, dx, published_var):
+        """Replace the current epoch's record by the corrected state (after an update) and
+        what the published covariance adds to P's diagonal after it (n,)."""
         if not self._record:
             return
         o, nav = self._out, state.nav
         for name, value in (("lat", nav.lat), ("lon", nav.lon), ("h", nav.h),
                             ("v", nav.v_enu), ("q", nav.q_nb), ("mode", state.mode),
-                            ("fix_common_var", fix_common_var),
+                            ("published_var", published_var),
                             *self._estimate_values(state).items()):
             o.set_last(name, value)
         o.last("dx")[:] += dx
@@ -260,5 +260,5 @@ class Recorder:
             mode=o.view("mode").astype(str), P=o.view("P") if full else None,
             P_prior=o.view("Pp") if full else None, phi=o.view("phi") if full else None,
             dx=o.view("dx").reshape(n, self.space.size),
-            fix_common_var=o.view("fix_common_var"), estimates=est,
+            published_var=o.view("published_var").reshape(n, self.space.size), estimates=est,
             space=self.space, updates=list(self._updates))

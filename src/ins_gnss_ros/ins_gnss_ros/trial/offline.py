@@ -330,9 +330,8 @@ def output_messages(result, config, datum, frames, prefix="", sensor_errors=Fals
         k = slice(first, first + OUTPUT_BLOCK)
         lat, lon, h, v, q = (result.lat[k], result.lon[k], result.h[k], result.v_enu[k],
                              result.q_nb[k])
-        # As the ekf node publishes it (Navigator.covariance), but without the noise floors
-        # of forced kinds, which are not recorded per epoch.
-        P = published_covariance(result.P[k], space, result.fix_common_var[k])
+        # As the ekf node publishes it (Navigator.covariance).
+        P = published_covariance(result.P[k], result.published_var[k])
         mode = result.mode[k]
         stamp = stamps_ns[k]
         errors = SensorErrors.of_estimates({name: values[k] for name, values in
