@@ -161,6 +161,36 @@ def mech_run(lat, lon, h, v0, q0, dths, dvs, dt, ell_par, h_ref, k1, k2):
 
 
 @njit(cache=True)
+def mech_segment(lat, lon, h, v, q, th, dv, cth, cdv, dts, gyro_bias, gyro_scale, accel_bias,
+                 accel_scale, dt, ell_par, sums):
+    """The navigator's time update of one segment of raw samples on the solution (lat, lon,
+    h, v, q): each increment compensated as increments.SensorErrors.compensate does
+    ((measured - bias dts) / (1 + scale)), its coning/sculling terms cth, cdv added, and
+    mechanised by :func:`mech_step` at the common step dt with a free vertical channel.
+
+    v and q are updated in place (mech_step reads them before it writes); sums gets the sums
+    of the compensated gyro and accelerometer increments (2, 3), in numpy's order (row after
+    row, from the first). Returns (lat, lon, h).
+    """
+    rot = np.empty(3)
+    dvn = np.empty(3)
+    for i in range(th.shape[0]):
+        for j in range(3):
+            a = (th[i, j] - dts[i] * gyro_bias[j]) / (1.0 + gyro_scale[j])
+            b = (dv[i, j] - dts[i] * accel_bias[j]) / (1.0 + accel_scale[j])
+            if i == 0:
+                sums[0, j], sums[1, j] = a, b
+            else:
+                sums[0, j] += a
+                sums[1, j] += b
+            rot[j] = a + cth[i, j]
+            dvn[j] = b + cdv[i, j]
+        lat, lon, h = mech_step(lat, lon, h, v, q, rot, dvn, dt, ell_par, math.nan, 0.0, 0.0,
+                                v, q)
+    return lat, lon, h
+
+
+@njit(cache=True)
 def _cross_acc(out, s, a0, a1, a2, b0, b1, b2):
     """out += s * (a x b) on scalars (no temporary arrays)."""
     out[0] += s * (a1 * b2 - a2 * b1)
@@ -392,6 +422,13 @@ def lyapunov_series(F, P0, Q, dt, order):
         coeff *= dt / i
         out += K * coeff
     return 0.5 * (out + out.T)
+
+
+@njit(cache=True)
+def picard_step(F, P, Q, dt, order):
+    """Transition matrix and predicted covariance of one step (ekf.ErrorStateEKF.predict): the
+    two series above in one call."""
+    return picard_transition(F, dt, order), lyapunov_series(F, P, Q, dt, order)
 
 
 @njit(cache=True)

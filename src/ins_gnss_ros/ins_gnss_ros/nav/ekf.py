@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _kernels
-from .discretize import DEFAULT_ORDER, picard_predict, picard_transition
+from .discretize import DEFAULT_ORDER
 from .error_model import DEFAULT_CLOCK_PSD, StateLayout, noise_input, system_matrix
 from .gating import DEFAULT_GATE_PROB, UpdateResult, chi2_gate
 
@@ -209,9 +209,9 @@ class ErrorStateEKF:
         """
         if refresh or self.F_model is None:
             self.F_model, self._Q = self.continuous_model(nav_state, f_b, w_ib_b)
-        F, Q = self.F_model, self._Q
-        phi = picard_transition(F, dt, self.order)
-        self.P = picard_predict(self.P, F, Q, dt, self.order)
+        # Both Picard series in one compiled call (discretize.picard_transition, picard_predict).
+        phi, self.P = _kernels.picard_step(self.F_model, np.ascontiguousarray(self.P, float),
+                                           self._Q, float(dt), int(self.order))
         self.x = phi @ self.x
         return phi
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .coning import coning_sculling
+from . import _kernels
 
 
 class ImuBuffer:
@@ -60,41 +60,47 @@ class ImuBuffer:
         and sculling terms, after dropping those before sample number `needed` (:meth:`trim`).
         ``compensated``: the increments have their terms already (imu/delta): zero terms.
         """
+        n, m = self._n, len(t)
+        times, th, v, cth, cdv = self._reserve(m)
+        times[n:n + m], th[n:n + m], v[n:n + m] = t, dtheta, dv
         if compensated:
             # Compensated once already: adding the terms again doubles them and parts the
             # filter from the strapdown node it keeps in step.
-            self.trim(needed)
-            self._append(t, dtheta, dv, np.zeros_like(dtheta), np.zeros_like(dv))
-            return
-        # Second-order coning/sculling/rotation terms of the raw samples, one batch at a time
-        # (one-sample algorithm chained across batches). Computing them before the bias
-        # compensation changes them by (bias dt) x (increment) ~ 1e-6 m/s per sample for a
-        # 0.2 deg/s gyro bias at 100 Hz: far below the sensor noise, and it keeps the
-        # per-segment work to a subtraction.
-        # Each sample's predecessor (filled in place: np.vstack costs more than the copy in
-        # the ekf node, which adds one sample per call).
-        prev_th, prev_dv = np.zeros_like(dtheta), np.zeros_like(dv)
-        if self._n:
-            prev_th[0], prev_dv[0] = self._store[1][self._n - 1], self._store[2][self._n - 1]
-        prev_th[1:], prev_dv[1:] = dtheta[:-1], dv[:-1]
-        rot, dvn = coning_sculling(dtheta[:, None, :], dv[:, None, :], "one_sample",
-                                   prev=(prev_th, prev_dv))
-        self.trim(needed)
-        self._append(t, dtheta, dv, rot - dtheta, dvn - dv)
+            cth[n:n + m] = 0.0
+            cdv[n:n + m] = 0.0
+        else:
+            # Second-order coning/sculling/rotation terms of the raw samples, one batch at a
+            # time (one-sample algorithm chained across batches). Computing them before the
+            # bias compensation changes them by (bias dt) x (increment) ~ 1e-6 m/s per sample
+            # for a 0.2 deg/s gyro bias at 100 Hz: far below the sensor noise, and it keeps
+            # the per-segment work to a subtraction.
+            # Each sample's predecessor is the row before it in the store (zeros before the
+            # first sample); the compiled kernel is called on views of the store, since the
+            # ekf node adds one sample per call and the checks of coning.coning_sculling cost
+            # more than its arithmetic there.
+            if n:
+                prev_th, prev_v = th[n - 1:n + m - 1], v[n - 1:n + m - 1]
+            else:
+                prev_th, prev_v = np.zeros((m, 3)), np.zeros((m, 3))
+                prev_th[1:], prev_v[1:] = th[:m - 1], v[:m - 1]
+            rows = slice(n, n + m)
+            _kernels.coning_sculling_run(th[rows].reshape(m, 1, 3), v[rows].reshape(m, 1, 3),
+                                         prev_th, prev_v, False, cth[rows], cdv[rows])
+            cth[rows] -= th[rows]   # the terms: compensated increment minus raw
+            cdv[rows] -= v[rows]
+        self._n = n + m
+        self.trim(needed)  # after: the newest sample before them was their predecessor
 
-    def _append(self, *columns):
-        """Append samples: t (N,), dtheta, dv, cth, cdv (N, 3)."""
-        n, m = self._n, len(columns[0])
-        store = self._store if n else None
-        if store is None or n + m > len(store[0]):
+    def _reserve(self, m):
+        """The store, with room for m more samples (its capacity doubled when full)."""
+        n = self._n
+        if self._store is None or n + m > len(self._store[0]):
             capacity = max(4096, 2 * (n + m))
-            store = [np.empty((capacity,) + c.shape[1:]) for c in columns]
+            store = [np.empty((capacity,) + shape) for shape in ((), (3,), (3,), (3,), (3,))]
             for a, old in zip(store, self._store if n else ()):
                 a[:n] = old[:n]
             self._store = store
-        for a, c in zip(store, columns):
-            a[n:n + m] = c
-        self._n = n + m
+        return self._store
 
     def trim(self, needed, keep_min=2000):
         """Drop the samples before number `needed` once there are at least `keep_min` of them

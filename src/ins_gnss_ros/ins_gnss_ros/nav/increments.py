@@ -85,11 +85,14 @@ class SensorErrors:
     def of_estimates(cls, estimates: dict) -> "SensorErrors":
         """What the filter's running estimates (by block name, SENSOR_BLOCKS) add up to; zero
         where the layout has none of a field's blocks."""
-        values = {}
-        for name, blocks in SENSOR_BLOCKS.items():
-            total = sum(estimates[b] for b in blocks if b in estimates)
-            values[name] = total if np.ndim(total) else np.zeros(3)
-        return cls(**values)
+        values = []
+        for blocks in SENSOR_BLOCKS.values():  # the fields' order (a call per filter segment)
+            total = 0
+            for b in blocks:
+                if b in estimates:
+                    total = total + estimates[b]
+            values.append(total if np.ndim(total) else np.zeros(3))
+        return cls(*values)
 
     def __add__(self, other: "SensorErrors") -> "SensorErrors":
         return SensorErrors(self.gyro_bias + other.gyro_bias, self.accel_bias + other.accel_bias,

@@ -58,8 +58,12 @@ UNKNOWN_SPEED_SIGMA = 30.0
 
 
 def _view(part, name, doc):
-    """A read-only property showing attribute `name` of the navigator's attribute `part`."""
-    return property(lambda self: getattr(getattr(self, part), name), doc=doc)
+    """A read-only property showing attribute `name` of the navigator's attribute `part`, once
+    the navigator has caught up with its input (:meth:`Navigator._catch_up`)."""
+    def get(self):
+        self._catch_up()
+        return getattr(getattr(self, part), name)
+    return property(get, doc=doc)
 
 
 class Navigator:
@@ -79,7 +83,7 @@ class Navigator:
         # Corrections of the solution so far, pseudo-measurements (NHC, ZARU) included: what a
         # follower of the solution (the strapdown node) must hear of. Monotonic, neither reset
         # nor rewound: a re-run after a delayed measurement changes the solution again.
-        self.revision = 0
+        self._revision = 0
         self.reset()
 
     # -- input -----------------------------------------------------------------------------
@@ -87,6 +91,10 @@ class Navigator:
         """Forget everything: back to ALIGNING with no data."""
         cfg = self.config
         self._imu = ImuBuffer()
+        # A measurement is queued at once but processed on the next IMU data or the next look
+        # at the results (_catch_up): measurements that arrive together late (a receiver's fix
+        # and velocity of one epoch) then rewind and re-run the IMU data once, not once each.
+        self._behind = False
         self._pending = []          # sorted list of (epoch, sequence, measurement)
         self._seq = 0
         self._state = RunState.initial(self._space)     # rewound by delayed measurements
@@ -114,6 +122,7 @@ class Navigator:
         dv = np.atleast_2d(np.asarray(dv, float))
         if len(self._imu) and t[0] <= self._imu.last_time:
             self.reset()
+        self._behind = False  # caught up by the _advance below
         self._imu.add(t, dtheta, dv, self._rewind.needed_sample(self._state),
                       self.config.compensated_increments)
         self._advance()
@@ -130,10 +139,20 @@ class Navigator:
     def add_measurement(self, m):
         """Add a time-stamped measurement (measurement_types.py); one older than the current
         state is applied at its epoch by re-running the stored IMU data (within `history` s)."""
+        if self._state.nav is None or "td" in self._space or \
+                m.t <= self._imu.last_time - self.config.history + self.config.cov_interval:
+            # Before the start, the measurements before m may start the filter (after which m
+            # can be too old); the epoch depends on the time-offset estimate of the caught-up
+            # state; near the history's end the checkpoints it still keeps decide "too old".
+            self._catch_up()
         epoch = self._epoch_of(m)
         if self._state.nav is not None and epoch < self._state.nav.t:
             checkpoint = self._rewind.before(epoch)
             if checkpoint is None:
+                if self._behind:  # decided, and reported in its place, on the caught-up run
+                    self._catch_up()
+                    self.add_measurement(m)
+                    return
                 self._refuse(m, epoch, "too old")
                 return
             self._state = checkpoint.state.copy()
@@ -142,11 +161,21 @@ class Navigator:
             for again in self._rewind.back_to(checkpoint):
                 self._queue(again)
         self._queue(m)
-        self._advance()
+        # Processed by the next _advance: a re-run from a checkpoint (or the segments up to
+        # m's epoch) gives the same states as if each measurement had been processed on
+        # arrival, since the checkpoints a re-run would take are those it rewinds to.
+        self._behind = True
 
     def flush(self):
         """Process every buffered IMU sample (end of the data)."""
+        self._behind = False
         self._advance(final=True)
+
+    def _catch_up(self):
+        """Process the measurements added since the last IMU data (add_measurement)."""
+        if self._behind:
+            self._behind = False  # first: a subclass's _measure may look at the results
+            self._advance()
 
     def start_from(self, state, estimates, P):
         """Start NAVIGATING from a solution (NavState), running estimates (dict by block name)
@@ -161,7 +190,18 @@ class Navigator:
     @property
     def started(self):
         """The filter runs: levelled at a first fix (or :meth:`start_from`)."""
+        self._catch_up()
         return self._state.ekf is not None
+
+    @property
+    def revision(self):
+        """Corrections of the solution so far (``_revision``)."""
+        self._catch_up()
+        return self._revision
+
+    @revision.setter
+    def revision(self, value):
+        self._revision = value
 
     solution = _view("_state", "nav", "The solution (NavState) at the last filter epoch; None "
                      "before the first fix.")
@@ -183,6 +223,7 @@ class Navigator:
         """The covariance to publish (n, n), once :attr:`started`: the filter's P plus
         :meth:`_published_var` on its diagonal (recorded per epoch, so that the offline path
         publishes the same)."""
+        self._catch_up()
         return published_covariance(self._state.ekf.P, self._published_var())
 
     def _published_var(self):
@@ -197,16 +238,19 @@ class Navigator:
 
     def updates_since(self, count):
         """The update results after the first `count` (as counted by :attr:`update_count`)."""
+        self._catch_up()
         return self._recorder.updates_since(count)
 
     def state_at(self, t):
         """The navigation solution moved to time t (s) at the current acceleration, or None
         before the first fix. Meant for t within a sample or two of the solution's time."""
+        self._catch_up()
         s = self._state
         return None if s.nav is None else extrapolate(s.nav, t - s.nav.t, s.a_enu)
 
     def output(self):
         """The forward pass so far, as a :class:`~ins_gnss_ros.nav.recording.NavigatorOutput`."""
+        self._catch_up()
         return self._recorder.output()
 
     # -- main loop -------------------------------------------------------------------------
@@ -303,7 +347,7 @@ class Navigator:
         phi = propagate(s, self._imu.rows(i, j), cfg.noise, cfg.cov_interval, self._gaps,
                         self._space)
         s.next_sample = j
-        self._recorder.epoch(s, phi, s.ekf.P.copy(), self._published_var())
+        self._recorder.epoch(s, phi, s.ekf.P, self._published_var())  # stored as a copy
         if s.mode != ALIGNING:
             if cfg.nhc_sigma is not None and s.nav.t - s.t_nhc >= cfg.nhc_interval - 1e-9:
                 s.t_nhc = s.nav.t
@@ -495,7 +539,7 @@ class Navigator:
         s.reject_since.pop(innov.name, None)
         guard.accepted(innov.name)
         self._feedback()
-        self.revision += 1
+        self._revision += 1
         if aiding:
             s.t_last_aid = epoch
             s.mode = modes.after_accepted(s.mode, guard.degraded(epoch))

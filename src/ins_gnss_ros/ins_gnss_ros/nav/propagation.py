@@ -6,9 +6,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from .earth import radii
+from . import _kernels
+from .earth import WGS84, radii
 from .increments import SensorErrors
-from .strapdown import NavState, run
+from .strapdown import NavState
 
 
 def extrapolate(state, dt, a_enu):
@@ -21,13 +22,6 @@ def extrapolate(state, dt, a_enu):
     return replace(state, lat=state.lat + d[1] / (rm + state.h),
                    lon=state.lon + d[0] / ((rn + state.h) * np.cos(state.lat)),
                    h=state.h + d[2], v_enu=state.v_enu + a_enu * dt, t=state.t + dt)
-
-
-def compensate(th, dv, dts, estimates):
-    """Raw increments th (rad), dv (m/s), (N, 3) body FLU, of durations dts (N,) s, corrected
-    by the running bias and scale-factor estimates (error_model.py blocks; the model of
-    :class:`~ins_gnss_ros.nav.increments.SensorErrors`)."""
-    return SensorErrors.of_estimates(estimates).compensate(th, dv, dts)
 
 
 def propagate(s, rows, noise, cov_interval, gaps, space):
@@ -60,18 +54,21 @@ def propagate(s, rows, noise, cov_interval, gaps, space):
     dts[0] = t[0] - s.nav.t
     np.subtract(t[1:], t[:-1], out=dts[1:])
     np.maximum(dts, 1e-6, out=dts)
-    th, dv = compensate(th, dv, dts, s.estimates)
-    rot = th + cth
-    dvn = dv + cdv
     T = float(dts.sum())
     start = s.nav
-    r = run(start, rot, dvn, T / len(t))
-    s.nav = NavState(r["lat"][-1], r["lon"][-1], r["h"][-1], r["v_enu"][-1],
-                     r["q_nb"][-1], float(t[-1]))
-    s.a_enu = (s.nav.v_enu - start.v_enu) / T
-    s.omega = th.sum(axis=0) / T
+    # Compensation with the running estimates, coning terms and mechanisation in one compiled
+    # loop over the segment (a chain of numpy calls on 20-sample arrays cost more than it).
+    errors = SensorErrors.of_estimates(s.estimates)
+    v, q, sums = start.v_enu.copy(), start.q_nb.copy(), np.empty((2, 3))
+    lat, lon, h = _kernels.mech_segment(
+        float(start.lat), float(start.lon), float(start.h), v, q, th, dv, cth, cdv, dts, errors.gyro_bias,
+        errors.gyro_scale, errors.accel_bias, errors.accel_scale, T / len(t),
+        WGS84.kernel_params, sums)
+    s.nav = NavState(lat, lon, h, v, q, float(t[-1]))
+    s.a_enu = (v - start.v_enu) / T
+    s.omega = sums[0] / T
     s.omega_time = T
-    f_b = dv.sum(axis=0) / T
+    f_b = sums[1] / T
     # F is rebuilt every cov_interval; shorter segments (cut by measurement epochs) reuse it.
     refresh = start.t - s.t_model >= cov_interval - 1e-9
     if refresh:

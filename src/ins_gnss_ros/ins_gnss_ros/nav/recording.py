@@ -95,20 +95,25 @@ class _Columns:
 
     def __init__(self):
         self.n = 0
+        self._capacity = 0
         self._data: dict[str, np.ndarray] = {}
 
     def append(self, values: dict) -> None:
         if not self._data:
-            self._data = {k: np.empty((1024,) + np.shape(v), object if isinstance(v, str)
-                                      else float) for k, v in values.items()}
-        if self.n == len(next(iter(self._data.values()))):
-            for k, old in self._data.items():
-                grown = np.empty((2 * self.n,) + old.shape[1:], old.dtype)
-                grown[:self.n] = old
-                self._data[k] = grown
+            self._capacity = 1024
+            self._data = {k: np.empty((self._capacity,) + np.shape(v),
+                                      object if isinstance(v, str) else float)
+                          for k, v in values.items()}
+        n, data = self.n, self._data
+        if n == self._capacity:
+            self._capacity = 2 * n
+            for k, old in data.items():
+                grown = np.empty((2 * n,) + old.shape[1:], old.dtype)
+                grown[:n] = old
+                data[k] = grown
         for k, v in values.items():
-            self._data[k][self.n] = v
-        self.n += 1
+            data[k][n] = v
+        self.n = n + 1
 
     def last(self, name) -> np.ndarray:
         """The current epoch's value (a writable view for an array value)."""
