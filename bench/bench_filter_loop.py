@@ -58,7 +58,6 @@ class _Calls:
 
 def recorded_calls(bag, profile_path):
     """The front end's calls of `trial replay --offline` over a bag, and the ekf parameters."""
-    from ins_gnss_ros import io as bagio
     from ins_gnss_ros.imu.preprocessor_params import preprocessor_from_params
     from ins_gnss_ros.trial.inputs import input_rows
     from ins_gnss_ros.trial.offline import _Feeder, offline_parameters
@@ -68,9 +67,7 @@ def recorded_calls(bag, profile_path):
     calls, events = _Calls(), Counter()
     feed = _Feeder(calls, preprocessor_from_params(pre_p), pre_p, ekf_p, events)
     for row in input_rows(bag):
-        handler = feed.handlers.get(row.topic)
-        if handler is not None:
-            handler(bagio.decode_message(row, bag))
+        feed.row(row, bag)
     return calls.calls, ekf_p
 
 

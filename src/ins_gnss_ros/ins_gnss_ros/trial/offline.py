@@ -171,12 +171,7 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
             counts.withheld[row.topic] += 1
             continue
         counts.played[row.topic] += 1
-        if row.topic == "/imu/data_raw":
-            feed.raw(row, bag_path)
-            continue
-        handler = feed.handlers.get(row.topic)
-        if handler is not None:
-            handler(bagio.decode_message(row, bag_path))
+        feed.row(row, bag_path)
     navigator.flush()
     return ForwardPass(navigator, aiding.datum, profile, windows, counts, events,
                        OutputFrames(ekf_p, pre_p, preprocessor.calibration.c_bs))
@@ -201,6 +196,15 @@ class _Feeder:
         inputs = EkfInputs(aiding, ekf_p, lambda text, log=True: events.update([text]))
         for topic, (_, handler) in inputs.handlers().items():
             self.handlers["/" + topic] = handler
+
+    def row(self, row, bag_path):
+        """One input row of the bag, as the node it is addressed to takes it."""
+        if row.topic == "/imu/data_raw":
+            self.raw(row, bag_path)
+            return
+        handler = self.handlers.get(row.topic)
+        if handler is not None:
+            handler(bagio.decode_message(row, bag_path))
 
     def increment(self, problem, t, dtheta, dv, dt):
         """An increment with its increment_problem verdict, as the ekf node takes it."""
