@@ -125,8 +125,11 @@ def test_covariance_matches_monte_carlo_spread():
 
 
 def test_in_motion_heading_sources():
-    yaw, sig = al.yaw_from_velocity([10.0, 10.0, 0.2], 0.1)
-    assert yaw == pytest.approx(45 * DEG) and sig == pytest.approx(2 * 0.1 / np.sqrt(200))
+    yaw, sig = al.yaw_from_velocity([10.0, 10.0, 0.2], np.eye(3) * 0.1 ** 2)
+    assert yaw == pytest.approx(45 * DEG) and sig == pytest.approx(0.1 / np.sqrt(200))
+    # Only the cross-track error turns the course: 0.1 m/s north across an eastward 10 m/s.
+    _, sig = al.yaw_from_velocity([10.0, 0.0, 0.0], np.diag([4.0, 0.01, 9.0]))
+    assert sig == pytest.approx(0.01)
     # Azimuth 30° (clockwise from North) is yaw 60°; a baseline pointing left (+90° in
     # body axes) means the body points 90° clockwise of it.
     yaw, sig = al.yaw_from_heading(30 * DEG, 0.01)
@@ -172,11 +175,16 @@ def test_navigator_heading_alignment_from_motion_and_heading_fix():
     # INS velocity 30 deg clockwise of the GNSS course: turn the solution by +30 deg.
     v_gnss = np.array([10.0 * np.cos(60 * DEG), 10.0 * np.sin(60 * DEG), 0.0])
     v_ins = np.array([10.0 * np.cos(30 * DEG), 10.0 * np.sin(30 * DEG), 0.0])
-    delta, sigma = al.yaw_error_from_motion(v_gnss, v_ins, q0, 0.1)
-    assert delta == pytest.approx(30 * DEG) and sigma == pytest.approx(0.02)
-    # Too slow an INS (motion started before the filter): the body x axis is compared.
-    delta, _ = al.yaw_error_from_motion(v_gnss, 0.1 * v_ins, q0, 0.1)
-    assert delta == pytest.approx(60 * DEG)
+    cov = np.eye(3) * 0.1 ** 2
+    delta, sigma, gain = al.yaw_error_from_motion(v_gnss, cov, v_ins, q0)
+    assert delta == pytest.approx(30 * DEG) and sigma == pytest.approx(0.01)
+    # d course / d v at the INS velocity: across it, over its speed
+    np.testing.assert_allclose(gain, [-np.sin(30 * DEG) / 10, np.cos(30 * DEG) / 10, 0.0])
+    # Too slow an INS (motion started before the filter): the body x axis is compared, with
+    # the side slip it may have.
+    delta, sigma, gain = al.yaw_error_from_motion(v_gnss, cov, 0.1 * v_ins, q0)
+    assert delta == pytest.approx(60 * DEG) and gain is None
+    assert sigma == pytest.approx(np.hypot(0.01, al.SIDE_SLIP_SIGMA))
     delta, sigma = al.yaw_error_from_heading(0.0, 1e-4, q0)  # heading north
     assert delta == pytest.approx(90 * DEG) and sigma == pytest.approx(0.01)
 
@@ -227,3 +235,78 @@ def test_yaw_rotation_correlates_the_turned_velocity_and_distance_with_the_yaw()
     d = position_residual_enu(st.lat, st.lon, st.h, rest.lat, rest.lon, rest.h)
     np.testing.assert_allclose(d - d_true, predicted[space["pos"]], atol=0.02)
     assert np.linalg.norm(d - d_true) > 0.4  # the test sees the turned distance's error
+
+
+def _moving_ins(space, noise, v_ins, P_vv):
+    """A levelled INS moving at v_ins (ENU) whose velocity covariance is P_vv, and its P."""
+    from ins_gnss_ros.nav.strapdown import NavState
+
+    P = al.initial_covariance(space, noise, 0.3, 0.1, 0.02)
+    P[space["vel"], space["vel"]] = P_vv
+    return NavState(0.8, 0.1, 10.0, np.asarray(v_ins, float),
+                    quat_from_euler(0.0, 0.0, 0.0), 5.0), P
+
+
+def test_motion_alignment_yaw_sigma_carries_both_velocities():
+    """Course east at 5 m/s from a velocity of sigma s1, INS velocity north of sigma s2: the
+    yaw's sigma is sqrt(s1^2 + s2^2) / 5, each velocity's cross-track error over the speed."""
+    from ins_gnss_ros.nav.ekf import StateSpace
+    from ins_gnss_ros.nav.error_model import make_layout
+
+    noise = se.filter_noise(se.MEMS_ADIS16405, "rw")
+    space = StateSpace(make_layout("15", noise))
+    s1, s2 = 0.3, 0.2
+    ins, P = _moving_ins(space, noise, [0.0, 5.0, 0.0], np.eye(3) * s2 ** 2)
+    delta, sigma, gain = al.yaw_error_from_motion([5.0, 0.0, 0.0], np.eye(3) * s1 ** 2,
+                                                  ins.v_enu, ins.q_nb)
+    assert delta == pytest.approx(-90 * DEG) and sigma == pytest.approx(s1 / 5.0)
+    _, P2 = al.rotate_yaw(ins, P, space, delta, sigma, 0.0, velocity_gain=gain)
+    k = space["att"].stop - 1
+    assert np.sqrt(P2[k, k]) == pytest.approx(np.hypot(s1, s2) / 5.0)
+    # The turned INS velocity points along the course: its cross-track (north) error is the
+    # course's, its along-track (east) error the INS's own.
+    vel = space["vel"]
+    np.testing.assert_allclose(np.diag(P2[vel, vel])[:2], [s2 ** 2, s1 ** 2])
+    # The floor tops the yaw up, no further.
+    _, P3 = al.rotate_yaw(ins, P, space, delta, sigma, 0.2, velocity_gain=gain)
+    assert np.sqrt(P3[k, k]) == pytest.approx(0.2)
+
+
+def test_motion_alignment_covariance_matches_monte_carlo_errors():
+    """Against truth: INS velocity errors and GNSS velocity noise drawn from their
+    covariances, an arbitrary true yaw; the yaw, velocity and cross-correlation errors after
+    the motion alignment scatter as rotate_yaw's covariance says."""
+    from ins_gnss_ros.nav.ekf import StateSpace
+    from ins_gnss_ros.nav.error_model import make_layout
+
+    noise = se.filter_noise(se.MEMS_ADIS16405, "rw")
+    space = StateSpace(make_layout("15", noise))
+    rng = np.random.default_rng(11)
+    v_true = np.array([4.0, 3.0, 0.0])                       # 5 m/s, true yaw along it
+    S_g = np.array([[0.09, 0.03, 0.0], [0.03, 0.05, 0.0], [0.0, 0.0, 0.2]])
+    P_vv = np.array([[0.02, -0.01, 0.0], [-0.01, 0.06, 0.0], [0.0, 0.0, 0.01]])
+    true_yaw = np.arctan2(v_true[1], v_true[0])
+    idx = [space["att"].stop - 1, space["vel"].start, space["vel"].start + 1]
+    errors, claimed = [], []
+    for _ in range(4000):
+        wrong = rng.uniform(-np.pi, np.pi)                   # the INS's yaw before alignment
+        # the INS's velocity error is P_vv in the true axes, turned with its yaw
+        turn = quat_to_dcm(quat_from_euler(0.0, 0.0, wrong - true_yaw))
+        v_ins = turn @ (v_true + rng.multivariate_normal(np.zeros(3), P_vv))
+        v_gnss = v_true + rng.multivariate_normal(np.zeros(3), S_g)
+        ins, P = _moving_ins(space, noise, v_ins, turn @ P_vv @ turn.T)
+        ins = ins.__class__(ins.lat, ins.lon, ins.h, v_ins, quat_from_euler(0.0, 0.0, wrong),
+                            ins.t)
+        delta, sigma, gain = al.yaw_error_from_motion(v_gnss, S_g, v_ins, ins.q_nb)
+        st, P2 = al.rotate_yaw(ins, P, space, delta, sigma, 0.0, velocity_gain=gain)
+        phi_u = -np.angle(np.exp(1j * (quat_to_euler(st.q_nb)[2] - true_yaw)))
+        errors.append([phi_u, *(st.v_enu - v_true)[:2]])
+        claimed.append(P2[np.ix_(idx, idx)])
+    errors, claimed = np.array(errors), np.array(claimed)
+    nees = np.einsum("ni,ni->n", errors, np.linalg.solve(claimed, errors[:, :, None])[:, :, 0])
+    # chi-square of 3 degrees of freedom, mean of 4000: 3 +- 0.04 (1 sigma)
+    assert 2.85 < nees.mean() < 3.15, nees.mean()
+    mean = claimed.mean(axis=0)
+    sd = np.sqrt(np.diag(mean))
+    np.testing.assert_allclose(np.cov(errors.T) / np.outer(sd, sd), mean / np.outer(sd, sd),
+                               atol=0.06)

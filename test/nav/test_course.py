@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from ins_gnss_ros.nav.course import CourseFromFixes
+from ins_gnss_ros.nav.earth import ecef_to_geodetic, enu_to_ecef
 
 LAT, LON = math.radians(59.9), math.radians(30.3)
 M_PER_RAD = 6.37e6
@@ -41,3 +42,44 @@ def test_the_fixes_own_scatter_sets_when_the_motion_is_beyond_it():
         assert np.hypot(*v.v_enu[:2]) == pytest.approx(5.0, abs=1.0)
     # where the white noise really is 5 m, 5 m/s is not beyond it
     assert not velocities(noise=5.0, assumed=5.0)
+
+
+def chord_velocities(position, rate=1.0, seconds=12.0, sigma=0.01):
+    """Velocities from noise-free fixes at position(t) (east, north; m) claiming sigma m."""
+    course, out = CourseFromFixes(), []
+    cov = np.diag([sigma ** 2, sigma ** 2, 4 * sigma ** 2])
+    for k in range(round(seconds * rate)):
+        t = k / rate
+        # exactly in the local ENU frame (the course is measured there)
+        lat, lon, h = ecef_to_geodetic(enu_to_ecef([*position(t), 0.0], LAT, LON, 10.0))
+        course.observe(t, lat, lon, h)
+        v = course.add(t, lat, lon, h, cov)
+        if v is not None:
+            out.append(v)
+    return out
+
+
+def test_chord_velocity_is_the_mid_epoch_velocity_under_constant_acceleration():
+    # p = v0 t + a t^2 / 2 on both axes: the chord velocity is v0 + a t_mid exactly
+    v0, a = np.array([3.0, -1.0]), np.array([0.8, 1.5])
+    found = chord_velocities(lambda t: v0 * t + 0.5 * a * t * t)
+    assert len(found) > 5
+    for v in found:
+        # (to 1 mm/s: each difference is resolved in the ENU axes of its later fix)
+        np.testing.assert_allclose(v.v_enu[:2], v0 + a * v.t, atol=1e-3)
+
+
+def test_chord_velocity_error_under_constant_jerk_is_within_its_variance():
+    # a steady change of acceleration j leaves j dt^2 / 24 (dt the fixes' spacing): the
+    # covariance's term for it, ACCELERATION_CHANGE * dt / 24, holds Δa = j dt up to 2 sigma
+    from ins_gnss_ros.nav.course import ACCELERATION_CHANGE
+
+    v0, j = np.array([5.0, 0.0]), np.array([0.0, 2.0 * ACCELERATION_CHANGE])  # 4 m/s^3
+    found = chord_velocities(lambda t: v0 * t + j * t ** 3 / 6.0, seconds=6.0)
+    assert found
+    for v in found:
+        dt = 1.0  # one fix apart at 1 Hz: the displacement is beyond 10 sigma at once
+        err = v.v_enu[:2] - (v0 + 0.5 * j * v.t ** 2)
+        np.testing.assert_allclose(err, j * dt ** 2 / 24.0, atol=1e-3)
+        white = 2 * 0.01 ** 2 / dt ** 2
+        assert abs(err[1]) <= 2.0 * np.sqrt(v.cov_enu[1, 1] - white) + 1e-9

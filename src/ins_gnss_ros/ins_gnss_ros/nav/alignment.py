@@ -33,13 +33,19 @@ import numpy as np
 from .conventions import wrap_pi
 from .earth import WGS84, normal_gravity
 from .lever_arm import lever_arm_position
-from .measurements import position_residual_enu
+from .measurements import Innovation, position_residual_enu
 from .rotations import quat_from_euler, quat_from_rotvec, quat_mul, quat_normalize, \
     quat_rotate, quat_to_dcm
 from .strapdown import NavState, apply_correction
 
 #: Variance of a heading uniformly distributed on [-π, π) [rad²].
 UNIFORM_HEADING_VAR = np.pi ** 2 / 3.0
+#: 1σ of the angle between the body x axis and the course over ground at the IMU [rad]: a
+#: car's body slip angle stays within a few degrees short of skidding (what stability control
+#: keeps it to), a wheeled robot's is less; a ship's drift angle in a cross current may exceed
+#: it, where a heading source or the motion alignment against the INS velocity (no side-slip
+#: assumed) is the better path.
+SIDE_SLIP_SIGMA = np.radians(3.0)
 
 
 def level(f_b):
@@ -167,25 +173,31 @@ def coarse_alignment(dthetas, dvs, dt, lat, grade=None, ell=WGS84):
     return Alignment(quat_from_euler(roll, pitch, yaw), cov)
 
 
-def yaw_from_velocity(v_enu, sigma_v):
+def course_gradient(v_enu):
+    """Gradient of the course atan2(v_N, v_E) with respect to the velocity (ENU, m/s): the
+    horizontal unit vector across v over its speed, e_U x v / |v_h|^2 [rad/(m/s)]."""
+    ve, vn = v_enu[0], v_enu[1]
+    return np.array([-vn, ve, 0.0]) / (ve * ve + vn * vn)
+
+
+def yaw_from_velocity(v_enu, cov_enu):
     """Yaw from the course over ground of a vehicle moving forward without side-slip.
 
     Parameters
     ----------
     v_enu : array_like, shape (3,)
         GNSS velocity [m/s].
-    sigma_v : float
-        1σ of each horizontal velocity component [m/s].
+    cov_enu : (3, 3) array_like
+        Its covariance [(m/s)^2].
 
     Returns
     -------
     yaw, sigma_yaw : float [rad]
-        sigma_yaw = 2 σ_v / |v_h|: twice the cross-track velocity error over the speed, the
-        margin the navigator has aligned with since its first version (the course compared
-        with the INS carries the errors of both velocities, and a crab angle adds to them).
+        sigma_yaw^2 = c' S c / |v_h|^2, c the horizontal unit vector across v and S its
+        covariance: the course's error is the cross-track velocity error over the speed.
     """
-    ve, vn = v_enu[0], v_enu[1]
-    return float(np.arctan2(vn, ve)), float(2.0 * sigma_v / np.hypot(ve, vn))
+    grad = course_gradient(v_enu)
+    return float(np.arctan2(v_enu[1], v_enu[0])), float(np.sqrt(grad @ np.asarray(cov_enu) @ grad))
 
 
 def yaw_from_heading(azimuth, sigma_azimuth, baseline_yaw_b=0.0):
@@ -341,49 +353,64 @@ def _yaw_of_x(q_nb):
     return np.arctan2(x[1], x[0])
 
 
-def yaw_error_from_motion(v_gnss, v_ins, q_nb, sigma_v):
+def yaw_error_from_motion(v_gnss, cov_gnss, v_ins, q_nb):
     """Yaw rotation onto the GNSS course of an INS levelled with an arbitrary yaw.
 
     The INS has run levelled but with an arbitrary yaw since the first fix, so its horizontal
     velocity is the true one rotated by minus the yaw error: the angle between the two velocity
     vectors is that error (no side-slip assumption). If the INS velocity is too small to
     compare (motion started before the filter), the course of the GNSS velocity is taken as the
-    heading of the body x axis instead.
+    heading of the body x axis instead (:func:`yaw_error_from_course`).
 
     Parameters
     ----------
-    v_gnss, v_ins : (3,) array_like
-        GNSS and INS velocity, ENU [m/s].
+    v_gnss : (3,) array_like
+        GNSS velocity, ENU [m/s].
+    cov_gnss : (3, 3) array_like
+        Its covariance [(m/s)^2].
+    v_ins : (3,) array_like
+        INS velocity, ENU [m/s].
     q_nb : (4,) array_like
         INS attitude.
-    sigma_v : float
-        1σ of the INS horizontal velocity [m/s].
 
     Returns
     -------
     delta, sigma : float [rad]
-        Rotation about Up to apply, and the yaw standard deviation after it
-        (:func:`yaw_from_velocity`).
+        Rotation about Up to apply, and the standard deviation of the GNSS course in it.
+    velocity_gain : (3,) ndarray or None
+        The course's gradient at the INS velocity (:func:`course_gradient`): the rotation also
+        carries the error of the INS velocity's direction, which :func:`rotate_yaw` takes from
+        the velocity covariance (the yaw variance after it is sigma^2 + c' P_vv c / |v_ins|^2).
+        None where the body x axis was compared instead.
     """
     if np.hypot(*v_ins[:2]) > 0.3 * np.hypot(*v_gnss[:2]):
-        course, sigma = yaw_from_velocity(v_gnss, sigma_v)
-        return course - np.arctan2(v_ins[1], v_ins[0]), sigma
-    return yaw_error_from_course(v_gnss, sigma_v, q_nb)
+        course, sigma = yaw_from_velocity(v_gnss, cov_gnss)
+        return course - np.arctan2(v_ins[1], v_ins[0]), sigma, course_gradient(v_ins)
+    return (*yaw_error_from_course(v_gnss, cov_gnss, q_nb), None)
 
 
-def yaw_error_from_course(v_gnss, sigma_v, q_nb):
+def yaw_error_from_course(v_gnss, cov_gnss, q_nb):
     """Yaw rotation of an INS attitude q_nb that puts its body x axis on the course of the GNSS
-    velocity v_gnss (ENU, m/s; no side-slip), whose horizontal components have the 1-sigma
-    sigma_v (m/s).
+    velocity v_gnss (ENU, m/s) of covariance cov_gnss ((m/s)^2).
 
     Returns
     -------
     delta, sigma : float [rad]
-        Rotation about Up to apply, and the yaw standard deviation after it
-        (:func:`yaw_from_velocity`).
+        Rotation about Up to apply, and the yaw standard deviation after it: the course's
+        (:func:`yaw_from_velocity`) and the body's side-slip angle (SIDE_SLIP_SIGMA).
     """
-    course, sigma = yaw_from_velocity(v_gnss, sigma_v)
-    return course - _yaw_of_x(q_nb), sigma
+    course, sigma = yaw_from_velocity(v_gnss, cov_gnss)
+    return course - _yaw_of_x(q_nb), float(np.hypot(sigma, SIDE_SLIP_SIGMA))
+
+
+def without_cross_track(innov, v_enu):
+    """A velocity innovation (3 rows, ENU) reduced to its along-track and vertical rows, across
+    the velocity v_enu (m/s) whose course a motion alignment (:func:`rotate_yaw` with a
+    velocity gain) has just turned the solution onto: the solution's cross-track velocity error
+    is then that velocity's own, and an update with it would count the course twice."""
+    u = np.array([v_enu[0], v_enu[1], 0.0]) / np.hypot(v_enu[0], v_enu[1])
+    rows = np.array([u, [0.0, 0.0, 1.0]])
+    return Innovation(innov.name, rows @ innov.z, rows @ innov.H, rows @ innov.R @ rows.T)
 
 
 def restart_velocity(nav, P, space, v_enu, cov_enu):
@@ -410,7 +437,7 @@ def yaw_error_from_heading(azimuth, variance, q_nb):
     return yaw - _yaw_of_x(q_nb), sigma
 
 
-def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, rest_pos=None):
+def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, rest_pos=None, velocity_gain=None):
     """Turn a solution and its covariance by delta about Up (the heading alignment).
 
     Parameters
@@ -422,10 +449,17 @@ def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, rest_pos=None):
     delta : float
         Rotation, counter-clockwise [rad].
     sigma, sigma_floor : float
-        The yaw standard deviation becomes max(sigma, sigma_floor), uncorrelated [rad].
+        Standard deviation of the error the measured heading (or course) brings into delta,
+        and the floor of the yaw standard deviation [rad].
     rest_pos : tuple of 3 float, optional
         (lat, lon, h) where the vehicle left its rest: the distance run since went the wrong way
         too and is turned about that point.
+    velocity_gain : (3,) array_like, optional
+        For a rotation measured against the INS velocity's direction
+        (:func:`yaw_error_from_motion`): the gradient of that direction with respect to the
+        velocity error before the turn (ENU, rad/(m/s)). The yaw error after the turn is then
+        phi_U = velocity_gain . dv - n (n the measured course's error, of sigma): correlated
+        with the velocity error it came from, whose cross-track part it cancels.
 
     Returns
     -------
@@ -461,7 +495,15 @@ def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, rest_pos=None):
     g[k] = 1.0
     g[space["vel"]] = np.cross(nav.v_enu, [0.0, 0.0, 1.0])
     g[space["pos"]] = np.cross(run, [0.0, 0.0, 1.0])
-    P += max(sigma_floor, sigma) ** 2 * np.outer(g, g)
+    # The new errors are x + g phi_U with phi_U = h' x - n, x the errors turned with the
+    # solution and h the yaw's dependence on them (zero for a heading fix or the body axis on a
+    # course): x' = (I + g h') x - g n. The floor tops up n where the yaw would be below it.
+    h = np.zeros(space.size)
+    if velocity_gain is not None:
+        h[space["vel"]] = R @ np.asarray(velocity_gain, float)
+    A = np.eye(space.size) + np.outer(g, h)
+    var_n = max(sigma ** 2, sigma_floor ** 2 - h @ P @ h)
+    P = A @ P @ A.T + var_n * np.outer(g, g)
     if "bg" in space:
         # While the yaw was unknown the mechanisation removed the horizontal Earth rate in the
         # wrong direction and the filter took the difference for gyro bias: widen the bias

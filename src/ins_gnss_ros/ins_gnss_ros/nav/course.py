@@ -26,8 +26,14 @@ from .measurement_types import GnssVelocity
 #: history).
 WINDOW_S = 2.0
 MIN_SIGMAS = 10.0
-#: Horizontal acceleration assumed between two fixes for the velocity's variance, m/s^2.
-ACCELERATION = 2.0
+#: 1σ of the change of horizontal acceleration between two fixes of the window, m/s^2. The
+#: chord velocity (p(t) - p(t0)) / dt equals the velocity at the mid-epoch under any constant
+#: acceleration; a steady change Δa over dt (constant jerk) leaves Δa dt / 24, a step of Δa at
+#: the mid-epoch Δa dt / 8 (the most a monotone change can leave). A car's acceleration
+#: changes by up to about 4 m/s^2 within the two seconds (turning in or braking at 0.4 g),
+#: taken as 2σ; a wheeled robot's steps of up to ~0.7 m/s^2 (each errs like a steady change
+#: three times larger) and a ship's fraction of that lie within it.
+ACCELERATION_CHANGE = 2.0
 #: Second differences kept for the white-noise estimate, and the fewest that make one.
 SCATTER_SAMPLES, MIN_SCATTER_SAMPLES = 50, 10
 #: Median of a chi-square variable of one degree of freedom (a robust variance from squares).
@@ -75,7 +81,8 @@ class CourseFromFixes:
         cov_d = self.fix_to_fix(cov) + self.fix_to_fix(cov0)
         if np.hypot(d[0], d[1]) < MIN_SIGMAS * np.sqrt(cov_d[0, 0] + cov_d[1, 1]):
             return None
-        cov_v = cov_d / dt ** 2 + np.diag([1.0, 1.0, 0.0]) * (0.5 * ACCELERATION * dt) ** 2
+        cov_v = cov_d / dt ** 2 \
+            + np.diag([1.0, 1.0, 0.0]) * (ACCELERATION_CHANGE * dt / 24.0) ** 2
         self._window = [self._window[-1]]
         return GnssVelocity(0.5 * (t0 + t), d / dt, cov_v)
 

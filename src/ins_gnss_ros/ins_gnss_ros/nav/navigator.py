@@ -30,8 +30,8 @@ import numpy as np
 from . import measurements as meas
 from . import modes
 from .alignment import Levelling, initial_covariance, levelled_state, restart_velocity, \
-    rotate_yaw, take_static_gyro_bias, yaw_error_from_course, yaw_error_from_heading, \
-    yaw_error_from_motion
+    rotate_yaw, take_static_gyro_bias, without_cross_track, yaw_error_from_course, \
+    yaw_error_from_heading, yaw_error_from_motion
 from .earth import WGS84
 from .ekf import ErrorStateEKF, StateSpace
 from .error_model import make_layout
@@ -427,17 +427,19 @@ class Navigator:
     def _gnss_velocity(self, m, st, epoch):
         s, cfg = self._state, self.config
         s.gnss_speed = float(np.hypot(*np.asarray(m.v_enu)[:2]))
+        aligned_by = None  # the INS velocity's course gradient where m turned the yaw against it
         if s.mode == ALIGNING and not s.heading_known and s.gnss_speed >= cfg.align_speed:
             vel = self._space["vel"].start
             v, sigma_ins = np.asarray(m.v_enu, float), np.sqrt(s.ekf.P[vel, vel])
             if sigma_ins < UNINFORMED_VELOCITY * s.gnss_speed:
-                self._rotate_yaw(*yaw_error_from_motion(v, s.nav.v_enu, s.nav.q_nb, sigma_ins))
+                delta, sigma, aligned_by = yaw_error_from_motion(v, m.cov_enu, s.nav.v_enu,
+                                                                 s.nav.q_nb)
+                self._rotate_yaw(delta, sigma, aligned_by)
             else:
                 # The INS ran unaided too long (a start on the move without a receiver speed)
-                # for its velocity to keep a direction: the body x axis takes the course (no
-                # side-slip) with the measured velocity's own sigma, and the INS that velocity.
-                sigma_v = np.sqrt(max(m.cov_enu[0, 0], m.cov_enu[1, 1]))
-                self._rotate_yaw(*yaw_error_from_course(v, sigma_v, s.nav.q_nb))
+                # for its velocity to keep a direction: the body x axis takes the course, and
+                # the INS that velocity.
+                self._rotate_yaw(*yaw_error_from_course(v, m.cov_enu, s.nav.q_nb))
                 s.nav, s.ekf.P = restart_velocity(s.nav, s.ekf.P, self._space, v, m.cov_enu)
                 return
             st = extrapolate(s.nav, st.t - s.nav.t, s.a_enu)
@@ -445,6 +447,8 @@ class Navigator:
             return
         innov = meas.gnss_velocity(self._space, st, m.v_enu, m.cov_enu, s.omega, self._lever,
                                    dzdt=s.a_enu)
+        if aligned_by is not None:
+            innov = without_cross_track(innov, m.v_enu)
         if self._at_rest(epoch):
             self._zero_rate(st, epoch)
         self._update(innov, epoch)
@@ -553,10 +557,10 @@ class Navigator:
             s.estimates[name] = s.estimates[name] + dx[S[name]]
         self._recorder.correct(s, dx, self._published_var())
 
-    def _rotate_yaw(self, delta, sigma):
+    def _rotate_yaw(self, delta, sigma, velocity_gain=None):
         """The heading alignment (alignment.rotate_yaw): from here on NAVIGATING."""
         s = self._state
         s.nav, s.ekf.P = rotate_yaw(s.nav, s.ekf.P, self._space, delta, sigma,
-                                    self.config.sigma_yaw_align, s.rest_pos)
+                                    self.config.sigma_yaw_align, s.rest_pos, velocity_gain)
         s.heading_known, s.mode, s.t_last_aid = True, NAVIGATING, s.nav.t
         self._recorder.correct(s, np.zeros(self._space.size), self._published_var())
