@@ -62,38 +62,29 @@ def template(cls):
 @lru_cache(maxsize=None)
 def _constructor(cls):
     """Function making instances equal to ``cls()`` from the fields of one made by ``cls()``:
-    numbers and strings shared (immutable), arrays copied, sub-messages made the same way.
+    numbers and strings shared (immutable), arrays copied, sub-messages made the same way."""
+    plain, made = [], []
+    for slot in cls.__slots__:
+        value = getattr(template(cls), slot)
+        if hasattr(value, "SLOT_TYPES"):
+            made.append((slot, _constructor(type(value))))
+        elif isinstance(value, list):      # an array of messages, or an empty sequence
+            made.append((slot, lambda v=value: [_constructor(type(e))() for e in v]))
+        elif hasattr(value, "copy"):       # numpy and array.array values (mutable)
+            made.append((slot, value.copy))
+        else:
+            plain.append((slot, value))
+    new_object = cls.__new__
 
-    Compiled once per class as straight assignments to the slots of every nested message: a
-    loop of ``setattr`` calls per nested message cost more than the rest of the work where
-    the nodes build their messages (four per IMU sample in the replay of a car drive)."""
-    env: dict = {}
-    lines: list[str] = []
+    def construct():
+        out = new_object(cls)
+        for slot, value in plain:
+            setattr(out, slot, value)
+        for slot, make in made:
+            setattr(out, slot, make())
+        return out
 
-    def name(value) -> str:
-        key = f"v{len(env)}"
-        env[key] = value
-        return key
-
-    def build(cls, var: str) -> None:
-        lines.append(f"    {var} = {name(cls.__new__)}({name(cls)})")
-        for slot in cls.__slots__:
-            value = getattr(template(cls), slot)
-            if hasattr(value, "SLOT_TYPES"):
-                sub = f"{var}_{len(lines)}"
-                build(type(value), sub)
-                lines.append(f"    {var}.{slot} = {sub}")
-            elif isinstance(value, list):      # an array of messages, or an empty sequence
-                make = name(lambda v=value: [new(type(e)) for e in v])
-                lines.append(f"    {var}.{slot} = {make}()")
-            elif hasattr(value, "copy"):       # numpy and array.array values (mutable)
-                lines.append(f"    {var}.{slot} = {name(value.copy)}()")
-            else:
-                lines.append(f"    {var}.{slot} = {name(value)}")
-
-    build(cls, "out")
-    exec("def construct():\n" + "\n".join(lines) + "\n    return out\n", env)
-    return env["construct"]
+    return construct
 
 
 def messages_equal(a, b) -> bool:
