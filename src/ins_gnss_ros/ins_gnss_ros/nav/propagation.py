@@ -61,9 +61,9 @@ def propagate(s, rows, noise, cov_interval, gaps, space):
     errors = SensorErrors.of_estimates(s.estimates)
     v, q, sums = start.v_enu.copy(), start.q_nb.copy(), np.empty((2, 3))
     lat, lon, h = _kernels.mech_segment(
-        float(start.lat), float(start.lon), float(start.h), v, q, th, dv, cth, cdv, dts, errors.gyro_bias,
-        errors.gyro_scale, errors.accel_bias, errors.accel_scale, T / len(t),
-        WGS84.kernel_params, sums)
+        float(start.lat), float(start.lon), float(start.h), v, q, th, dv, cth, cdv, dts,
+        errors.gyro_bias, errors.gyro_scale, errors.accel_bias, errors.accel_scale,
+        T / len(t), WGS84.kernel_params, sums)
     s.nav = NavState(lat, lon, h, v, q, float(t[-1]))
     s.a_enu = (v - start.v_enu) / T
     s.omega = sums[0] / T
