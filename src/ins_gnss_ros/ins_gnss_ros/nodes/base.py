@@ -29,6 +29,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
 
 from ..io import ns_to_stamp
 from ..io.cdr import codec
@@ -388,11 +389,15 @@ def run(node_factory: Callable[[], Node], args: list[str] | None = None,
         node = node_factory()
         spinner = EXECUTORS[kind]()
         spinner.add_node(node)
-        # spin_once with a timeout rather than spin(): rclpy 7.1's EventsExecutor.spin() polls
-        # without sleeping and never sees SIGINT/SIGTERM; spin_once returns on a signal (as
-        # KeyboardInterrupt or ExternalShutdownException) and idles at no CPU.
+        # Spun a second at a time on a future that never completes, rather than spin():
+        # rclpy 7.1's EventsExecutor.spin() polls without sleeping and never sees
+        # SIGINT/SIGTERM; this returns on a signal (as KeyboardInterrupt or
+        # ExternalShutdownException) and idles at no CPU. Not spin_once: the events executor
+        # then stops and returns to Python after every callback, ~70 us more CPU per message
+        # (docs/results/live_cost.md).
+        forever = Future()
         while rclpy.ok():
-            spinner.spin_once(timeout_sec=1.0)
+            spinner.spin_until_future_complete(forever, timeout_sec=1.0)
     except (ParameterError, ParameterException) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
