@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 from collections import Counter, defaultdict, deque
 from typing import Any, Callable, Sequence
 
@@ -24,6 +25,7 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy._rclpy_pybind11 import RCLError
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.experimental import EventsExecutor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -258,19 +260,26 @@ class _CountedPublisher:
     hands rclpy the message serialized by the project's codec (Imu 7 us; rclpy's conversion
     and serialization 27 us here). A volatile topic nobody subscribes to is not serialized
     (``imu/data`` at the IMU rate, read only where a compass levels from it): no late joiner
-    could get it anyway."""
+    could get it anyway. Its subscribers are counted from the publisher's matched events, not
+    asked of rclpy per message."""
 
-    def __init__(self, publisher, msg_type, qos, traffic: Counter):
-        self._publisher, self._traffic = publisher, traffic
+    def __init__(self, node: Node, msg_type, topic: str, qos, traffic: Counter):
+        self._subscribers = 0
+        self._publisher = node.create_publisher(
+            msg_type, topic, qos, event_callbacks=PublisherEventCallbacks(matched=self._matched))
+        self._traffic = traffic
         self._encode = codec(msg_type).encode
-        self._key = f"published {publisher.topic_name}"
+        self._key = f"published {self._publisher.topic_name}"
         self._volatile = not (isinstance(qos, QoSProfile)
                               and qos.durability == DurabilityPolicy.TRANSIENT_LOCAL)
+
+    def _matched(self, status) -> None:
+        self._subscribers = status.current_count
 
     def wanted(self) -> bool:
         """Whether a message published now reaches anyone: a node may skip building one
         nobody would get."""
-        return not self._volatile or self._publisher.get_subscription_count() > 0
+        return not self._volatile or self._subscribers > 0
 
     def publish(self, msg) -> None:
         if not self.wanted():
@@ -306,10 +315,9 @@ class NavNode(Node):
         """A DDS publisher, or the bus' stand-in with the same ``publish``."""
         if self.bus is not None:
             return _BusPublisher(self.bus, topic)
-        publisher = self.create_publisher(msg_type, topic, qos)
         if topic == "/diagnostics":
-            return publisher
-        return _CountedPublisher(publisher, msg_type, qos, self.diag.traffic)
+            return self.create_publisher(msg_type, topic, qos)
+        return _CountedPublisher(self, msg_type, topic, qos, self.diag.traffic)
 
     def subscribe(self, msg_type, topic: str, callback, qos) -> None:
         if self.bus is not None:
@@ -393,7 +401,12 @@ class NavNode(Node):
         """Current time, ns: the bus' replay time or the node clock."""
         if self.bus is not None:
             return self.bus.now_ns
-        return self.get_clock().now().nanoseconds
+        clock = self.get_clock()
+        if clock.ros_time_is_active:  # use_sim_time: the /clock time
+            return clock.now().nanoseconds
+        # The system time the ROS clock reads without /clock, without building an rclpy Time
+        # (9 us here; the imu_preprocessor reads it per sample).
+        return time.time_ns()
 
     def now_msg(self) -> Time:
         """Current time as a message stamp (as rclpy's ``Time.to_msg``, without building an
