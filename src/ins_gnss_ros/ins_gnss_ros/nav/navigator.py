@@ -29,9 +29,9 @@ import numpy as np
 
 from . import measurements as meas
 from . import modes
-from .alignment import Levelling, initial_covariance, levelled_state, restart_velocity, \
-    rotate_yaw, take_static_gyro_bias, without_cross_track, yaw_error_from_course, \
-    yaw_error_from_heading, yaw_error_from_motion
+from .alignment import Levelling, course_error_gain, fixes_with_course, initial_covariance, \
+    levelled_state, restart_velocity, rotate_yaw, take_static_gyro_bias, without_cross_track, \
+    yaw_error_from_course, yaw_error_from_heading, yaw_error_from_motion
 from .earth import WGS84
 from .ekf import ErrorStateEKF, StateSpace
 from .error_model import make_layout
@@ -45,6 +45,7 @@ from .measurement_types import GNSS_TYPES, GnssFix, GnssVelocity, HeadingFix, Ph
 from .modes import ALIGNING, NAVIGATING
 from .propagation import extrapolate, propagate
 from .recording import Recorder, published_covariance
+from .rotations import quat_from_rotvec, quat_rotate
 from .rewind import Rewind, RunState
 from .strapdown import apply_correction
 
@@ -407,10 +408,13 @@ class Navigator:
         return False
 
     def _gnss_fix(self, m, st, epoch):
+        s = self._state
+        if m.t <= s.t_fixes_aligned:
+            self._refuse(m, epoch, "in the alignment")
+            return
         if self._held_for_alignment(m, epoch):
             return
         self._fix_common_var = m.common_var
-        s = self._state
         v_ant = lever_arm_velocity(st.v_enu, st.q_nb, s.omega, self._lever, st.lat)
         innov = meas.gnss_position(self._space, st, m.lat, m.lon, m.h, m.cov_enu, self._lever,
                                    dzdt=v_ant)
@@ -422,7 +426,8 @@ class Navigator:
         if frozen:
             self._recorder.add_update(rejected("gnss_pos", epoch, innov.z, innov.R, "frozen"))
             return
-        self._update(innov, epoch)
+        if self._update(innov, epoch).accepted:
+            s.t_fix_accepted = m.t
 
     def _gnss_velocity(self, m, st, epoch):
         s, cfg = self._state, self.config
@@ -431,16 +436,24 @@ class Navigator:
         if s.mode == ALIGNING and not s.heading_known and s.gnss_speed >= cfg.align_speed:
             vel = self._space["vel"].start
             v, sigma_ins = np.asarray(m.v_enu, float), np.sqrt(s.ekf.P[vel, vel])
-            if sigma_ins < UNINFORMED_VELOCITY * s.gnss_speed:
+            # The INS ran unaided too long (a start on the move without a receiver speed) for
+            # its velocity to keep a direction: the body x axis takes the course, and the INS
+            # that velocity.
+            restart = sigma_ins >= UNINFORMED_VELOCITY * s.gnss_speed
+            if restart:
+                delta, sigma = yaw_error_from_course(v, m.cov_enu, s.nav.q_nb)
+            else:
                 delta, sigma, aligned_by = yaw_error_from_motion(v, m.cov_enu, s.nav.v_enu,
                                                                  s.nav.q_nb)
-                self._rotate_yaw(delta, sigma, aligned_by)
-            else:
-                # The INS ran unaided too long (a start on the move without a receiver speed)
-                # for its velocity to keep a direction: the body x axis takes the course, and
-                # the INS that velocity.
-                self._rotate_yaw(*yaw_error_from_course(v, m.cov_enu, s.nav.q_nb))
-                s.nav, s.ekf.P = restart_velocity(s.nav, s.ekf.P, self._space, v, m.cov_enu)
+            self._rotate_yaw(delta, sigma, aligned_by)
+            gain = course_error_gain(s.nav, self._space, v, s.rest_pos, restart)
+            if restart:
+                s.nav, s.ekf.P = restart_velocity(s.nav, s.ekf.P, self._space, v, m.cov_enu,
+                                                  gain)
+            if m.fixes:
+                self._fixes_of_course(m, gain, delta, epoch)
+                return
+            if restart:
                 return
             st = extrapolate(s.nav, st.t - s.nav.t, s.a_enu)
         if self._held_for_alignment(m, epoch):
@@ -452,6 +465,26 @@ class Navigator:
         if self._at_rest(epoch):
             self._zero_rate(st, epoch)
         self._update(innov, epoch)
+
+    def _fixes_of_course(self, m, gain, delta, epoch):
+        """After an alignment on a velocity made of fixes (nav/course.py), those of its fixes
+        the filter has not taken, as one update with their correlation to the alignment's
+        errors (alignment.fixes_with_course); the velocity itself is not applied, its
+        along-track part is in the fixes. A first fix taken already (at rest) stays out, its
+        correlation with the course not modelled."""
+        s = self._state
+        fixes = [(f, x) for f, x in m.fixes if f.t > s.t_fix_accepted]
+        s.t_fixes_aligned = m.fixes[-1][0].t
+        if not fixes:
+            return
+        # The last segment's acceleration turned with the solution: it moves the solution to
+        # the fixes, up to a second away.
+        a_enu = quat_rotate(quat_from_rotvec([0.0, 0.0, delta]), s.a_enu)
+        innov = fixes_with_course(self._space, s.nav, s.ekf.P, fixes,
+                                  [self._epoch_of(f) for f, _ in fixes], gain, a_enu, s.omega,
+                                  self._lever)
+        if self._update(innov, epoch).accepted:
+            s.t_fix_accepted = fixes[-1][0].t
 
     def _zero_rate(self, st, epoch):
         """ZARU at rest: the gyros see only the Earth rate, so their biases become observable

@@ -67,6 +67,11 @@ class RunState:
         (lat, lon, h) of the IMU at the last fix at rest while the heading was unknown.
     last_fix : tuple of 3 float or None
         (lat, lon, h) of the last GNSS fix (a frozen receiver repeats it).
+    t_fix_accepted : float
+        GNSS time of the last fix the filter took.
+    t_fixes_aligned : float
+        GNSS time of the last fix of the course the heading was aligned on: the fixes up to it
+        are in the alignment (alignment.fixes_with_course), not applied again.
     """
 
     next_sample: int = 0
@@ -89,6 +94,8 @@ class RunState:
     omega_time: float = 1.0
     rest_pos: tuple | None = None
     last_fix: tuple | None = None
+    t_fix_accepted: float = -np.inf
+    t_fixes_aligned: float = -np.inf
 
     @classmethod
     def initial(cls, space):
