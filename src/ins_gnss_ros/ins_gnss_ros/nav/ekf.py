@@ -188,6 +188,12 @@ class ErrorStateEKF:
             self._Q = Q
         return F, self._Q
 
+    def set_noise(self, noise):
+        """Use the IMU noise model `noise` from the next step on (the densities measured at
+        rest, rest_noise.py): F and Q are rebuilt then."""
+        if noise is not self.noise:
+            self.noise, self.F_model, self._Q = noise, None, None
+
     def predict(self, nav_state, f_b, w_ib_b, dt, refresh=True):
         """Propagate x and P over dt with the model frozen at the given state.
 
