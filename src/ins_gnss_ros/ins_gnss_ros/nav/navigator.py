@@ -454,7 +454,7 @@ class Navigator:
         if self._held_for_alignment(m, epoch):
             return
         innov = meas.gnss_velocity(self._space, st, m.v_enu, m.cov_enu, s.omega, self._lever,
-                                   dzdt=s.a_enu)
+                                   dzdt=s.a_enu, latency=s.estimates.get("vd", (0.0,))[0])
         if aligned_by is not None:
             innov = without_cross_track(innov, m.v_enu)
         if self._at_rest(epoch):
@@ -565,6 +565,8 @@ class Navigator:
         s.nav = apply_correction(s.nav, dx[S["pos"]], dx[S["vel"]], dx[S["att"]])
         for name in s.estimates:
             s.estimates[name] = s.estimates[name] + dx[S[name]]
+        if "vd" in s.estimates:  # projected onto its physical range (measurements.py)
+            s.estimates["vd"] = np.clip(s.estimates["vd"], *meas.VELOCITY_LATENCY_RANGE)
         self._recorder.correct(s, dx, self._published_var())
 
     def _rotate_yaw(self, delta, sigma, velocity_gain=None):

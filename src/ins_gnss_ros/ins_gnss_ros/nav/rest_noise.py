@@ -2,21 +2,23 @@
 
 An IMU grade's densities come from a data sheet, measured on a quiet table. On a vehicle, the
 engine, fans and mounting add vibration that the filter has to carry as noise too: the real car
-drive's IMU standing with its engine idling scatters 3-10 times the data sheet's white noise on
-its axes, and a filter on the data sheet's densities gates the fixes after every outage. While
-the vehicle stands, whatever the increments scatter is noise. Over blocks of ``BLOCK_S`` the
-increments are averaged, and consecutive block means differenced (which removes the biases,
-gravity and the Earth rate): for white noise of density N the difference has the variance
-2 N^2 / T, twice the Allan variance at tau = T (IEEE Std 952-1997, annex C). A vibration that averages out within a
-block counts only with what is left of it over ``BLOCK_S``, which is about the interval of the
-GNSS updates the filter's noise has to bridge.
+drive's IMU standing with its engine idling scatters 3-10 times the data sheet's white noise on its
+axes, and a filter on the data sheet's densities gates the fixes after every outage. While the
+vehicle stands, whatever the increments scatter is noise. Over blocks of ``BLOCK_S`` the increments
+are averaged, and consecutive block means differenced (which removes the biases, gravity and the
+Earth rate): for white noise of density N the difference has the variance 2 N^2 / T, twice the
+Allan variance at tau = T (IEEE Std 952-1997, annex C). A vibration that averages out within a
+block counts only with what is left of it over ``BLOCK_S``, which is about the interval of the GNSS
+updates the filter's noise has to bridge.
 
-A block difference counts only once a GNSS velocity after it confirms the rest (the rest the
-navigator knows lags the receiver's speed by up to an update, and the start of a drive must not
-count as noise). The filter's densities follow the measured ones, per sensor the mean variance of
-the three axes (the filter's model is isotropic), where they exceed the grade's by more than
-three standard deviations of the estimate (a chi-square of 3 (blocks - 1) degrees of freedom);
-never below the grade's.
+A block counts only from ``CONFIRM_S`` after the first GNSS velocity of a rest, and its difference
+only once a velocity ``CONFIRM_S`` after it still says rest: the rest the navigator knows lags the
+receiver's speed by up to an update, and neither the last deceleration of a stop (the suspension
+rocking after it) nor the onset of a drive, before its speed passes the rest threshold, is noise.
+The filter's densities follow the measured ones, per sensor the mean variance of the three axes
+(the filter's model is isotropic), where they exceed the grade's by more than three standard
+deviations of the estimate (a chi-square of 3 (blocks - 1) degrees of freedom); never below the
+grade's.
 """
 from __future__ import annotations
 
@@ -24,8 +26,10 @@ from dataclasses import replace
 
 import numpy as np
 
-#: Length of the blocks whose sums are differenced, s.
+#: Length of the blocks whose means are differenced, s.
 BLOCK_S = 0.5
+#: Time after a block by which a GNSS velocity must still say rest for the block to count, s.
+CONFIRM_S = 1.0
 #: Standard deviations of the estimate by which it must exceed the grade's density.
 SIGNIFICANCE = 3.0
 
@@ -52,6 +56,7 @@ class RestNoise:
         self._sq = np.zeros(2)   # sums of the confirmed squared differences: gyro, accel
         self._count = 0          # confirmed differences (each of three axes)
         self._t_last = -np.inf   # end of the last sample added, s
+        self._rest_since = np.inf  # epoch of the current rest's first GNSS velocity, s
 
     def add(self, t, dtheta, dv):
         """IMU samples at rest: end times t (N,), increments dtheta, dv (N, 3) [s, rad, m/s].
@@ -62,8 +67,13 @@ class RestNoise:
             keep = t > self._t_last
             t, dtheta, dv = t[keep], dtheta[keep], dv[keep]
         self._t_last = t[-1]
+        if t[0] < self._rest_since + CONFIRM_S:
+            return   # too close to the rest's first velocity (or none yet)
         if self._block is None:
+            # The block starts at the end of its first sample (whose start is not known here):
+            # a mean over a length that missed a sample would be off by gravity / samples.
             self._block = [t[0], np.zeros(3), np.zeros(3)]
+            dtheta, dv = dtheta[1:], dv[1:]
         b = self._block
         b[1] = b[1] + dtheta.sum(axis=0)
         b[2] = b[2] + dv.sum(axis=0)
@@ -81,17 +91,21 @@ class RestNoise:
         self._previous = (rate, force, length)
 
     def moved(self):
-        """The rest is over (or not known): the next rest starts a new chain of blocks."""
+        """The rest is over (or not known): the next rest starts a new chain of blocks (its
+        first GNSS velocity, :meth:`confirm`, starts the margin)."""
         self._block = self._previous = None
 
     def confirm(self, t, at_rest):
         """A GNSS velocity at t (s) says the vehicle is (or is not) at rest: the block
-        differences before it count (or are dropped, and the chain ends)."""
+        differences ``CONFIRM_S`` before it count (or all unconfirmed ones are dropped, and the
+        chain ends)."""
         if not at_rest:
             self._pending = []
+            self._rest_since = np.inf
             self.moved()
             return
-        while self._pending and self._pending[0][0] <= t:
+        self._rest_since = min(self._rest_since, t)
+        while self._pending and self._pending[0][0] <= t - CONFIRM_S:
             _, g, a = self._pending.pop(0)
             self._sq += (g.sum(), a.sum())
             self._count += 3
