@@ -218,6 +218,18 @@ class Navigator:
                          "far, including forgotten ones. A delayed measurement that re-runs "
                          "the filter can make it go back.")
 
+    imu_noise_at_rest = _view("_rest_noise", "summary", "The IMU's white noise measured at "
+                              "rest against the grade's (rest_noise.py), or None.")
+
+    def velocity_latency(self):
+        """The GNSS velocity's latency estimate and its sigma (s, "vd" state), or None."""
+        self._catch_up()
+        s = self._state
+        if "vd" not in self._space or s.ekf is None:
+            return None
+        i = self._space["vd"].start
+        return float(s.estimates["vd"][0]), float(np.sqrt(s.ekf.P[i, i]))
+
     space = property(lambda self: self._space, doc="The filter's StateSpace.")
     lever_arm_b = property(lambda self: self._lever, doc="GNSS antenna relative to the IMU, FLU, m.")
 
