@@ -55,8 +55,9 @@ class RunState:
         The yaw has been aligned; until then its variance is kept out of the filter.
     t_epoch, t_model, t_nhc, t_last_aid : float
         The last filter epoch, model (F) refresh, non-holonomic update and accepted aiding.
-    reject_since : dict of str to float
-        Measurement kind -> start of its current continuous rejection (decides forcing).
+    reject_since : dict of str to (float, float)
+        Measurement kind -> first and last epoch of its current continuous rejection (decides
+        forcing, :func:`~ins_gnss_ros.nav.integrity.rejection_start`).
     a_enu : (3,) ndarray
         Mean acceleration of the last segment, ENU, m/s^2.
     omega : (3,) ndarray
