@@ -83,3 +83,32 @@ def test_chord_velocity_error_under_constant_jerk_is_within_its_variance():
         np.testing.assert_allclose(err, j * dt ** 2 / 24.0, atol=1e-3)
         white = 2 * 0.01 ** 2 / dt ** 2
         assert abs(err[1]) <= 2.0 * np.sqrt(v.cov_enu[1, 1] - white) + 1e-9
+
+
+def test_velocity_carries_its_fixes_and_their_correlation_with_it():
+    """Every fix of the window comes with the velocity (the held ones between the ends too),
+    and the velocity's error (e_1 - e_0) / dt is correlated with the ends' errors by -W_0 / dt
+    and W_1 / dt: checked against the sample covariance of drawn fix errors."""
+    rng = np.random.default_rng(2)
+    cov = np.diag([0.25, 0.25, 1.0])
+    v_err, e_first, e_last = [], [], []
+    for _ in range(3000):
+        course, found = CourseFromFixes(), None
+        errors = []
+        for t in (0.0, 0.5, 1.0, 1.5):  # 8 m/s north: the velocity comes with the fourth fix
+            e = np.array([0.5, 0.5, 1.0]) * rng.standard_normal(3)
+            errors.append(e)
+            n = 8.0 * t + e[1]
+            found = course.add(t, LAT + n / M_PER_RAD, LON + e[0] / (M_PER_RAD * math.cos(LAT)),
+                               10.0 + e[2], cov)
+        if found is None or len(found.fixes) < 4:
+            continue  # the noise made the third fix complete one (a few draws in a thousand)
+        v_err.append(found.v_enu - [0.0, 8.0, 0.0])
+        e_first.append(errors[0])
+        e_last.append(errors[-1])
+    assert len(v_err) > 2900 and [f.t for f, _ in found.fixes] == [0.0, 0.5, 1.0, 1.5]
+    (_, x0), (_, x1), (_, x2), (_, x3) = found.fixes
+    np.testing.assert_allclose(np.hstack([x1, x2]), 0.0)
+    for errs, claimed in ((e_first, x0), (e_last, x3)):
+        sample = np.cov(np.hstack([v_err, errs]).T)[:3, 3:]
+        np.testing.assert_allclose(sample[:2, :2], claimed[:2, :2], atol=0.025)

@@ -24,7 +24,7 @@ def running_state(t=1.0):
     s = RunState.initial(SPACE)
     s.nav = NavState(0.8, 0.1, 10.0, np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), t)
     s.ekf = ErrorStateEKF(SPACE, NOISE, np.eye(SPACE.size))
-    s.reject_since["gnss_pos"] = 0.5
+    s.reject_since["gnss_pos"] = (0.5, 0.5)
     return s
 
 
@@ -36,7 +36,7 @@ def test_a_copy_shares_nothing_that_the_filter_changes_in_place():
     s.ekf.x[0] = 7.0
     s.estimates["ba"] *= 0.0
     s.estimates["ba"] += 7.0
-    s.reject_since["gnss_vel"] = 2.0
+    s.reject_since["gnss_vel"] = (2.0, 2.0)
     s.a_enu[0] = 7.0
     assert c.ekf.P[0, 0] == 1.0 and c.ekf.x[0] == 0.0 and c.ekf is not s.ekf
     assert np.all(c.estimates["ba"] == 0.0) and "gnss_vel" not in c.reject_since

@@ -1,11 +1,13 @@
-"""Trial bags: rosbag2 folders of one MCAP file, written with ``rosbags`` and read here.
+"""Trial bags: rosbag2 folders of one MCAP file, written and read here.
 
 A bag folder holds ``metadata.yaml`` and one ``.mcap`` file, the layout ``ros2 bag record -s
 mcap`` produces, so ``ros2 bag play``, Foxglove and the ``mcap`` tools open it. Payloads are CDR
 laid out by :mod:`ins_gnss_ros.io.cdr` (padding zero: the same messages give the same bytes),
 and read back into the rclpy message classes, so a replay feeds the nodes the same objects DDS
-would deliver. ``rosbags``' public :class:`~rosbags.rosbag2.Writer` writes the container; its
-typestore supplies the message definitions that MCAP stores as schemas (the project's own
+would deliver. :mod:`ins_gnss_ros.io.mcap_writer` writes the container a chunk of messages at
+a time (rosbags' writer took five Python writes per message, a sizeable part of a replay:
+docs/results/live_cost.md); ``rosbags``' typestore supplies the message definitions and type
+hashes that MCAP stores as schemas and metadata.yaml lists (the project's own
 ``ins_gnss_msgs`` are registered from their .msg files).
 
 Reading parses ``metadata.yaml`` and walks the MCAP files (:mod:`ins_gnss_ros.io.mcap_reader`),
@@ -31,9 +33,13 @@ from operator import itemgetter
 from pathlib import Path, PurePath
 from typing import Any, Iterable, Iterator
 
+import numpy as np
+import yaml
+
 from ..params_io import ParamsFileError, load_yaml_file
 from .cdr import Unsupported, codec
 from .mcap_reader import McapReader, RawMessage
+from .mcap_writer import CHUNK_SIZE, MESSAGE_HEAD_SIZE, McapWriter
 from .messages import MessageTypeError, msg_class, msgtype_of, template
 from .stamps import msg_stamp_ns
 
@@ -41,6 +47,9 @@ from .stamps import msg_stamp_ns
 CUSTOM_PACKAGE = "ins_gnss_msgs"
 #: Newest rosbag2 metadata version read (Jazzy writes 9).
 METADATA_VERSION = 9
+#: The Header record's library and metadata.yaml's ros_distro of the bags written here.
+LIBRARY = "ins_gnss_ros.io.mcap_writer"
+ROS_DISTRO = "jazzy"
 
 log = logging.getLogger(__name__)
 
@@ -131,7 +140,7 @@ def resolve(topic: str) -> str:
 
 class BagWriter:
     """Collects messages and writes them, sorted by stamp, when closed; or, ``ordered``,
-    writes each at once (the producer hands them in stamp order).
+    writes them a chunk at a time (the producer hands them in stamp order).
 
     Example
     -------
@@ -141,19 +150,36 @@ class BagWriter:
     Sorting at the end lets a producer write each sensor stream in turn; a bag of a few hundred
     thousand small messages fits in memory comfortably. A producer of hours of output in stamp
     order (trial smooth) writes ``ordered``: the memory is then one MCAP chunk's.
+
+    The container is written by :class:`~ins_gnss_ros.io.mcap_writer.McapWriter` (profile
+    ``ros2``, a channel per topic with schema encoding ``ros2msg`` and message encoding ``cdr``,
+    zstd chunks: rosbag2's "storage" compression, which the mcap plugin, Foxglove and the mcap
+    tools read natively), with rosbag2's ``rosbag2`` metadata record and ``metadata.yaml``
+    (version 9) beside it, as ``ros2 bag record -s mcap`` leaves them.
     """
 
     def __init__(self, path, ordered: bool = False):
         self.path = Path(path)
         if self.path.exists():
             raise BagError(f"{self.path} exists: choose a new output folder")
-        self._rows: list[tuple[int, int, str, bytes]] = []
-        self._types: dict[str, str] = {}
         self._ordered = ordered
+        # Per topic (absolute name, in order of first write): its type, and its message count
+        # and channel id once written. Written topic names, relative ones too, map to its index.
+        self._names: list[str] = []
+        self._msgtypes: list[str] = []
+        self._written: list[int] = []
+        self._channel_ids: list[int] = []
+        self._schema_ids: dict[str, int] = {}   # per type
+        self._index_of: dict[str, tuple[int, str]] = {}
+        # Messages not written yet: topic index, log time, payload.
+        self._topic_rows: list[int] = []
+        self._times: list[int] = []
+        self._payloads: list[bytes] = []
+        self._buffered = 0      # record bytes of an ordered writer's pending chunk
         self._count = 0
         self._last_ns = -1
-        self._writer = None   # the rosbags writer, open from the first ordered message on
-        self._connections: dict[str, Any] = {}
+        self._span = None       # (first, last) log time written
+        self._mcap = None       # open from the first chunk (ordered) or the close on
 
     def write(self, topic: str, msg, t_ns: int | None = None) -> None:
         """Queue ``msg`` on ``topic`` at log time ``t_ns`` (default: its header stamp)."""
@@ -163,19 +189,39 @@ class BagWriter:
 
     def write_raw(self, topic: str, msgtype: str, t_ns: int, data: bytes) -> None:
         """Queue a serialised (CDR) message of type ``msgtype`` on ``topic`` at ``t_ns``."""
-        topic = resolve(topic)
-        if self._types.setdefault(topic, msgtype) != msgtype:
-            raise BagError(f"topic {topic} carries {self._types[topic]}, not {msgtype}")
+        entry = self._index_of.get(topic)
+        if entry is None or entry[1] != msgtype:
+            entry = self._topic(topic, msgtype)
         t_ns = int(t_ns)
         if self._ordered:
             if t_ns < self._last_ns:
-                raise BagError(f"{self.path}: {topic} at {t_ns} ns comes after {self._last_ns} "
-                               "ns: an ordered writer takes messages in stamp order")
+                raise BagError(f"{self.path}: {resolve(topic)} at {t_ns} ns comes after "
+                               f"{self._last_ns} ns: an ordered writer takes messages in "
+                               "stamp order")
             self._last_ns = t_ns
-            self._open().write(self._connection(topic), t_ns, data)
-        else:
-            self._rows.append((t_ns, self._count, topic, data))
+            self._buffered += len(data) + MESSAGE_HEAD_SIZE
+        self._topic_rows.append(entry[0])
+        self._times.append(t_ns)
+        self._payloads.append(data)
         self._count += 1
+        if self._buffered >= CHUNK_SIZE:
+            self._flush()
+
+    def _topic(self, topic: str, msgtype: str) -> tuple[int, str]:
+        """(index, type) of a topic written for the first time under this name."""
+        name = resolve(topic)
+        if name in self._names:
+            index = self._names.index(name)
+            if self._msgtypes[index] != msgtype:
+                raise BagError(f"topic {name} carries {self._msgtypes[index]}, not {msgtype}")
+        else:
+            index = len(self._names)
+            self._names.append(name)
+            self._msgtypes.append(msgtype)
+            self._written.append(0)
+            self._channel_ids.append(0)
+        self._index_of[topic] = index, msgtype
+        return index, msgtype
 
     def __len__(self) -> int:
         return self._count
@@ -185,42 +231,109 @@ class BagWriter:
             self.write(topic, msg)
 
     def close(self) -> Path:
-        # (stamp, writing order) decide: the order is unique, so no key function is needed.
-        self._rows.sort()
-        writer = self._open()
-        for topic in sorted(self._types):   # channels in name order, as ever
-            self._connection(topic)
-        for t, _, topic, data in self._rows:
-            writer.write(self._connection(topic), t, data)
-        self._rows = []
-        writer.close()
+        if not self._ordered:
+            # By stamp, ties in writing order (a stable sort); channels in name order.
+            order = np.argsort(np.array(self._times, np.int64), kind="stable")
+            self._topic_rows = [self._topic_rows[k] for k in order.tolist()]
+            self._times = [self._times[k] for k in order.tolist()]
+            self._payloads = [self._payloads[k] for k in order.tolist()]
+            for index in sorted(range(len(self._names)), key=self._names.__getitem__):
+                self._channel(index)
+        self._flush()
+        mcap = self._open()
+        info = self._info()
+        mcap.add_metadata("rosbag2", {"serialized_metadata": yaml.safe_dump(
+            info, default_flow_style=False).strip()})
+        mcap.close()
+        _write_text(self.path / "metadata.yaml",
+                    yaml.safe_dump({"rosbag2_bagfile_information": info},
+                                   default_flow_style=False))
         return self.path
 
-    def _open(self):
-        if self._writer is None:
-            from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
+    def _flush(self) -> None:
+        """Write the pending messages (in the order held) as MCAP chunks."""
+        if not self._payloads:
+            return
+        rows = np.array(self._topic_rows, np.intp)
+        for index in np.unique(rows).tolist():
+            self._channel(index)
+        times = np.array(self._times, np.int64)
+        self._open().write_messages(np.array(self._channel_ids, np.uint16)[rows], times,
+                                    self._payloads)
+        for index, n in enumerate(np.bincount(rows, minlength=len(self._names)).tolist()):
+            self._written[index] += n
+        first, last = int(times.min()), int(times.max())
+        self._span = (first, last) if self._span is None else \
+            (min(first, self._span[0]), max(last, self._span[1]))
+        self._topic_rows, self._times, self._payloads = [], [], []
+        self._buffered = 0
 
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
-            # zstd-compressed MCAP chunks (rosbag2's "storage" compression, which the mcap
-            # plugin, Foxglove and the mcap tools read natively): IMU messages shrink fourfold.
-            self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
-            self._writer.open()
-        return self._writer
+    def _open(self) -> McapWriter:
+        if self._mcap is None:
+            self.path.mkdir(parents=True)
+            self._mcap = McapWriter(self.path / f"{self.path.name}.mcap", profile="ros2",
+                                    library=LIBRARY)
+        return self._mcap
 
-    def _connection(self, topic: str):
-        if topic not in self._connections:
-            self._connections[topic] = self._writer.add_connection(
-                topic, self._types[topic], typestore=typestore())
-        return self._connections[topic]
+    def _channel(self, index: int) -> int:
+        """The channel id of topic ``index``, its schema and channel written on first use."""
+        if not self._channel_ids[index]:
+            mcap = self._open()
+            msgtype = self._msgtypes[index]
+            if msgtype not in self._schema_ids:
+                self._schema_ids[msgtype] = mcap.add_schema(msgtype, "ros2msg",
+                                                            _definition(msgtype)[0].encode())
+            # No QoS offered (a recording's publishers are the replay's): rosbag2's empty list.
+            self._channel_ids[index] = mcap.add_channel(
+                self._names[index], self._schema_ids[msgtype], "cdr",
+                {"offered_qos_profiles": "[]"})
+        return self._channel_ids[index]
+
+    def _info(self) -> dict:
+        """rosbag2's bag information (what ``ros2 bag info`` shows), metadata version 9."""
+        first, last = self._span or (0, 0)
+        file = f"{self.path.name}.mcap"
+        topics = sorted((id_, index) for index, id_ in enumerate(self._channel_ids) if id_)
+        return {
+            "version": 9, "storage_identifier": "mcap", "relative_file_paths": [file],
+            "duration": {"nanoseconds": last - first},
+            "starting_time": {"nanoseconds_since_epoch": first},
+            "message_count": self._count,
+            "topics_with_message_count": [{
+                "topic_metadata": {
+                    "name": self._names[index], "type": self._msgtypes[index],
+                    "serialization_format": "cdr", "offered_qos_profiles": [],
+                    "type_description_hash": _definition(self._msgtypes[index])[1]},
+                "message_count": self._written[index]} for _, index in topics],
+            "compression_format": "", "compression_mode": "",
+            "files": [{"path": file, "starting_time": {"nanoseconds_since_epoch": first},
+                       "duration": {"nanoseconds": last - first},
+                       "message_count": self._count}],
+            "custom_data": None, "ros_distro": ROS_DISTRO,
+        }
 
     def __enter__(self) -> "BagWriter":
         return self
 
     def __exit__(self, exc_type, *exc) -> None:
         # An ordered bag holds what was written before a failure, like a recording cut short.
-        if exc_type is None or self._writer is not None:
+        if exc_type is None or self._mcap is not None:
             self.close()
+
+
+@lru_cache(maxsize=None)
+def _definition(msgtype: str) -> tuple[str, str]:
+    """(``ros2msg`` definition with its dependencies, RIHS01 type hash) of a type, from the
+    typestore: what rosbag2 stores as a channel's schema and in metadata.yaml."""
+    store = typestore()
+    return store.generate_msgdef(msgtype, ros_version=2)[0], store.hash_rihs01(msgtype)
+
+
+def _write_text(path: Path, text: str) -> None:
+    # Through a temporary name: a reader never sees half a metadata.yaml.
+    tmp = path.with_suffix(".yaml.tmp")
+    tmp.write_text(text, "utf8")
+    tmp.replace(path)
 
 
 def bag_topics(path) -> dict[str, str]:

@@ -31,9 +31,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .conventions import wrap_pi
+from .course import ACCELERATION_CHANGE, WINDOW_S
 from .earth import WGS84, normal_gravity
-from .lever_arm import lever_arm_position
-from .measurements import Innovation, position_residual_enu
+from .lever_arm import lever_arm_position, lever_arm_velocity
+from .measurements import Innovation, gnss_position, position_residual_enu
+from .propagation import extrapolate
 from .rotations import quat_from_euler, quat_from_rotvec, quat_mul, quat_normalize, \
     quat_rotate, quat_to_dcm
 from .strapdown import NavState, apply_correction
@@ -413,15 +415,113 @@ def without_cross_track(innov, v_enu):
     return Innovation(innov.name, rows @ innov.z, rows @ innov.H, rows @ innov.R @ rows.T)
 
 
-def restart_velocity(nav, P, space, v_enu, cov_enu):
-    """The solution's velocity replaced by a measured one (ENU, m/s) and its covariance (3, 3,
-    (m/s)^2), uncorrelated with the rest: for an INS that ran unaided too long to know it."""
+def restart_velocity(nav, P, space, v_enu, cov_enu, gain):
+    """The solution's velocity replaced by a measured one (ENU, m/s) of covariance cov_enu (3,
+    3, (m/s)^2): for an INS that ran unaided too long to know it, just aligned on that
+    velocity's course. gain: :func:`course_error_gain` with ``restarted``; the yaw (and what
+    turned with it) keeps its correlation with the velocity error both came from."""
     k = space["vel"]
     P = P.copy()
-    P[k, :] = 0.0
-    P[:, k] = 0.0
+    cross = np.asarray(gain) @ np.asarray(cov_enu, float)  # cov(errors, velocity error)
+    P[:, k] = cross
+    P[k, :] = cross.T
     P[k, k] = cov_enu
     return replace(nav, v_enu=np.asarray(v_enu, float).copy()), P
+
+
+def yaw_error_gain(nav, space, run):
+    """How a yaw error phi_U of a solution just turned onto a heading (:func:`rotate_yaw`)
+    shows in its other errors (n,): the velocity turned with it errs by v x e_U phi_U (the
+    velocity error equation, error_model.py, integrated over the accelerations since the rest),
+    the distance run (ENU, m) turned with it by run x e_U phi_U."""
+    g = np.zeros(space.size)
+    g[space["att"].stop - 1] = 1.0
+    g[space["vel"]] = np.cross(nav.v_enu, [0.0, 0.0, 1.0])
+    g[space["pos"]] = np.cross(run, [0.0, 0.0, 1.0])
+    return g
+
+
+def course_error_gain(nav, space, v_enu, rest_pos=None, restarted=False):
+    """The errors (n, 3) of a solution just aligned on the course of velocity v_enu (ENU, m/s)
+    per unit error of that velocity: the yaw takes -c'e_v (c its :func:`course_gradient`; the
+    course errs by c'e_v), and the rest with it by :func:`yaw_error_gain` (rest_pos: lat, lon,
+    h where the distance turned with it began, as for :func:`rotate_yaw`); ``restarted``
+    (:func:`restart_velocity`): the solution's velocity is v_enu, its error e_v itself."""
+    run = np.zeros(3) if rest_pos is None else \
+        position_residual_enu(nav.lat, nav.lon, nav.h, *rest_pos)
+    g = yaw_error_gain(nav, space, run)
+    if restarted:
+        g[space["vel"]] = 0.0
+    gain = -np.outer(g, course_gradient(v_enu))
+    if restarted:
+        gain[space["vel"], :] = np.eye(3)
+    return gain
+
+
+#: 1 sigma of the jerk that moving a solution by up to a second at its last acceleration
+#: leaves out, m/s^3: the change of acceleration the course allows over its window.
+EXTRAPOLATION_JERK = ACCELERATION_CHANGE / WINDOW_S
+
+
+def fixes_with_course(space, nav, P, fixes, epochs, gain, a_enu, omega, lever_b):
+    """The fixes a course velocity was made of as one position measurement of the solution
+    just aligned on that course, their errors' correlation with its errors accounted for.
+
+    The course turned the yaw (and set the velocity, on a restart), so the solution's errors
+    now hold the velocity's error e_v = sum of D_i e_i over the fixes' errors: the fixes are no
+    longer independent of the state. With C = cov(state error, measurement noise) the update
+    is the one of H' = H + C' P^-1 and R' = R - C' P^-1 C, whose noise is independent of the
+    state (the noise split into its regression on the state error and a remainder: Bar-Shalom,
+    Li and Kirubarajan, Estimation with Applications to Tracking and Navigation, the
+    correlated measurement noise; the gain is (P H' + C) S^-1 as the joint estimator's).
+
+    Parameters
+    ----------
+    space : StateSpace
+    nav : NavState
+        The aligned solution at nav.t.
+    P : (n, n) ndarray
+        Its covariance.
+    fixes : sequence of (GnssFix, X)
+        GnssVelocity.fixes (X the velocity's error covariance with that fix's) not yet in the
+        filter.
+    epochs : sequence of float
+        Their epochs, s: each predicted by moving nav there at a_enu (m/s^2, ENU), whose error
+        over the second or so grows as EXTRAPOLATION_JERK |dt|^3 / 6.
+    gain : (n, 3) ndarray
+        :func:`course_error_gain`.
+    omega : (3,) ndarray
+        Compensated angular rate, body FLU, rad/s (the antenna's lever-arm velocity).
+    lever_b : (3,) array_like
+        Antenna relative to the IMU, FLU, m.
+
+    Returns
+    -------
+    Innovation
+        "gnss_pos", three rows per fix.
+    """
+    zs, Hs, Rs, Cs = [], [], [], []
+    for (fix, cross), epoch in zip(fixes, epochs):
+        dt = epoch - nav.t
+        st = extrapolate(nav, dt, a_enu)
+        v_ant = lever_arm_velocity(st.v_enu, st.q_nb, omega, lever_b, st.lat)
+        innov = gnss_position(space, st, fix.lat, fix.lon, fix.h, fix.cov_enu, lever_b,
+                              dzdt=v_ant)
+        H = innov.H.copy()
+        H[:, space["vel"]] += dt * H[:, space["pos"]]  # the error at nav.t carried to epoch
+        zs.append(innov.z)
+        Hs.append(H)
+        Rs.append(innov.R + np.eye(3) * (EXTRAPOLATION_JERK * abs(dt) ** 3 / 6.0) ** 2)
+        # The filter's noise is -e_i (z = predicted - measured), the state error gain @ e_v.
+        Cs.append(-np.asarray(gain) @ np.asarray(cross))
+    m = 3 * len(zs)
+    R = np.zeros((m, m))
+    for i, Ri in enumerate(Rs):
+        R[3 * i:3 * i + 3, 3 * i:3 * i + 3] = Ri
+    C = np.hstack(Cs)
+    PC = np.linalg.solve(P, C)
+    R = R - C.T @ PC
+    return Innovation("gnss_pos", np.concatenate(zs), np.vstack(Hs) + PC.T, 0.5 * (R + R.T))
 
 
 def yaw_error_from_heading(azimuth, variance, q_nb):
@@ -486,15 +586,10 @@ def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, rest_pos=None, velocity
     P[k, :] = 0.0
     P[:, k] = 0.0
     # The velocity and the distance run since the rest were turned by the new yaw, so they
-    # carry its error: a yaw error phi_U leaves delta v = v x e_U phi_U (the velocity error
-    # equation, error_model.py, integrated over the accelerations since the rest) and
-    # delta p = run x e_U phi_U. With these correlations the first fixes after the alignment
-    # correct the yaw through the distance run, instead of taking the turned distance's error
-    # for a position error alone (fixes at 1 Hz after a course of several seconds).
-    g = np.zeros(space.size)
-    g[k] = 1.0
-    g[space["vel"]] = np.cross(nav.v_enu, [0.0, 0.0, 1.0])
-    g[space["pos"]] = np.cross(run, [0.0, 0.0, 1.0])
+    # carry its error (yaw_error_gain). With these correlations the first fixes after the
+    # alignment correct the yaw through the distance run, instead of taking the turned
+    # distance's error for a position error alone (fixes at 1 Hz after a course of seconds).
+    g = yaw_error_gain(nav, space, run)
     # The new errors are x + g phi_U with phi_U = h' x - n, x the errors turned with the
     # solution and h the yaw's dependence on them (zero for a heading fix or the body axis on a
     # course): x' = (I + g h') x - g n. The floor tops up n where the yaw would be below it.

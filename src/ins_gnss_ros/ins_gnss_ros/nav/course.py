@@ -10,6 +10,11 @@ difference over a second or two, and a fix without covariance is given a generou
 (nav/aiding.py). The white part is measured from the fixes themselves: the second difference of
 three equally spaced fixes, e_(k+1) - 2 e_k + e_(k-1), has six times the white variance and no
 velocity in it (an acceleration a adds a dt^2, so the estimate errs on the large side).
+
+The velocity carries the fixes it was made of (GnssVelocity.fixes): its error is
+(e_1 - e_0) / dt, so it is correlated with the first fix's error by -W_0 / dt and with the
+last's by W_1 / dt (W the white covariances), and an alignment on it must not take those fixes
+for independent news (nav/alignment.py, fixes_with_course).
 """
 from __future__ import annotations
 
@@ -19,7 +24,7 @@ from collections import deque
 import numpy as np
 
 from .earth import ecef_to_enu_matrix, geodetic_to_ecef
-from .measurement_types import GnssVelocity
+from .measurement_types import GnssFix, GnssVelocity
 
 #: Two fixes at most WINDOW_S apart whose horizontal displacement exceeds MIN_SIGMAS times its
 #: standard deviation give a velocity (applied at the mid-epoch, within the navigator's 3 s
@@ -44,7 +49,7 @@ class CourseFromFixes:
     """Turns successive fixes into velocities (:class:`GnssVelocity`)."""
 
     def __init__(self):
-        self._window: list[tuple[float, np.ndarray, np.ndarray]] = []  # t, ECEF, cov ENU
+        self._window: list[tuple[np.ndarray, GnssFix]] = []  # ECEF, the fix
         self._last3: deque = deque(maxlen=3)                           # t, ECEF
         # (east^2, north^2) of each, Python floats, m^2: every fix asks for their median, and
         # numpy's median of a hundred values cost more than the rest of a fix's front end
@@ -71,20 +76,26 @@ class CourseFromFixes:
         (:meth:`observe`). Returns the velocity it completes, or None."""
         r = geodetic_to_ecef(lat, lon, h)
         R = ecef_to_enu_matrix(lat, lon)
-        self._window = [f for f in self._window if t - f[0] <= WINDOW_S]
-        self._window.append((t, r, cov))
-        t0, r0, cov0 = self._window[0]
-        dt = t - t0
+        self._window = [f for f in self._window if t - f[1].t <= WINDOW_S]
+        self._window.append((r, GnssFix(t, lat, lon, h, cov)))
+        r0, first = self._window[0]
+        dt = t - first.t
         if dt <= 0.0:
             return None
         d = R @ (r - r0)
-        cov_d = self.fix_to_fix(cov) + self.fix_to_fix(cov0)
+        white0, white1 = self.fix_to_fix(first.cov_enu), self.fix_to_fix(cov)
+        cov_d = white0 + white1
         if np.hypot(d[0], d[1]) < MIN_SIGMAS * np.sqrt(cov_d[0, 0] + cov_d[1, 1]):
             return None
         cov_v = cov_d / dt ** 2 \
             + np.diag([1.0, 1.0, 0.0]) * (ACCELERATION_CHANGE * dt / 24.0) ** 2
+        # The fixes between the two ends are in the window too: not in the velocity, but news
+        # the alignment can use (the filter refused them while the heading was unknown).
+        cross = [np.zeros((3, 3))] * len(self._window)
+        cross[0], cross[-1] = -white0 / dt, white1 / dt
+        fixes = tuple(zip((f for _, f in self._window), cross))
         self._window = [self._window[-1]]
-        return GnssVelocity(0.5 * (t0 + t), d / dt, cov_v)
+        return GnssVelocity(0.5 * (first.t + t), d / dt, cov_v, fixes)
 
     def observe(self, t: float, lat: float, lon: float, h: float) -> None:
         """Every fix (t s; rad, rad, m), for the fix-to-fix noise of :meth:`fix_to_fix`."""

@@ -61,8 +61,9 @@ class ExtraState:
 #: stamped t refers to the navigation epoch t - td), "mag" magnetic-heading bias (rad), "nhc"
 #: pitch and yaw of the vehicle axes relative to the IMU axes for the non-holonomic
 #: constraint (2, rad), "log" water current E, N (m/s) and speed-log scale error (3), "wheel"
-#: wheel-odometry scale error (1, -).
-KNOWN_EXTRAS = ("td", "mag", "ahrs", "nhc", "log", "wheel")
+#: wheel-odometry scale error (1, -), "vd" latency of the GNSS velocity alone (s, measurements.py
+#: gnss_velocity).
+KNOWN_EXTRAS = ("td", "mag", "ahrs", "nhc", "log", "wheel", "vd")
 
 
 @dataclass(frozen=True)
@@ -187,6 +188,12 @@ class ErrorStateEKF:
             Q[n0:, n0:] = self._Q_extra
             self._Q = Q
         return F, self._Q
+
+    def set_noise(self, noise):
+        """Use the IMU noise model `noise` from the next step on (the densities measured at
+        rest, rest_noise.py): F and Q are rebuilt then."""
+        if noise is not self.noise:
+            self.noise, self.F_model, self._Q = noise, None, None
 
     def predict(self, nav_state, f_b, w_ib_b, dt, refresh=True):
         """Propagate x and P over dt with the model frozen at the given state.

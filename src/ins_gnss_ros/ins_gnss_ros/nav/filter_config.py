@@ -45,6 +45,8 @@ PARAMS = (
           0.0, 10.0),
     Param("gnss.velocity_delay_s", 0.0, "latency of the receiver's velocity solution: a "
           "gnss/vel stamped t is applied at t - delay, s", 0.0, 2.0),
+    Param("gnss.velocity_latency_sigma_s", 0.0, "initial sigma of the filter state of the "
+          "receiver velocity's latency beyond gnss.velocity_delay_s, s (0: no state)", 0.0, 1.0),
     Param("coupling", "loose", "GNSS aiding: loose (fix + velocity), tight (pseudorange + "
           "Doppler; needs a layout with the clock block, e.g. 24) or auto (tight below "
           "auto.min_satellites)", choices=("loose", "tight", "auto")),
@@ -174,6 +176,8 @@ def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
     extras = {}
     if p["time_offset_sigma_s"] > 0.0:
         extras["td"] = ExtraState(1, p["time_offset_sigma_s"])
+    if p["gnss.velocity_latency_sigma_s"] > 0.0:
+        extras["vd"] = ExtraState(1, p["gnss.velocity_latency_sigma_s"])
     if p["use_magnetic_heading"] and p["magnetic_bias_sigma_deg"] > 0.0:
         extras["mag"] = ExtraState(1, np.radians(p["magnetic_bias_sigma_deg"]))
     if p["use_imu_heading"] and p["imu_heading_bias_sigma_deg"] > 0.0:

@@ -22,6 +22,13 @@ The floors and the rejection times are not part of the checkpoints for delayed m
 (rewind.py): a re-run keeps the current ones (a floor is only ever conservative). The start of
 a kind's current rejection, which decides the forcing, is part of the run state and is rewound.
 
+A rejection is continuous while the kind keeps arriving: a gap of more than
+``GAP_FACTOR * max_reject_time`` without it (a GNSS outage) ends it, so that the first
+measurements after the gap, which meet an INS that coasted through it, get the full
+`max_reject_time` to be accepted before they are forced (a rejection counted from before a 15 s
+outage forced the first fix after it at once on the real car drive, and its floor of the
+outage's drift kept the solution degraded for minutes).
+
 F decays by exp(-dt / floor_tau) over the time the kind is accepted (not while it is rejected);
 while it exceeds degraded_ratio^2 times the kind's own variance, the solution is degraded
 (mode DEAD_RECKONING, modes.py: it is not confirmed by its aiding). So it is while an aiding
@@ -36,6 +43,19 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .gating import chi2_gate, normalised_innovation
+
+#: A kind absent for more than this many times max_reject_time ends its continuous rejection:
+#: a kind arriving at 0.5 Hz still continues one at the default 2 s.
+GAP_FACTOR = 2.0
+
+
+def rejection_start(span, epoch, max_reject_time):
+    """Start (s) of the continuous rejection a measurement of the kind at `epoch` (s) would
+    continue, or None: none is under way (`span` None) or the kind's last rejected measurement,
+    ``span = (first, last)``, lies more than ``GAP_FACTOR * max_reject_time`` before it."""
+    if span is None or epoch - span[1] > GAP_FACTOR * max_reject_time:
+        return None
+    return span[0]
 
 
 @dataclass
@@ -91,7 +111,7 @@ class Integrity:
         epoch : float
             s.
         rejected_since : float or None
-            Start of the kind's current continuous rejection, s.
+            Start of the kind's current continuous rejection (:func:`rejection_start`), s.
         widen_prior : callable (slice, variances)
             Told of each widening of a state block by a forced update (the record's P-).
 
@@ -122,8 +142,8 @@ class Integrity:
 
     def rejected(self, name, epoch):
         """An aiding measurement of kind `name` was rejected at `epoch` (s)."""
-        first = self.rejecting.get(name, (epoch, epoch))[0]
-        self.rejecting[name] = (first, epoch)
+        first = rejection_start(self.rejecting.get(name), epoch, self.config.max_reject_time)
+        self.rejecting[name] = (epoch if first is None else first, epoch)
 
     def accepted(self, name):
         """A measurement of kind `name` was accepted: its rejection is over."""

@@ -31,11 +31,16 @@ class GnssFix:
 
 @dataclass(frozen=True)
 class GnssVelocity:
-    """Antenna velocity ENU (m/s) at GNSS time t, covariance ((m/s)^2)."""
+    """Antenna velocity ENU (m/s) at GNSS time t, covariance ((m/s)^2).
+
+    ``fixes``: for a velocity made of successive fixes (nav/course.py), those fixes, each as
+    (GnssFix, X) with X (3, 3) the covariance of this velocity's error with the fix's error
+    ((m^2)/s): the alignment on it uses them with that correlation, and the filter not again."""
 
     t: float
     v_enu: np.ndarray
     cov_enu: np.ndarray
+    fixes: tuple = ()
 
 
 @dataclass(frozen=True)

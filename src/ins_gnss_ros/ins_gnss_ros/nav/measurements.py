@@ -107,12 +107,25 @@ def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=
     return Innovation("gnss_pos", z, H, np.asarray(cov_enu, float))
 
 
-def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3), dzdt=None):
+#: Physical range of the GNSS velocity's latency estimate ("vd" state), s: a receiver's velocity
+#: does not precede its epoch, and a solution averaged over a second lags by half of it.
+VELOCITY_LATENCY_RANGE = (0.0, 0.5)
+
+
+def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3), dzdt=None,
+                  latency=0.0):
     """GNSS antenna velocity (loose coupling).
 
     Predicted v_a = v + C (omega_ib x l) - omega_ie x (C l) (Groves eq. 2.167). Its error:
     dv + [C (omega x l) x] phi - [omega_ie x][(C l) x] phi - C [l x] d_omega, with d_omega the
     residual gyro error.
+
+    With a "vd" state, the velocity of the epoch t - latency (a receiver's velocity is often a
+    filtered or averaged Doppler solution, so it lags its fix, which "td" would move as well):
+    predicted v_a(t) - a latency, whose error adds a (vd - latency) for the true latency vd; an
+    unknown latency modelled as a state of the filter, with the acceleration as its measurement
+    coefficient, as Groves (2nd ed., ch. 14, on INS/GNSS time synchronisation) treats an
+    unknown time offset. Observable in accelerations (turns, braking) only.
 
     Parameters
     ----------
@@ -124,7 +137,9 @@ def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3),
         Compensated angular rate, FLU, rad/s.
     lever_b : array_like, shape (3,)
     dzdt : array_like, shape (3,), optional
-        Antenna acceleration ENU (m/s^2), for the time-offset state.
+        Antenna acceleration ENU (m/s^2), for the time-offset and velocity-latency states.
+    latency : float
+        The running estimate of the velocity's latency ("vd" state), s.
 
     Returns
     -------
@@ -137,6 +152,9 @@ def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3),
     H[:, space["att"]] = d_att
     _gyro_columns(space, H, d_gyro)
     _add_time_offset(space, H, dzdt)
+    if dzdt is not None and "vd" in space:
+        pred = pred - np.asarray(dzdt, float) * latency
+        H[:, space["vd"].start] = dzdt
     return Innovation("gnss_vel", pred - np.asarray(v_enu, float), H, np.asarray(cov_enu, float))
 
 

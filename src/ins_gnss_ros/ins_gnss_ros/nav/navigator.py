@@ -29,22 +29,24 @@ import numpy as np
 
 from . import measurements as meas
 from . import modes
-from .alignment import Levelling, initial_covariance, levelled_state, restart_velocity, \
-    rotate_yaw, take_static_gyro_bias, without_cross_track, yaw_error_from_course, \
-    yaw_error_from_heading, yaw_error_from_motion
+from .alignment import Levelling, course_error_gain, fixes_with_course, initial_covariance, \
+    levelled_state, restart_velocity, rotate_yaw, take_static_gyro_bias, without_cross_track, \
+    yaw_error_from_course, yaw_error_from_heading, yaw_error_from_motion
 from .earth import WGS84
 from .ekf import ErrorStateEKF, StateSpace
 from .error_model import make_layout
 from .gating import rejected
 from .imu_buffer import ImuBuffer
 from .imu_gaps import BridgedGaps
-from .integrity import Integrity
+from .integrity import Integrity, rejection_start
 from .lever_arm import lever_arm_velocity
 from .measurement_types import GNSS_TYPES, GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, \
     SatelliteRanges, SpeedLog, StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .propagation import extrapolate, propagate
 from .recording import Recorder, published_covariance
+from .rest_noise import RestNoise
+from .rotations import quat_from_rotvec, quat_rotate
 from .rewind import Rewind, RunState
 from .strapdown import apply_correction
 
@@ -100,6 +102,7 @@ class Navigator:
         self._state = RunState.initial(self._space)     # rewound by delayed measurements
         self._rewind = Rewind(cfg.history, cfg.checkpoint_interval)
         self._integrity = Integrity(cfg)                # not rewound (integrity.py)
+        self._rest_noise = RestNoise(cfg.noise)         # a property of the IMU: not rewound
         self._recorder = Recorder(self._space, cfg.record, cfg.store_covariance)
         self._gaps = BridgedGaps(cfg.gap_accel_sigma, cfg.gap_rate_sigma)
         # The fixes' common error (GnssFix.common_var) of the latest fix used, m^2: a property
@@ -215,6 +218,18 @@ class Navigator:
     update_count = _view("_recorder", "update_count", "Number of update results produced so "
                          "far, including forgotten ones. A delayed measurement that re-runs "
                          "the filter can make it go back.")
+
+    imu_noise_at_rest = _view("_rest_noise", "summary", "The IMU's white noise measured at "
+                              "rest against the grade's (rest_noise.py), or None.")
+
+    def velocity_latency(self):
+        """The GNSS velocity's latency estimate and its sigma (s, "vd" state), or None."""
+        self._catch_up()
+        s = self._state
+        if "vd" not in self._space or s.ekf is None:
+            return None
+        i = self._space["vd"].start
+        return float(s.estimates["vd"][0]), float(np.sqrt(s.ekf.P[i, i]))
 
     space = property(lambda self: self._space, doc="The filter's StateSpace.")
     lever_arm_b = property(lambda self: self._lever, doc="GNSS antenna relative to the IMU, FLU, m.")
@@ -344,8 +359,13 @@ class Navigator:
     def _segment(self, i, j):
         """Mechanise samples i..j-1 and propagate the covariance to the end of the segment."""
         s, cfg = self._state, self.config
-        phi = propagate(s, self._imu.rows(i, j), cfg.noise, cfg.cov_interval, self._gaps,
-                        self._space)
+        rows = self._imu.rows(i, j)
+        if self._at_rest(s.nav.t):
+            self._rest_noise.add(*rows[:3])
+        else:
+            self._rest_noise.moved()
+        s.ekf.set_noise(self._rest_noise.noise)
+        phi = propagate(s, rows, s.ekf.noise, cfg.cov_interval, self._gaps, self._space)
         s.next_sample = j
         self._recorder.epoch(s, phi, s.ekf.P, self._published_var())  # stored as a copy
         if s.mode != ALIGNING:
@@ -407,10 +427,13 @@ class Navigator:
         return False
 
     def _gnss_fix(self, m, st, epoch):
+        s = self._state
+        if m.t <= s.t_fixes_aligned:
+            self._refuse(m, epoch, "in the alignment")
+            return
         if self._held_for_alignment(m, epoch):
             return
         self._fix_common_var = m.common_var
-        s = self._state
         v_ant = lever_arm_velocity(st.v_enu, st.q_nb, s.omega, self._lever, st.lat)
         innov = meas.gnss_position(self._space, st, m.lat, m.lon, m.h, m.cov_enu, self._lever,
                                    dzdt=v_ant)
@@ -422,36 +445,66 @@ class Navigator:
         if frozen:
             self._recorder.add_update(rejected("gnss_pos", epoch, innov.z, innov.R, "frozen"))
             return
-        self._update(innov, epoch)
+        if self._update(innov, epoch).accepted:
+            s.t_fix_accepted = m.t
 
     def _gnss_velocity(self, m, st, epoch):
         s, cfg = self._state, self.config
         s.gnss_speed = float(np.hypot(*np.asarray(m.v_enu)[:2]))
+        self._rest_noise.confirm(epoch, s.gnss_speed <= cfg.static_speed)
         aligned_by = None  # the INS velocity's course gradient where m turned the yaw against it
         if s.mode == ALIGNING and not s.heading_known and s.gnss_speed >= cfg.align_speed:
             vel = self._space["vel"].start
             v, sigma_ins = np.asarray(m.v_enu, float), np.sqrt(s.ekf.P[vel, vel])
-            if sigma_ins < UNINFORMED_VELOCITY * s.gnss_speed:
+            # The INS ran unaided too long (a start on the move without a receiver speed) for
+            # its velocity to keep a direction: the body x axis takes the course, and the INS
+            # that velocity.
+            restart = sigma_ins >= UNINFORMED_VELOCITY * s.gnss_speed
+            if restart:
+                delta, sigma = yaw_error_from_course(v, m.cov_enu, s.nav.q_nb)
+            else:
                 delta, sigma, aligned_by = yaw_error_from_motion(v, m.cov_enu, s.nav.v_enu,
                                                                  s.nav.q_nb)
-                self._rotate_yaw(delta, sigma, aligned_by)
-            else:
-                # The INS ran unaided too long (a start on the move without a receiver speed)
-                # for its velocity to keep a direction: the body x axis takes the course, and
-                # the INS that velocity.
-                self._rotate_yaw(*yaw_error_from_course(v, m.cov_enu, s.nav.q_nb))
-                s.nav, s.ekf.P = restart_velocity(s.nav, s.ekf.P, self._space, v, m.cov_enu)
+            self._rotate_yaw(delta, sigma, aligned_by)
+            gain = course_error_gain(s.nav, self._space, v, s.rest_pos, restart)
+            if restart:
+                s.nav, s.ekf.P = restart_velocity(s.nav, s.ekf.P, self._space, v, m.cov_enu,
+                                                  gain)
+            if m.fixes:
+                self._fixes_of_course(m, gain, delta, epoch)
+                return
+            if restart:
                 return
             st = extrapolate(s.nav, st.t - s.nav.t, s.a_enu)
         if self._held_for_alignment(m, epoch):
             return
         innov = meas.gnss_velocity(self._space, st, m.v_enu, m.cov_enu, s.omega, self._lever,
-                                   dzdt=s.a_enu)
+                                   dzdt=s.a_enu, latency=s.estimates.get("vd", (0.0,))[0])
         if aligned_by is not None:
             innov = without_cross_track(innov, m.v_enu)
         if self._at_rest(epoch):
             self._zero_rate(st, epoch)
         self._update(innov, epoch)
+
+    def _fixes_of_course(self, m, gain, delta, epoch):
+        """After an alignment on a velocity made of fixes (nav/course.py), those of its fixes
+        the filter has not taken, as one update with their correlation to the alignment's
+        errors (alignment.fixes_with_course); the velocity itself is not applied, its
+        along-track part is in the fixes. A first fix taken already (at rest) stays out, its
+        correlation with the course not modelled."""
+        s = self._state
+        fixes = [(f, x) for f, x in m.fixes if f.t > s.t_fix_accepted]
+        s.t_fixes_aligned = m.fixes[-1][0].t
+        if not fixes:
+            return
+        # The last segment's acceleration turned with the solution: it moves the solution to
+        # the fixes, up to a second away.
+        a_enu = quat_rotate(quat_from_rotvec([0.0, 0.0, delta]), s.a_enu)
+        innov = fixes_with_course(self._space, s.nav, s.ekf.P, fixes,
+                                  [self._epoch_of(f) for f, _ in fixes], gain, a_enu, s.omega,
+                                  self._lever)
+        if self._update(innov, epoch).accepted:
+            s.t_fix_accepted = fixes[-1][0].t
 
     def _zero_rate(self, st, epoch):
         """ZARU at rest: the gyros see only the Earth rate, so their biases become observable
@@ -502,6 +555,7 @@ class Navigator:
 
     def _zero_velocity(self, m, st, epoch):
         self._state.t_rest = epoch
+        self._rest_noise.confirm(epoch, True)
         self._zero_rate(st, epoch)
         self._update(meas.zero_velocity(self._space, st, m.sigma_v), epoch)
 
@@ -530,12 +584,13 @@ class Navigator:
         """Gate and apply one measurement, forced in after `max_reject_time` s of continuous
         rejection (integrity.py); only aiding (not constraints) counts for the mode."""
         s, guard = self._state, self._integrity
-        res = guard.update(s.ekf, self._space, innov, epoch, s.reject_since.get(innov.name),
-                           self._recorder.widen_prior)
+        since = rejection_start(s.reject_since.get(innov.name), epoch,
+                                self.config.max_reject_time)
+        res = guard.update(s.ekf, self._space, innov, epoch, since, self._recorder.widen_prior)
         if aiding:
             self._recorder.add_update(res)
         if not res.accepted:
-            s.reject_since.setdefault(innov.name, epoch)
+            s.reject_since[innov.name] = (epoch if since is None else since, epoch)
             if aiding:
                 guard.rejected(innov.name, epoch)
                 s.mode = modes.after_rejected(s.mode, guard.degraded(epoch))
@@ -555,6 +610,8 @@ class Navigator:
         s.nav = apply_correction(s.nav, dx[S["pos"]], dx[S["vel"]], dx[S["att"]])
         for name in s.estimates:
             s.estimates[name] = s.estimates[name] + dx[S[name]]
+        if "vd" in s.estimates:  # projected onto its physical range (measurements.py)
+            s.estimates["vd"] = np.clip(s.estimates["vd"], *meas.VELOCITY_LATENCY_RANGE)
         self._recorder.correct(s, dx, self._published_var())
 
     def _rotate_yaw(self, delta, sigma, velocity_gain=None):

@@ -55,8 +55,9 @@ class RunState:
         The yaw has been aligned; until then its variance is kept out of the filter.
     t_epoch, t_model, t_nhc, t_last_aid : float
         The last filter epoch, model (F) refresh, non-holonomic update and accepted aiding.
-    reject_since : dict of str to float
-        Measurement kind -> start of its current continuous rejection (decides forcing).
+    reject_since : dict of str to (float, float)
+        Measurement kind -> first and last epoch of its current continuous rejection (decides
+        forcing, :func:`~ins_gnss_ros.nav.integrity.rejection_start`).
     a_enu : (3,) ndarray
         Mean acceleration of the last segment, ENU, m/s^2.
     omega : (3,) ndarray
@@ -67,6 +68,11 @@ class RunState:
         (lat, lon, h) of the IMU at the last fix at rest while the heading was unknown.
     last_fix : tuple of 3 float or None
         (lat, lon, h) of the last GNSS fix (a frozen receiver repeats it).
+    t_fix_accepted : float
+        GNSS time of the last fix the filter took.
+    t_fixes_aligned : float
+        GNSS time of the last fix of the course the heading was aligned on: the fixes up to it
+        are in the alignment (alignment.fixes_with_course), not applied again.
     """
 
     next_sample: int = 0
@@ -89,6 +95,8 @@ class RunState:
     omega_time: float = 1.0
     rest_pos: tuple | None = None
     last_fix: tuple | None = None
+    t_fix_accepted: float = -np.inf
+    t_fixes_aligned: float = -np.inf
 
     @classmethod
     def initial(cls, space):

@@ -246,6 +246,12 @@ class EkfNode(EkfServices, NavNode):
                             self.sync.waiting_for(nav.mode) or explanation)
         for name, stats in self.aiding.inputs.items():
             self.diag.set_value(name, stats.summary(t))
+        if nav.imu_noise_at_rest is not None:
+            self.diag.set_value("IMU noise at rest", nav.imu_noise_at_rest)
+        latency = nav.velocity_latency()
+        if latency is not None:
+            self.diag.set_value("gnss/vel latency estimate",
+                                f"{1e3 * latency[0]:.0f} +- {1e3 * latency[1]:.0f} ms")
         self.pub_status.publish(status_msg(
             t, MODE_VALUES[mode], self.aiding.use_ranges, updates,
             (nav.space, nav.covariance()) if nav.started else None,
