@@ -12,6 +12,10 @@ from the nodes' own counters (``received <topic>`` / ``published <topic>`` in ea
 * output loss of a node: per topic it publishes, what it published minus what its least
   served subscriber received.
 
+A topic a node reads only now and then (``NavNode.subscribe_latest``: ``ins/state`` in
+``mag_compass`` and ``phase_heading``) is counted as ``taken <topic>``, the newest message
+taken when the node needed it: listed, not a loss.
+
 This process only observes: /diagnostics, and ``ins/state`` taken serialized (the stamp is
 read from the bytes) for the IMU -> ``ins/state`` latency, the time the state arrives here
 minus the stamp of the IMU sample that completed it. CPU is % of one core per node process,
@@ -106,7 +110,7 @@ def live_load(duration: float, rate: float, profile: Path) -> dict:
     def on_diagnostics(msg):
         for status in msg.status:
             counts = {kv.key: int(kv.value) for kv in status.values
-                      if kv.key.startswith(("received ", "published "))}
+                      if kv.key.startswith(("received ", "published ", "taken "))}
             traffic[status.hardware_id] = counts
 
     def on_state(data: bytes):
@@ -165,13 +169,15 @@ def summarise(names, traffic, sent, cpu, latencies, duration, rate, profile) -> 
     """Per node CPU and input/output losses from the counters (see the module docstring)."""
     published = {SENSOR: sent["sent"]}
     received = defaultdict(dict)  # topic -> node -> count
+    taken = defaultdict(dict)
     for name in names:
         counts = traffic.get(name, {})
         published[name] = {k.split(" ", 1)[1]: v for k, v in counts.items()
                            if k.startswith("published ")}
         for k, v in counts.items():
-            if k.startswith("received "):
-                received[k.split(" ", 1)[1]][name] = v
+            for kind, counts_of in (("received ", received), ("taken ", taken)):
+                if k.startswith(kind):
+                    counts_of[k.split(" ", 1)[1]][name] = v
     source = {topic: (who, n) for who, topics in published.items() for topic, n in topics.items()}
     nodes = {}
     for name in names:
@@ -180,7 +186,10 @@ def summarise(names, traffic, sent, cpu, latencies, duration, rate, profile) -> 
                   for topic, by in received.items() if name in by and topic in source}
         outputs = {topic: {"published": n, "lost": n - min(received[topic].values())}
                    for topic, n in published[name].items() if received.get(topic)}
-        nodes[name] = {"cpu_percent": cpu[name], "inputs": inputs, "outputs": outputs}
+        taken_here = {topic: {"sent": source[topic][1], "taken": by[name]}
+                      for topic, by in taken.items() if name in by and topic in source}
+        nodes[name] = {"cpu_percent": cpu[name], "inputs": inputs, "outputs": outputs,
+                       "taken": taken_here}
     lat = np.asarray(latencies, float) * 1e-6
     return {"duration_s": duration, "rate_hz": rate, "profile": str(profile),
             "total_cpu_percent": sum(cpu.values()), "nodes": nodes,
@@ -210,7 +219,9 @@ def main() -> int:
     print(f"live load: {r['duration_s']:g} s at {r['rate_hz']:g} Hz, profile {r['profile']}")
     print(f"{'node':18s} {'CPU %':>6s}  input loss (sent/received)  output loss")
     for name, n in r["nodes"].items():
-        ins = ", ".join(f"{t} {i['lost']} of {i['sent']}" for t, i in n["inputs"].items())
+        ins = ", ".join([f"{t} {i['lost']} of {i['sent']}" for t, i in n["inputs"].items()]
+                        + [f"{t} taken {i['taken']} of {i['sent']}"
+                           for t, i in n["taken"].items()])
         outs = ", ".join(f"{t} {o['lost']} of {o['published']}" for t, o in n["outputs"].items())
         print(f"{name:18s} {n['cpu_percent']:6.1f}  {ins or '-'}  |  {outs or '-'}")
     lat, late = r["ins_state_latency_ms"], r["sensor_late_ms"]

@@ -1,9 +1,11 @@
 """Byte sources: URL selection, serial (pseudo-terminal), TCP client and server on loopback, file,
-reconnection backoff and replay pacing (with a fake clock: no timing assertions)."""
+reconnection backoff and replay pacing (with a fake clock: no timing assertions), the reader
+thread (what it hands over and in which order; waits only as lower bounds)."""
 
 from __future__ import annotations
 
 import os
+import queue
 import socket
 import threading
 import time
@@ -11,8 +13,8 @@ import tty
 
 import pytest
 
-from ins_gnss_ros.gnss.sources import (FileSource, Pacer, SerialSource, TcpClientSource,
-                                       TcpServerSource, open_source)
+from ins_gnss_ros.gnss.sources import (FileSource, Pacer, SerialSource, SourceReader,
+                                       TcpClientSource, TcpServerSource, open_source)
 
 PAYLOAD = bytes(range(256)) * 40  # 10 KiB, every byte value (binary UBX-safe)
 
@@ -179,3 +181,84 @@ def test_pacer_releases_at_the_recorded_spacing():
     assert pacer.wait_s(8600.0) == 0.0
     pacer.released(8600.0)
     assert pacer.wait_s(4000.0) == 0.0
+
+
+class Driver:
+    """The driver's side of a SourceReader: posted functions run on the test's thread, in
+    :meth:`run_until`; what it was handed is logged in order."""
+
+    def __init__(self, hold_first_s=None):
+        self.posted: queue.Queue = queue.Queue()
+        self.log: list = []
+        self._hold = hold_first_s  # the first chunk's records held back this long
+
+    def feed(self, data):
+        self.log.append(("feed", data, time.monotonic()))
+        hold, self._hold = self._hold, None
+        return hold
+
+    def release(self):
+        self.log.append(("release", None, time.monotonic()))
+        return None
+
+    def run_until(self, done, timeout=10.0):
+        deadline = time.monotonic() + timeout
+        while not done() and time.monotonic() < deadline:
+            try:
+                self.posted.get(timeout=0.05)()
+            except queue.Empty:
+                pass
+        assert done()
+
+
+def _reader(source, driver, max_bytes=65536, **kwargs):
+    return SourceReader(source, driver.posted.put, driver.feed, driver.release, max_bytes,
+                        **kwargs)
+
+
+def test_reader_hands_over_only_what_arrives():
+    server = socket.create_server(("127.0.0.1", 0))
+    source = TcpClientSource("127.0.0.1", server.getsockname()[1])
+    driver = Driver()
+    reader = _reader(source, driver, wait_s=0.05)
+    reader.start()
+    conn, _ = server.accept()
+    try:
+        time.sleep(0.3)  # connected, nothing sent: nothing is posted
+        assert driver.posted.empty() and driver.log == []
+        conn.sendall(PAYLOAD)
+        driver.run_until(lambda: sum(len(d) for _, d, _ in driver.log) == len(PAYLOAD))
+        assert b"".join(d for _, d, _ in driver.log) == PAYLOAD
+        assert {kind for kind, _, _ in driver.log} == {"feed"}
+    finally:
+        reader.stop()
+        conn.close()
+        server.close()
+        source.close()
+    assert not reader._thread.is_alive()
+
+
+def test_reader_waits_for_held_back_records_before_reading_on(tmp_path):
+    path = tmp_path / "stream.bin"
+    path.write_bytes(PAYLOAD)
+    driver = Driver(hold_first_s=0.2)
+    reader = _reader(FileSource(str(path), "recorded"), driver, max_bytes=1024)
+    reader.start()
+    driver.run_until(lambda: not reader._thread.is_alive() and driver.posted.empty())
+    kinds = [kind for kind, _, _ in driver.log]
+    # 1 KiB chunks: the second is read only after the records of the first were released
+    assert kinds[:3] == ["feed", "release", "feed"] and kinds.count("release") == 1
+    assert driver.log[1][2] - driver.log[0][2] >= 0.2
+    assert b"".join(d for kind, d, _ in driver.log if kind == "feed") == PAYLOAD
+
+
+def test_reader_of_a_missing_source_sleeps_until_the_retry(tmp_path):
+    source = FileSource(str(tmp_path / "missing.bin"), retry_initial_s=30.0)
+    reads = []
+    source_read = source.read
+    source.read = lambda *args: reads.append(1) or source_read(*args)
+    reader = _reader(source, Driver())
+    reader.start()
+    time.sleep(0.3)
+    reader.stop()
+    assert len(reads) == 1  # one failed open, then asleep until the retry in 30 s

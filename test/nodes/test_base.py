@@ -47,7 +47,7 @@ def test_diagnostics_report_counts_and_use_sim_time(executor, probe, ros_context
     msg = Clock()
     msg.clock.sec = 1234
     clock.publish(msg)
-    spin_until(executor, lambda: node.get_clock().now().nanoseconds == 1234 * 10**9, what="sim time")
+    spin_until(executor, lambda: node.now_ns() == 1234 * 10**9, what="sim time")
     node.diag.count("bad sample: NaN")
     node.diag.publish()
     spin_until(executor, lambda: any(a.status[0].values for a in arrays), what="diagnostics")
@@ -55,6 +55,37 @@ def test_diagnostics_report_counts_and_use_sim_time(executor, probe, ros_context
     assert status.level == DiagnosticStatus.WARN
     assert {kv.key: kv.value for kv in status.values} == {"bad sample: NaN": "1"}
     assert [a for a in arrays if a.status[0].values][-1].header.stamp.sec == 1234
+
+
+def test_now_is_the_system_time_without_sim_time(ros_context):
+    import time
+
+    node = _Counting(context=ros_context)
+    try:
+        before = time.time_ns()
+        assert before <= node.now_ns() <= time.time_ns()
+    finally:
+        node.destroy_node()
+
+
+def test_a_volatile_output_is_wanted_while_someone_subscribes(executor, probe, ros_context):
+    from sensor_msgs.msg import Imu
+
+    from ins_gnss_ros.nodes.base import SENSOR_QOS
+
+    node = _Counting(context=ros_context)
+    executor.add_node(node)
+    pub = node.publisher(Imu, "base_test/imu", SENSOR_QOS)
+    assert not pub.wanted()
+    got = []
+    sub = probe.create_subscription(Imu, "base_test/imu", got.append, SENSOR_QOS)
+    spin_until(executor, pub.wanted, what="the subscriber matched")
+    pub.publish(Imu())
+    spin_until(executor, lambda: got, what="the message")
+    probe.destroy_subscription(sub)
+    spin_until(executor, lambda: not pub.wanted(), what="the subscriber gone")
+    pub.publish(Imu())  # skipped, not counted
+    assert node.diag.traffic["published /base_test/imu"] == 1
 
 
 @pytest.mark.parametrize("kind", EXECUTORS)

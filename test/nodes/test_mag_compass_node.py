@@ -408,6 +408,9 @@ def test_publishes_over_ros(executor, ros_context, probe):
     spin_until(executor, lambda: len(headings) == 1, what="mag/heading")
     assert headings[0].azimuth == pytest.approx(np.pi / 2, abs=1e-9)  # x axis east
     assert headings[0].header.stamp == _stamp(0.05)
+    # counted when taken, from a subscription no executor dispatches
+    assert node.diag.traffic["taken /ins/state"] == 1
+    assert "/ins/state" not in {sub.topic_name for sub in node.subscriptions}
 
 
 #: The simulated drive of bench/bench_identity.py (sim_car): MEMS IMU, 50 Hz magnetometer with

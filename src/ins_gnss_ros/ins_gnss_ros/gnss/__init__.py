@@ -33,7 +33,7 @@ _PUBLIC = {
                  "errors_at"),
     "simulator": ("GnssSimulator", "SimulatorConfig", "default_start", "solve_fix",
                   "time_reference"),
-    "sources": ("NORMAL_EVENTS", "FileSource", "Pacer", "open_source"),
+    "sources": ("NORMAL_EVENTS", "FileSource", "Pacer", "SourceReader", "open_source"),
     "stream": ("Decoder", "split_frames"),
     "time": ("BDT_MINUS_GPST_S", "GPS_EPOCH", "GPS_EPOCH_POSIX", "glonass_time_of_day",
              "gps_seconds", "gps_to_posix", "gps_to_posix_ns", "gps_to_utc", "leap_seconds",

@@ -4,7 +4,8 @@ Every source has the same small interface, ``read(max_bytes, timeout) -> bytes``
 its reconnection: a failed open or a lost connection (unplugged USB receiver, closed socket,
 missing file) is reported through ``notify(event, detail)`` and retried with exponential
 backoff, and ``read`` returns ``b""`` meanwhile instead of raising, so a driver that polls it
-never stops.  Sources are selected by a URL (:func:`open_source`):
+never stops; :class:`SourceReader` reads one in a thread of its own instead, waiting for bytes
+rather than polling.  Sources are selected by a URL (:func:`open_source`):
 
 * ``serial:///dev/ttyACM0?baud=115200`` (pyserial; ``baud`` defaults to 115200)
 * ``tcp://HOST:PORT``: connect to a receiver or an NTRIP-style caster that serves the stream
@@ -23,6 +24,7 @@ from __future__ import annotations
 import math
 import select
 import socket
+import threading
 import time
 from typing import Callable
 from urllib.parse import parse_qs, urlsplit
@@ -80,6 +82,10 @@ class ByteSource:
         except OSError as err:  # pyserial's SerialException and socket errors are OSErrors
             self._failed("lost", err)
             return b""
+
+    def reconnect_in_s(self) -> float:
+        """Seconds until ``read`` tries to open the source again (0 when connected or due)."""
+        return 0.0 if self.connected else max(0.0, self._next_attempt - self._clock())
 
     def close(self) -> None:
         """Release the device; a later ``read`` opens it again."""
@@ -293,6 +299,82 @@ class Pacer:
             return False
         self.released(t)
         return True
+
+
+class SourceReader:
+    """Reads a source in a thread of its own and hands the bytes to the driver's thread.
+
+    For a driver on an event loop (a ROS executor): while the source has nothing, nothing runs
+    (the thread blocks in ``select`` on the port or socket, or sleeps until a reconnection is
+    due) instead of a timer polling it. ``post(fn)`` must run ``fn()`` on the driver's thread
+    (it may return before that). Each chunk read is handed over as ``feed(data)``; it returns
+    the seconds until the driver wants ``release()`` (records a :class:`Pacer` holds back) or
+    None, and ``release()`` returns the same. The thread reads on only when nothing is held
+    back, so a file is read no further ahead of the decoder than one chunk and a paced one
+    keeps its recorded timing. The thread ends at the end of a file or at :meth:`stop`;
+    ``on_error(err)`` (on the reader's thread) is told of anything unexpected, and reading
+    resumes after ``retry_s``.
+    """
+
+    def __init__(self, source: ByteSource, post: Callable[[Callable[[], None]], None],
+                 feed: Callable[[bytes], float | None], release: Callable[[], float | None],
+                 max_bytes: int, on_error: Callable[[Exception], None] = lambda err: None,
+                 wait_s: float = 0.5, retry_s: float = 0.5):
+        self.source, self.max_bytes = source, max_bytes
+        self._post, self._feed, self._release, self._on_error = post, feed, release, on_error
+        # The longest block in select: how soon stop() is noticed.
+        self._wait_s, self._retry_s = wait_s, retry_s
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f"reader {source.name}",
+                                        daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        """End the thread and wait for it (at most ``wait_s`` plus what the driver runs)."""
+        self._stop.set()
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join()
+
+    def sleep(self, seconds: float) -> bool:
+        """Wait ``seconds`` or until :meth:`stop`; whether it was stopped."""
+        return self._stop.wait(seconds)
+
+    def _run(self) -> None:
+        due = None  # seconds until the driver wants release(), None: nothing held back
+        while not self._stop.is_set():
+            try:
+                if due is not None:
+                    if self.sleep(due):
+                        return
+                    due = self._on_driver(self._release)
+                    continue
+                data = self.source.read(self.max_bytes, self._wait_s)
+                if data:
+                    due = self._on_driver(self._feed, data)
+                elif isinstance(self.source, FileSource) and self.source.finished:
+                    return
+                elif not self.source.connected:
+                    self.sleep(self.source.reconnect_in_s())
+            except Exception as err:  # noqa: BLE001 - the reader must outlive any fault
+                self._on_error(err)
+                self.sleep(self._retry_s)
+
+    def _on_driver(self, fn, *args) -> float | None:
+        """``fn(*args)`` run on the driver's thread; its result, once it has run."""
+        done, result = threading.Event(), [None]
+
+        def task() -> None:
+            try:
+                result[0] = fn(*args)
+            finally:
+                done.set()
+        self._post(task)
+        while not done.wait(self._wait_s):
+            if self._stop.is_set():
+                return None
+        return result[0]
 
 
 def open_source(url: str, **kwargs) -> ByteSource:

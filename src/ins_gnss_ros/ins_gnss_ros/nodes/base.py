@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 from collections import Counter, defaultdict, deque
 from typing import Any, Callable, Sequence
 
@@ -24,11 +25,14 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy._rclpy_pybind11 import RCLError
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.experimental import EventsExecutor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
 
 from ..io import ns_to_stamp
 from ..io.cdr import codec
@@ -210,25 +214,36 @@ class Latest:
 
     For a node that needs a state now and then from a stream published at the navigation rate
     (``ins/state`` at 100-1000 Hz, read by ``mag_compass`` per field sample and by
-    ``phase_heading`` per GNSS epoch): on DDS the subscription takes the serialized message
-    (rclpy ``raw=True``: no Python message is built per sample) and :meth:`take` decodes only
-    the newest one, once; on an :class:`InProcessBus` it holds the message object itself.
+    ``phase_heading`` per GNSS epoch). On DDS ``take_newest`` takes the newest message
+    serialized (or None) from a subscription no executor dispatches
+    (:meth:`NavNode.subscribe_latest`): nothing runs in Python per message published, and
+    :meth:`take` decodes only the one it reads; on an :class:`InProcessBus` the bus
+    :meth:`put` s each message object and the newest is kept.
     """
 
-    def __init__(self, msg_type, handler):
+    def __init__(self, msg_type, handler, take_newest: Callable[[], Any] | None = None):
         self._codec, self._handler = codec(msg_type), handler
+        self._take_newest = take_newest
         self._pending = None
 
     def put(self, data) -> None:
         self._pending = data
 
+    def _fetch(self) -> None:
+        if self._take_newest is not None:
+            data = self._take_newest()
+            if data is not None:
+                self._pending = data
+
     @property
     def waiting(self) -> bool:
         """A message came that has not been taken."""
+        self._fetch()
         return self._pending is not None
 
     def take(self):
         """The newest message not taken before, or None."""
+        self._fetch()
         data, self._pending = self._pending, None
         return self._codec.decode(data) if isinstance(data, bytes) else data
 
@@ -245,19 +260,26 @@ class _CountedPublisher:
     hands rclpy the message serialized by the project's codec (Imu 7 us; rclpy's conversion
     and serialization 27 us here). A volatile topic nobody subscribes to is not serialized
     (``imu/data`` at the IMU rate, read only where a compass levels from it): no late joiner
-    could get it anyway."""
+    could get it anyway. Its subscribers are counted from the publisher's matched events, not
+    asked of rclpy per message."""
 
-    def __init__(self, publisher, msg_type, qos, traffic: Counter):
-        self._publisher, self._traffic = publisher, traffic
+    def __init__(self, node: Node, msg_type, topic: str, qos, traffic: Counter):
+        self._subscribers = 0
+        self._publisher = node.create_publisher(
+            msg_type, topic, qos, event_callbacks=PublisherEventCallbacks(matched=self._matched))
+        self._traffic = traffic
         self._encode = codec(msg_type).encode
-        self._key = f"published {publisher.topic_name}"
+        self._key = f"published {self._publisher.topic_name}"
         self._volatile = not (isinstance(qos, QoSProfile)
                               and qos.durability == DurabilityPolicy.TRANSIENT_LOCAL)
+
+    def _matched(self, status) -> None:
+        self._subscribers = status.current_count
 
     def wanted(self) -> bool:
         """Whether a message published now reaches anyone: a node may skip building one
         nobody would get."""
-        return not self._volatile or self._publisher.get_subscription_count() > 0
+        return not self._volatile or self._subscribers > 0
 
     def publish(self, msg) -> None:
         if not self.wanted():
@@ -282,6 +304,7 @@ class NavNode(Node):
     def __init__(self, name: str, *, bus: InProcessBus | None = None, **kwargs):
         super().__init__(name, **kwargs)
         self.bus = bus
+        self._undispatched: Node | None = None  # see _undispatched_node
         self.p: dict[str, Any] = {}
         for spec in self.PARAMS:
             self.declare_parameter(spec.name, spec.default, descriptor(spec))
@@ -292,10 +315,9 @@ class NavNode(Node):
         """A DDS publisher, or the bus' stand-in with the same ``publish``."""
         if self.bus is not None:
             return _BusPublisher(self.bus, topic)
-        publisher = self.create_publisher(msg_type, topic, qos)
         if topic == "/diagnostics":
-            return publisher
-        return _CountedPublisher(publisher, msg_type, qos, self.diag.traffic)
+            return self.create_publisher(msg_type, topic, qos)
+        return _CountedPublisher(self, msg_type, topic, qos, self.diag.traffic)
 
     def subscribe(self, msg_type, topic: str, callback, qos) -> None:
         if self.bus is not None:
@@ -321,14 +343,49 @@ class NavNode(Node):
 
     def subscribe_latest(self, msg_type, topic: str, qos, handler) -> Latest:
         """A subscription that keeps only the newest message, decoded when it is taken
-        and handed to ``handler`` by :meth:`Latest.handle`."""
-        latest = Latest(msg_type, handler)
+        and handed to ``handler`` by :meth:`Latest.handle`.
+
+        On DDS the subscription (depth 1, ``qos`` otherwise) belongs to a hidden node of this
+        process that no executor spins, so that no callback runs per message (~190 us of CPU
+        each here, docs/results/live_cost.md); the message is taken when the node reads it,
+        and counted then in ``diag.traffic["taken <topic>"]``: what was used, not what was
+        published."""
         if self.bus is not None:
+            latest = Latest(msg_type, handler)
             self.bus.subscribe(topic, latest.put)
-        else:
-            self.create_subscription(msg_type, topic, self._counted(topic, latest.put), qos,
-                                     raw=True)
-        return latest
+            return latest
+        name = self.resolve_topic_name(topic)  # this node's namespace and remappings
+        sub = self._undispatched_node().create_subscription(
+            msg_type, name, lambda _: None,
+            QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=qos.reliability,
+                       durability=qos.durability), raw=True)
+        key, traffic = f"taken {name}", self.diag.traffic
+
+        def take_newest():
+            taken = sub.handle.take_message(sub.msg_type, True)  # as rclpy.wait_for_message
+            if taken is None:
+                return None
+            traffic[key] += 1
+            return taken[0]
+        return Latest(msg_type, handler, take_newest)
+
+    def _undispatched_node(self) -> Node:
+        """The hidden node (``_<name>_latest``: ``ros2 node list`` omits it) that holds the
+        subscriptions of :meth:`subscribe_latest`. It ignores the process' arguments (a node
+        name remapping would give it this node's name); topics are resolved by this node."""
+        if self._undispatched is None:
+            self._undispatched = Node(
+                f"_{self.get_name()}_latest", context=self.context,
+                namespace=self.get_namespace(), use_global_arguments=False,
+                start_parameter_services=False, enable_rosout=False,
+                parameter_overrides=[Parameter("start_type_description_service", value=False)])
+        return self._undispatched
+
+    def destroy_node(self):
+        if self._undispatched is not None:
+            self._undispatched.destroy_node()
+            self._undispatched = None
+        return super().destroy_node()
 
     def service(self, srv_type, name: str, callback) -> None:
         """A DDS service, or the same callback registered with the bus (``bus.call``); a
@@ -344,7 +401,12 @@ class NavNode(Node):
         """Current time, ns: the bus' replay time or the node clock."""
         if self.bus is not None:
             return self.bus.now_ns
-        return self.get_clock().now().nanoseconds
+        clock = self.get_clock()
+        if clock.ros_time_is_active:  # use_sim_time: the /clock time
+            return clock.now().nanoseconds
+        # The system time the ROS clock reads without /clock, without building an rclpy Time
+        # (9 us here; the imu_preprocessor reads it per sample).
+        return time.time_ns()
 
     def now_msg(self) -> Time:
         """Current time as a message stamp (as rclpy's ``Time.to_msg``, without building an
@@ -388,11 +450,15 @@ def run(node_factory: Callable[[], Node], args: list[str] | None = None,
         node = node_factory()
         spinner = EXECUTORS[kind]()
         spinner.add_node(node)
-        # spin_once with a timeout rather than spin(): rclpy 7.1's EventsExecutor.spin() polls
-        # without sleeping and never sees SIGINT/SIGTERM; spin_once returns on a signal (as
-        # KeyboardInterrupt or ExternalShutdownException) and idles at no CPU.
+        # Spun a second at a time on a future that never completes, rather than spin():
+        # rclpy 7.1's EventsExecutor.spin() polls without sleeping and never sees
+        # SIGINT/SIGTERM; this returns on a signal (as KeyboardInterrupt or
+        # ExternalShutdownException) and idles at no CPU. Not spin_once: the events executor
+        # then stops and returns to Python after every callback, ~70 us more CPU per message
+        # (docs/results/live_cost.md).
+        forever = Future()
         while rclpy.ok():
-            spinner.spin_once(timeout_sec=1.0)
+            spinner.spin_until_future_complete(forever, timeout_sec=1.0)
     except (ParameterError, ParameterException) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -1,8 +1,9 @@
 """``gnss_driver`` node: a u-blox / NMEA 0183 receiver stream -> the ``gnss/*`` topics.
 
 The byte stream comes from the ``source`` URL (:mod:`ins_gnss_ros.gnss.sources`: serial port,
-TCP client or server, recorded file at recorded pace or as fast as possible), polled every
-``poll_period_s`` without blocking; :class:`~ins_gnss_ros.gnss.stream.Decoder` frames and
+TCP client or server, recorded file at recorded pace or as fast as possible), read by a thread
+that waits for bytes (:class:`~ins_gnss_ros.gnss.sources.SourceReader`: a driver without data
+costs nothing) and hands them to the executor; :class:`~ins_gnss_ros.gnss.stream.Decoder` frames and
 parses it, and :class:`~ins_gnss_ros.gnss.receiver.ReceiverStream` turns the records into
 outputs, which the node publishes (it is their ``ReceiverOutputs``).  Published:
 
@@ -39,7 +40,7 @@ from ins_gnss_msgs.msg import GnssEphemeris, GnssObservations, Heading
 from sensor_msgs.msg import NavSatFix, NavSatStatus, TimeReference
 
 from ..gnss import (NORMAL_EVENTS, Decoder, FileSource, Pacer, PvtFix, ReceiverStream,
-                    open_source, stream_time)
+                    SourceReader, open_source, stream_time)
 from . import gnss_messages as gm
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
 
@@ -73,8 +74,7 @@ class GnssDriverNode(NavNode):
               "GST is received, m", 0.01, 1000.0),
         Param("nmea.speed_std_mps", 0.5, "1-sigma horizontal velocity accuracy assumed for NMEA "
               "RMC, m/s", 0.001, 100.0),
-        Param("poll_period_s", 0.01, "period of reading the source, s", 0.001, 1.0),
-        Param("read_max_bytes", 65536, "largest read from the source per poll, bytes", 64,
+        Param("read_max_bytes", 65536, "largest read from the source at once, bytes", 64,
               16_777_216),
         Param("reconnect.initial_s", 0.5, "first wait before reconnecting a lost source, s",
               0.01, 60.0),
@@ -112,21 +112,57 @@ class GnssDriverNode(NavNode):
         self.pub_heading = self.publisher(Heading, "gnss/heading", SENSOR_QOS)
         self.pub_time = self.publisher(TimeReference, "gnss/time_reference", SENSOR_QOS)
         self.diag.set_value("source", p["source"])
+        self.reader = None
         if self.bus is None:  # on a bus whoever drives it calls poll()
-            self.create_timer(p["poll_period_s"], self.poll)
+            self.reader = SourceReader(
+                self.source, self._post, self._on_bytes, self._on_due, self.read_size,
+                lambda err: self._post(lambda: self._failed(err)))
+            self.reader.start()
 
     # -- input ------------------------------------------------------------------------------
     def poll(self) -> None:
-        """Read what the source has and publish what it completes (paced records first)."""
+        """Read what the source has and publish what it completes (paced records first): the
+        in-process path, whose driver calls this."""
+        self._guarded(self._poll)
+
+    def _poll(self) -> None:
+        self._release()
+        if not self.pending:
+            data = self.source.read(self.read_size, 0.0)
+            if data:
+                self.feed(data)
+
+    # On DDS the reader thread calls these; the decoding runs on the executor's thread.
+    def _post(self, fn) -> None:
+        """Run ``fn`` on the executor (from the reader thread), once the node is spun."""
+        while (executor := self.executor) is None:  # only until run() adds the node
+            if self.reader.sleep(0.05):
+                return
+        executor.create_task(fn)
+
+    def _on_bytes(self, data: bytes) -> float | None:
+        self._guarded(self.feed, data)
+        return self._held_back_s()
+
+    def _on_due(self) -> float | None:
+        self._guarded(self._release)
+        return self._held_back_s()
+
+    def _held_back_s(self) -> float | None:
+        """Seconds until the first record the pacer holds back is due, None if none is."""
+        if not self.pending or self.pacer is None:
+            return None
+        return self.pacer.wait_s(stream_time(self.pending[0]))
+
+    def _guarded(self, fn, *args) -> None:
         try:
-            self._release()
-            if not self.pending:
-                data = self.source.read(self.read_size, 0.0)
-                if data:
-                    self.feed(data)
-        except Exception as err:  # noqa: BLE001 - the timer callback must never raise
-            self.diag.count(f"poll failed: {type(err).__name__}")
-            self.get_logger().error(f"poll: {err!r}")
+            fn(*args)
+        except Exception as err:  # noqa: BLE001 - a callback must never raise
+            self._failed(err)
+
+    def _failed(self, err: Exception) -> None:
+        self.diag.count(f"poll failed: {type(err).__name__}")
+        self.get_logger().error(f"poll: {err!r}")
 
     def feed(self, data: bytes) -> None:
         """Decode bytes and publish the records they complete (or queue them for pacing)."""
@@ -212,6 +248,8 @@ class GnssDriverNode(NavNode):
             self.diag.count(what, DiagnosticStatus.OK, log=False)
 
     def destroy_node(self):
+        if self.reader is not None:
+            self.reader.stop()
         self.source.close()
         return super().destroy_node()
 
