@@ -158,8 +158,14 @@ class InputStats:
 
 
 def _floored(cov: np.ndarray, sigma_floor: float) -> np.ndarray:
+    """cov with its variances raised to sigma_floor^2 (each diagonal element gets
+    max(floor - variance, 0) added, element by element: np.diag and np.maximum on a 3 x 3
+    matrix cost several times that at every fix)."""
     floor = sigma_floor ** 2
-    return cov + np.diag(np.maximum(floor - np.diag(cov), 0.0))
+    out = np.array(cov, float)
+    for i in range(len(out)):
+        out[i, i] += max(floor - out[i, i], 0.0)
+    return out
 
 
 class Aiding:

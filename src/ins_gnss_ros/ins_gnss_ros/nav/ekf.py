@@ -241,19 +241,16 @@ class ErrorStateEKF:
         z = np.atleast_1d(np.asarray(z, float))
         H = np.ascontiguousarray(np.atleast_2d(H), dtype=float)
         R = np.ascontiguousarray(np.atleast_2d(R), dtype=float)
-        nu = z - H @ self.x
         gate = chi2_gate(len(z), gate_prob) if gate_prob is not None else np.inf
-        # One compiled call for the covariance algebra (S, NIS, gain, Joseph form); the numpy
-        # version spent most of its time in the overhead of some twenty small-array operations.
-        S, nis, Kt, P = _kernels.kalman_update(np.ascontiguousarray(self.P, dtype=float), H, R,
-                                              nu, gate, force, self.joseph, MIN_VARIANCE)
+        # One compiled call for the whole update (innovation, S, NIS, gain, state, Joseph
+        # form); the numpy version spent most of its time in the overhead of some twenty
+        # small-array operations.
+        nu, s_diag, nis, self.x, self.P = _kernels.kalman_update(
+            np.ascontiguousarray(self.P, dtype=float), self.x, H, R, z, gate, force,
+            self.joseph, MIN_VARIANCE)
         ok = nis <= gate
-        result = UpdateResult(name, float(t), nu, S.diagonal().copy(), nis, gate, ok or force,
-                              "ok" if ok else ("forced" if force else "gated"))
-        if result.accepted:
-            self.x = self.x + Kt.T @ nu
-            self.P = P
-        return result
+        return UpdateResult(name, float(t), nu, s_diag, nis, gate, ok or force,
+                            "ok" if ok else ("forced" if force else "gated"))
 
     def take_correction(self):
         """Return the estimated error state and zero it (closed-loop reset).
