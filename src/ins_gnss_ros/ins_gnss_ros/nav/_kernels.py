@@ -432,42 +432,126 @@ def picard_step(F, P, Q, dt, order):
 
 
 @njit(cache=True)
+def _solve_lower(L, B):
+    """L^-1 B by forward substitution, L lower triangular (m, m), B (m, p)."""
+    Y = B.copy()
+    for i in range(L.shape[0]):
+        for k in range(i):
+            a = L[i, k]
+            for j in range(Y.shape[1]):
+                Y[i, j] -= a * Y[k, j]
+        for j in range(Y.shape[1]):
+            Y[i, j] /= L[i, i]
+    return Y
+
+
+@njit(cache=True)
+def _solve_upper_t(L, B):
+    """L^-T B by back substitution, L lower triangular (m, m), B (m, p)."""
+    X = B.copy()
+    for i in range(L.shape[0] - 1, -1, -1):
+        for k in range(i + 1, L.shape[0]):
+            a = L[k, i]
+            for j in range(X.shape[1]):
+                X[i, j] -= a * X[k, j]
+        for j in range(X.shape[1]):
+            X[i, j] /= L[i, i]
+    return X
+
+
+@njit(cache=True)
+def _times_ht(A, H, cols):
+    """A H^T (p, m) over the columns `cols` of H that hold its nonzero entries."""
+    out = np.zeros((A.shape[0], H.shape[0]))
+    for i in range(A.shape[0]):
+        for j in range(H.shape[0]):
+            acc = 0.0
+            for k in cols:
+                acc += A[i, k] * H[j, k]
+            out[i, j] = acc
+    return out
+
+
+@njit(cache=True)
 def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance):
-    """Gated update of ekf.ErrorStateEKF.update, with numpy's BLAS/LAPACK routines in the
-    order of the numpy formulation.
+    """Gated update of ekf.ErrorStateEKF.update.
 
     nu = z - H x, S = H P H^T + R (symmetrised), NIS = |L^-1 nu|^2 with L the Cholesky factor
-    of S (gating.normalised_innovation). If NIS <= gate or `force`: K = P H^T S^-1,
-    x + K nu and the Joseph form (I - K H) P (I - K H)^T + K R K^T (or P - K H P),
+    of S (gating.normalised_innovation). If NIS <= gate or `force`: K = P H^T S^-1 (through
+    L), x + K nu and the Joseph form (I - K H) P (I - K H)^T + K R K^T (or P - K H P),
     symmetrised, with the diagonal floored at min_variance.
+
+    Written out in loops over the columns H touches (a handful of the state's): the dense BLAS
+    and LAPACK calls it replaces cost more in their set-up and in the zeros of H and I - K H
+    than in the arithmetic that matters. The Joseph form is formed as B = P - K (H P),
+    B - (B H^T - K R) K^T: the same products regrouped.
 
     Returns (nu, diag(S), nis, x, P): x and P the arguments themselves when the measurement is
     not applied. Raises LinAlgError if S is not positive definite, as np.linalg.cholesky does.
     """
-    nu = z - H @ x
-    PHt = P @ H.T
-    S = H @ PHt + R
+    n, m = P.shape[0], H.shape[0]
+    cols = np.empty(n, np.int64)
+    used = 0
+    for k in range(n):
+        for i in range(m):
+            if H[i, k] != 0.0:
+                cols[used] = k
+                used += 1
+                break
+    cols = cols[:used]
+    PHt = _times_ht(P, H, cols)
+    S = _times_ht(H, np.ascontiguousarray(PHt.T), cols) + R
     S = 0.5 * (S + S.T)
     s_diag = np.diag(S).copy()
-    w = np.linalg.solve(np.linalg.cholesky(S), nu)
-    nis = w @ w
+    nu = z.copy()
+    for j in range(m):
+        for k in cols:
+            nu[j] -= H[j, k] * x[k]
+    L = np.linalg.cholesky(S)
+    w = _solve_lower(L, nu.reshape((m, 1)))
+    nis = 0.0
+    for i in range(m):
+        nis += w[i, 0] * w[i, 0]
     if not (nis <= gate or force):
         return nu, s_diag, nis, x, P
-    # K^T in C order, as numpy's solve returns it (numba's is in Fortran order): x + K nu
-    # then has the memory layout, hence the rounding, of the numpy formulation.
-    Kt = np.ascontiguousarray(np.linalg.solve(S, PHt.T))
-    K = Kt.T
-    x_new = x + K @ nu
+    Kt = _solve_upper_t(L, _solve_lower(L, np.ascontiguousarray(PHt.T)))
+    K = np.ascontiguousarray(Kt.T)
+    x_new = x.copy()
+    for i in range(n):
+        for j in range(m):
+            x_new[i] += K[i, j] * nu[j]
+    # B = (I - K H) P = P - K (H P), with H P by the rows of P that H touches.
+    HP = np.zeros((m, n))
+    for i in range(m):
+        for k in cols:
+            a = H[i, k]
+            for j in range(n):
+                HP[i, j] += a * P[k, j]
+    B = P.copy()
+    for i in range(n):
+        for k in range(m):
+            a = K[i, k]
+            for j in range(n):
+                B[i, j] -= a * HP[k, j]
     if joseph:
-        A = np.eye(P.shape[0]) - K @ H
-        P_new = A @ P @ A.T + K @ R @ K.T
-    else:
-        P_new = P - K @ PHt.T
-    P_new = 0.5 * (P_new + P_new.T)
-    for i in range(P_new.shape[0]):
-        if P_new[i, i] < min_variance:
-            P_new[i, i] = min_variance
-    return nu, s_diag, nis, x_new, P_new
+        # B A^T + K R K^T = B - (B H^T - K R) K^T.
+        C = _times_ht(B, H, cols)
+        for i in range(n):
+            for j in range(m):
+                for k in range(m):
+                    C[i, j] -= K[i, k] * R[k, j]
+        for i in range(n):
+            for k in range(m):
+                a = C[i, k]
+                for j in range(n):
+                    B[i, j] -= a * Kt[k, j]
+    # Symmetrised in place (the mean of B and B^T) and the diagonal floored.
+    for i in range(n):
+        for j in range(i + 1, n):
+            B[i, j] = B[j, i] = 0.5 * (B[i, j] + B[j, i])
+        if B[i, i] < min_variance:
+            B[i, i] = min_variance
+    return nu, s_diag, nis, x_new, B
 
 
 @njit(cache=True)
