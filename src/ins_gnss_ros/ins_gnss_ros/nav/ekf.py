@@ -115,6 +115,17 @@ class StateSpace:
         return name in self._slices
 
 
+def _kernel_array(a, ndim):
+    """`a` as a C-contiguous float64 array of at least `ndim` dimensions, as the compiled
+    update takes it: `a` itself when it is one already (the measurement models' arrays; the
+    general conversion costs more than the check at every update)."""
+    if type(a) is np.ndarray and a.dtype == np.float64 and a.ndim == ndim and \
+            a.flags.c_contiguous:
+        return a
+    a = np.asarray(a, float)
+    return np.ascontiguousarray(np.atleast_1d(a) if ndim == 1 else np.atleast_2d(a))
+
+
 class ErrorStateEKF:
     """Covariance and error-state estimate of the closed-loop filter.
 
@@ -238,9 +249,7 @@ class ErrorStateEKF:
         -------
         UpdateResult
         """
-        z = np.atleast_1d(np.asarray(z, float))
-        H = np.ascontiguousarray(np.atleast_2d(H), dtype=float)
-        R = np.ascontiguousarray(np.atleast_2d(R), dtype=float)
+        z, H, R = _kernel_array(z, 1), _kernel_array(H, 2), _kernel_array(R, 2)
         gate = chi2_gate(len(z), gate_prob) if gate_prob is not None else np.inf
         # One compiled call for the whole update (innovation, S, NIS, gain, state, Joseph
         # form); the numpy version spent most of its time in the overhead of some twenty
