@@ -2,7 +2,6 @@
 segment of IMU samples, and the small extrapolation to a measurement epoch inside a sample."""
 from __future__ import annotations
 
-
 import numpy as np
 
 from . import _kernels
