@@ -432,39 +432,186 @@ def picard_step(F, P, Q, dt, order):
 
 
 @njit(cache=True)
-def kalman_update(P, H, R, nu, gate, force, joseph, min_variance):
-    """Gated covariance update of ekf.ErrorStateEKF.update, with numpy's BLAS/LAPACK routines
-    in the order of the numpy formulation (the same results, bit for bit).
+def _solve_lower(L, B):
+    """L^-1 B by forward substitution, L lower triangular (m, m), B (m, p)."""
+    Y = B.copy()
+    for i in range(L.shape[0]):
+        for k in range(i):
+            a = L[i, k]
+            for j in range(Y.shape[1]):
+                Y[i, j] -= a * Y[k, j]
+        for j in range(Y.shape[1]):
+            Y[i, j] /= L[i, i]
+    return Y
 
-    S = H P H^T + R (symmetrised), NIS = |L^-1 nu|^2 with L the Cholesky factor of S
-    (gating.normalised_innovation). If NIS <= gate or `force`: K = P H^T S^-1 and the Joseph
-    form (I - K H) P (I - K H)^T + K R K^T (or P - K H P), symmetrised, with the diagonal floored
-    at min_variance.
 
-    Returns (S, nis, K^T, P); K^T and P are empty when the measurement is not applied. Raises
-    LinAlgError if S is not positive definite, as np.linalg.cholesky does.
+@njit(cache=True)
+def _solve_upper_t(L, B):
+    """L^-T B by back substitution, L lower triangular (m, m), B (m, p)."""
+    X = B.copy()
+    for i in range(L.shape[0] - 1, -1, -1):
+        for k in range(i + 1, L.shape[0]):
+            a = L[k, i]
+            for j in range(X.shape[1]):
+                X[i, j] -= a * X[k, j]
+        for j in range(X.shape[1]):
+            X[i, j] /= L[i, i]
+    return X
+
+
+@njit(cache=True)
+def _times_ht(A, H, cols):
+    """A H^T (p, m) over the columns `cols` of H that hold its nonzero entries."""
+    out = np.zeros((A.shape[0], H.shape[0]))
+    for i in range(A.shape[0]):
+        for j in range(H.shape[0]):
+            acc = 0.0
+            for k in cols:
+                acc += A[i, k] * H[j, k]
+            out[i, j] = acc
+    return out
+
+
+@njit(cache=True)
+def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance):
+    """Gated update of ekf.ErrorStateEKF.update.
+
+    nu = z - H x, S = H P H^T + R (symmetrised), NIS = |L^-1 nu|^2 with L the Cholesky factor
+    of S (gating.normalised_innovation). If NIS <= gate or `force`: K = P H^T S^-1 (through
+    L), x + K nu and the Joseph form (I - K H) P (I - K H)^T + K R K^T (or P - K H P),
+    symmetrised, with the diagonal floored at min_variance.
+
+    Written out in loops over the columns H touches (a handful of the state's): the dense BLAS
+    and LAPACK calls it replaces cost more in their set-up and in the zeros of H and I - K H
+    than in the arithmetic that matters. The Joseph form is formed as B = P - K (H P),
+    B - (B H^T - K R) K^T: the same products regrouped.
+
+    Returns (nu, diag(S), nis, x, P): x and P the arguments themselves when the measurement is
+    not applied. Raises LinAlgError if S is not positive definite, as np.linalg.cholesky does.
     """
-    PHt = P @ H.T
-    S = H @ PHt + R
+    n, m = P.shape[0], H.shape[0]
+    cols = np.empty(n, np.int64)
+    used = 0
+    for k in range(n):
+        for i in range(m):
+            if H[i, k] != 0.0:
+                cols[used] = k
+                used += 1
+                break
+    cols = cols[:used]
+    PHt = _times_ht(P, H, cols)
+    S = _times_ht(H, np.ascontiguousarray(PHt.T), cols) + R
     S = 0.5 * (S + S.T)
-    w = np.linalg.solve(np.linalg.cholesky(S), nu)
-    nis = w @ w
+    s_diag = np.diag(S).copy()
+    nu = z.copy()
+    for j in range(m):
+        for k in cols:
+            nu[j] -= H[j, k] * x[k]
+    L = np.linalg.cholesky(S)
+    w = _solve_lower(L, nu.reshape((m, 1)))
+    nis = 0.0
+    for i in range(m):
+        nis += w[i, 0] * w[i, 0]
     if not (nis <= gate or force):
-        return S, nis, np.empty((0, 0)), np.empty((0, 0))
-    # K^T in C order, as numpy's solve returns it (numba's is in Fortran order): x + K nu is
-    # formed by the caller with the same memory layout, hence the same rounding, as before.
-    Kt = np.ascontiguousarray(np.linalg.solve(S, PHt.T))
-    K = Kt.T
+        return nu, s_diag, nis, x, P
+    Kt = _solve_upper_t(L, _solve_lower(L, np.ascontiguousarray(PHt.T)))
+    K = np.ascontiguousarray(Kt.T)
+    x_new = x.copy()
+    for i in range(n):
+        for j in range(m):
+            x_new[i] += K[i, j] * nu[j]
+    # B = (I - K H) P = P - K (H P), with H P by the rows of P that H touches.
+    HP = np.zeros((m, n))
+    for i in range(m):
+        for k in cols:
+            a = H[i, k]
+            for j in range(n):
+                HP[i, j] += a * P[k, j]
+    B = P.copy()
+    for i in range(n):
+        for k in range(m):
+            a = K[i, k]
+            for j in range(n):
+                B[i, j] -= a * HP[k, j]
     if joseph:
-        A = np.eye(P.shape[0]) - K @ H
-        P_new = A @ P @ A.T + K @ R @ K.T
-    else:
-        P_new = P - K @ PHt.T
-    P_new = 0.5 * (P_new + P_new.T)
-    for i in range(P_new.shape[0]):
-        if P_new[i, i] < min_variance:
-            P_new[i, i] = min_variance
-    return S, nis, Kt, P_new
+        # B A^T + K R K^T = B - (B H^T - K R) K^T.
+        C = _times_ht(B, H, cols)
+        for i in range(n):
+            for j in range(m):
+                for k in range(m):
+                    C[i, j] -= K[i, k] * R[k, j]
+        for i in range(n):
+            for k in range(m):
+                a = C[i, k]
+                for j in range(n):
+                    B[i, j] -= a * Kt[k, j]
+    # Symmetrised in place (the mean of B and B^T) and the diagonal floored.
+    for i in range(n):
+        for j in range(i + 1, n):
+            B[i, j] = B[j, i] = 0.5 * (B[i, j] + B[j, i])
+        if B[i, i] < min_variance:
+            B[i, i] = min_variance
+    return nu, s_diag, nis, x_new, B
+
+
+@njit(cache=True)
+def extrapolate(lat, lon, h, v, a_enu, dt, a, e2, out_v):
+    """Position and velocity moved by dt at constant acceleration; see
+    propagation.extrapolate. Writes the velocity into out_v and returns (lat, lon, h)."""
+    rm, rn = _radii(lat, a, e2)
+    d0 = v[0] * dt + 0.5 * a_enu[0] * dt * dt
+    d1 = v[1] * dt + 0.5 * a_enu[1] * dt * dt
+    d2 = v[2] * dt + 0.5 * a_enu[2] * dt * dt
+    for j in range(3):
+        out_v[j] = v[j] + a_enu[j] * dt
+    return lat + d1 / (rm + h), lon + d0 / ((rn + h) * math.cos(lat)), h + d2
+
+
+@njit(cache=True)
+def position_residual(lat, lon, h, lat_ref, lon_ref, h_ref, a, e2):
+    """(lat, lon, h) - (lat_ref, lon_ref, h_ref) as ENU metres at the reference; see
+    measurements.position_residual_enu."""
+    rm, rn = _radii(lat_ref, a, e2)
+    dlon = (lon - lon_ref + math.pi) % (2.0 * math.pi) - math.pi
+    return (rn + h_ref) * math.cos(lat_ref) * dlon, (rm + h_ref) * (lat - lat_ref), h - h_ref
+
+
+@njit(cache=True)
+def _rotate_dcm(q, x):
+    """C x with C = _dcm(q), summed as numpy's matrix-vector product of quat_to_dcm(q) @ x."""
+    C = _dcm(q)
+    return (C[0, 0] * x[0] + C[0, 1] * x[1] + C[0, 2] * x[2],
+            C[1, 0] * x[0] + C[1, 1] * x[1] + C[1, 2] * x[2],
+            C[2, 0] * x[0] + C[2, 1] * x[1] + C[2, 2] * x[2])
+
+
+@njit(cache=True)
+def gnss_position(lat, lon, h, q, lever, lat_m, lon_m, h_m, a, e2, z, H, pos, att):
+    """Residual z (3,) and the position and attitude columns (from `pos`, `att`) of H (3, n)
+    of a GNSS position; see measurements.gnss_position."""
+    l0, l1, l2 = _rotate_dcm(q, lever)
+    e, n, u = position_residual(lat, lon, h, lat_m, lon_m, h_m, a, e2)
+    z[0], z[1], z[2] = e + l0, n + l1, u + l2
+    for i in range(3):
+        H[i, pos + i] = 1.0
+    # [(C l) x]
+    H[0, att + 1], H[0, att + 2] = -l2, l1
+    H[1, att], H[1, att + 2] = l2, -l0
+    H[2, att], H[2, att + 1] = -l1, l0
+
+
+@njit(cache=True)
+def axis_direction(q, axis, grad):
+    """ENU direction c = C axis of a body axis, returned, and the gradient of its azimuth
+    with respect to phi, minus that of its yaw atan2(c_N, c_E), written into grad; see
+    measurements.azimuth_of_axis."""
+    c0, c1, c2 = _rotate_dcm(q, axis)
+    r2 = c0 ** 2 + c1 ** 2
+    # -(c_E [c x]_N - c_N [c x]_E) / r2, the rows of [c x] with their zeros, as numpy forms it.
+    grad[0] = -((c0 * c2 - c1 * 0.0) / r2)
+    grad[1] = -((c0 * 0.0 - c1 * -c2) / r2)
+    grad[2] = -((c0 * -c0 - c1 * c1) / r2)
+    return c0, c1, c2
 
 
 @njit(cache=True)

@@ -158,8 +158,14 @@ class InputStats:
 
 
 def _floored(cov: np.ndarray, sigma_floor: float) -> np.ndarray:
+    """cov with its variances raised to sigma_floor^2 (each diagonal element gets
+    max(floor - variance, 0) added, element by element: np.diag and np.maximum on a 3 x 3
+    matrix cost several times that at every fix)."""
     floor = sigma_floor ** 2
-    return cov + np.diag(np.maximum(floor - np.diag(cov), 0.0))
+    out = np.array(cov, float)
+    for i in range(len(out)):
+        out[i, i] += max(floor - out[i, i], 0.0)
+    return out
 
 
 class Aiding:
@@ -278,13 +284,15 @@ class Aiding:
         if status < 0:
             self.report("gnss/fix without a fix ignored", log=False)
             return self._seen("gnss/fix", t, False)
-        if not (np.isfinite([lat_deg, lon_deg, h]).all() and np.isfinite(cov).all()):
+        cov = np.asarray(cov, float)
+        if not (math.isfinite(lat_deg) and math.isfinite(lon_deg) and math.isfinite(h)
+                and np.isfinite(cov).all()):
             self.report("non-finite gnss/fix rejected")
             return self._seen("gnss/fix", t, False)
         if not HEIGHT_RANGE[0] <= h <= HEIGHT_RANGE[1]:
             self.report("implausible gnss/fix altitude rejected")
             return self._seen("gnss/fix", t, False)
-        assumed = not covariance_known or not np.all(np.diag(cov) > 0.0)
+        assumed = not covariance_known or not (cov.diagonal() > 0.0).all()
         if assumed:
             sigma = UNKNOWN_FIX_SIGMA[min(status, 2)]
             cov = np.diag([sigma ** 2, sigma ** 2, (2.0 * sigma) ** 2])

@@ -116,6 +116,17 @@ class StateSpace:
         return name in self._slices
 
 
+def _kernel_array(a, ndim):
+    """`a` as a C-contiguous float64 array of at least `ndim` dimensions, as the compiled
+    update takes it: `a` itself when it is one already (the measurement models' arrays; the
+    general conversion costs more than the check at every update)."""
+    if type(a) is np.ndarray and a.dtype == np.float64 and a.ndim == ndim and \
+            a.flags.c_contiguous:
+        return a
+    a = np.asarray(a, float)
+    return np.ascontiguousarray(np.atleast_1d(a) if ndim == 1 else np.atleast_2d(a))
+
+
 class ErrorStateEKF:
     """Covariance and error-state estimate of the closed-loop filter.
 
@@ -245,22 +256,17 @@ class ErrorStateEKF:
         -------
         UpdateResult
         """
-        z = np.atleast_1d(np.asarray(z, float))
-        H = np.ascontiguousarray(np.atleast_2d(H), dtype=float)
-        R = np.ascontiguousarray(np.atleast_2d(R), dtype=float)
-        nu = z - H @ self.x
+        z, H, R = _kernel_array(z, 1), _kernel_array(H, 2), _kernel_array(R, 2)
         gate = chi2_gate(len(z), gate_prob) if gate_prob is not None else np.inf
-        # One compiled call for the covariance algebra (S, NIS, gain, Joseph form); the numpy
-        # version spent most of its time in the overhead of some twenty small-array operations.
-        S, nis, Kt, P = _kernels.kalman_update(np.ascontiguousarray(self.P, dtype=float), H, R,
-                                              nu, gate, force, self.joseph, MIN_VARIANCE)
+        # One compiled call for the whole update (innovation, S, NIS, gain, state, Joseph
+        # form); the numpy version spent most of its time in the overhead of some twenty
+        # small-array operations.
+        nu, s_diag, nis, self.x, self.P = _kernels.kalman_update(
+            np.ascontiguousarray(self.P, dtype=float), self.x, H, R, z, gate, force,
+            self.joseph, MIN_VARIANCE)
         ok = nis <= gate
-        result = UpdateResult(name, float(t), nu, S.diagonal().copy(), nis, gate, ok or force,
-                              "ok" if ok else ("forced" if force else "gated"))
-        if result.accepted:
-            self.x = self.x + Kt.T @ nu
-            self.P = P
-        return result
+        return UpdateResult(name, float(t), nu, s_diag, nis, gate, ok or force,
+                            "ok" if ok else ("forced" if force else "gated"))
 
     def take_correction(self):
         """Return the estimated error state and zero it (closed-loop reset).

@@ -87,11 +87,12 @@ class SensorErrors:
         where the layout has none of a field's blocks."""
         values = []
         for blocks in SENSOR_BLOCKS.values():  # the fields' order (a call per filter segment)
-            total = 0
+            total = None
             for b in blocks:
                 if b in estimates:
-                    total = total + estimates[b]
-            values.append(total if np.ndim(total) else np.zeros(3))
+                    e = estimates[b]
+                    total = np.array(e, float) if total is None else total + e
+            values.append(np.zeros(3) if total is None else total)
         return cls(*values)
 
     def __add__(self, other: "SensorErrors") -> "SensorErrors":

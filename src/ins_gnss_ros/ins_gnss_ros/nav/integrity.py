@@ -152,6 +152,8 @@ class Integrity:
     def degraded(self, epoch):
         """A forced kind's noise floor is still large, or an aiding kind is being rejected for
         `suspect_time` (module docstring)."""
+        if not self.floors and not self.rejecting:
+            return False  # the usual case, asked after every update
         cfg = self.config
         ratio2 = cfg.degraded_ratio ** 2
         return any(np.max(f.var) > ratio2 * f.r for f in self.floors.values()) or any(

@@ -17,8 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _kernels
 from .conventions import azimuth_from_yaw, wrap_pi
-from .earth import WGS84, earth_rate_enu, ecef_to_enu_matrix, geodetic_to_ecef, radii
+from .earth import WGS84, earth_rate_enu, ecef_to_enu_matrix, geodetic_to_ecef
 from .lever_arm import lever_arm_position, lever_arm_velocity, lever_arm_velocity_jacobians
 from .rotations import cross, quat_to_dcm, skew
 
@@ -67,11 +68,10 @@ def position_residual_enu(lat, lon, h, lat_ref, lon_ref, h_ref, ell=WGS84):
     """(lat, lon, h) - (lat_ref, lon_ref, h_ref) as ENU metres at the reference position.
 
     Uses the curvilinear scaling of the error state (error_model.py), exact to first order.
+    Positions are floats (rad, rad, m).
     """
-    rm, rn = radii(lat_ref, ell)
-    dlon = (lon - lon_ref + np.pi) % (2.0 * np.pi) - np.pi
-    return np.array([(rn + h_ref) * np.cos(lat_ref) * dlon, (rm + h_ref) * (lat - lat_ref),
-                     h - h_ref])
+    return np.array(_kernels.position_residual(lat, lon, h, lat_ref, lon_ref, h_ref, ell.a,
+                                               ell.e2))
 
 
 def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=None):
@@ -96,13 +96,14 @@ def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=
     Innovation
         z in ENU metres; H = [I, 0, [(C l) x]] (+ time offset).
     """
-    lever_n = quat_to_dcm(state.q_nb) @ np.asarray(lever_b, float)
     # Antenna minus measured = (IMU minus measured) + C l, resolved in the ENU frame of the
     # measured point; the curvature neglected is |l|^2 / R ~ 1e-7 m for a metre-long arm.
-    z = position_residual_enu(state.lat, state.lon, state.h, lat, lon, h) + lever_n
-    H = _zeros(space, 3)
-    H[:, space["pos"]] = np.eye(3)
-    H[:, space["att"]] = skew(lever_n)
+    # Compiled: one filter update's model, where numpy's per-call overhead on 3-vectors was
+    # most of the cost.
+    z, H = np.empty(3), _zeros(space, 3)
+    _kernels.gnss_position(state.lat, state.lon, state.h, state.q_nb,
+                           np.ascontiguousarray(lever_b, dtype=float), lat, lon, h, WGS84.a,
+                           WGS84.e2, z, H, space["pos"].start, space["att"].start)
     _add_time_offset(space, H, dzdt)
     return Innovation("gnss_pos", z, H, np.asarray(cov_enu, float))
 
@@ -168,13 +169,13 @@ def azimuth_of_axis(q_nb, axis_b=(1.0, 0.0, 0.0)):
     grad : ndarray, shape (3,)
         d azimuth / d phi, from d c = -[phi x] c = [c x] phi for the axis c = C axis_b.
     """
-    c = quat_to_dcm(q_nb) @ np.asarray(axis_b, float)
-    yaw = np.arctan2(c[1], c[0])
-    r2 = c[0] ** 2 + c[1] ** 2
-    dc = skew(c)
-    dyaw = (c[0] * dc[1] - c[1] * dc[0]) / r2
+    grad = np.empty(3)
+    c = _kernels.axis_direction(np.asarray(q_nb, float), np.asarray(axis_b, float), grad)
     # azimuth = pi/2 - yaw.
-    return azimuth_from_yaw(yaw), -dyaw
+    return azimuth_from_yaw(np.arctan2(c[1], c[0])), grad
+
+
+_X_AXIS = np.array([1.0, 0.0, 0.0])
 
 
 def heading(space, state, azimuth, variance, baseline_yaw_b=0.0, name="heading"):
@@ -195,7 +196,8 @@ def heading(space, state, azimuth, variance, baseline_yaw_b=0.0, name="heading")
         z = azimuth_pred - azimuth (wrapped); for a level vehicle H_att = [0, 0, 1] (seed 004
         section 2.5: H_K(1,1) = +1, z_K = K_pr - K_ext = phi_h).
     """
-    axis = (np.cos(baseline_yaw_b), np.sin(baseline_yaw_b), 0.0)
+    axis = _X_AXIS if baseline_yaw_b == 0.0 else \
+        (np.cos(baseline_yaw_b), np.sin(baseline_yaw_b), 0.0)
     pred, grad = azimuth_of_axis(state.q_nb, axis)
     H = _zeros(space, 1)
     H[0, space["att"]] = grad

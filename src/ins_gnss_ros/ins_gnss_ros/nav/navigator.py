@@ -247,8 +247,9 @@ class Navigator:
         common to the fixes the filter follows (GnssFix.common_var: the filter's position is
         relative to them)."""
         var = self._integrity.variances(self._space)
-        east = self._space["pos"].start
-        var[east:east + 2] += self._fix_common_var
+        if self._fix_common_var:
+            east = self._space["pos"].start
+            var[east:east + 2] += self._fix_common_var
         return var
 
     def updates_since(self, count):

@@ -2,12 +2,10 @@
 segment of IMU samples, and the small extrapolation to a measurement epoch inside a sample."""
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from . import _kernels
-from .earth import WGS84, radii
+from .earth import WGS84
 from .increments import SensorErrors
 from .strapdown import NavState
 
@@ -17,11 +15,12 @@ def extrapolate(state, dt, a_enu):
     time-offset estimate) at constant acceleration a_enu (m/s^2): the measurement epoch."""
     if dt == 0.0:
         return state
-    rm, rn = radii(state.lat)
-    d = state.v_enu * dt + 0.5 * a_enu * dt * dt
-    return replace(state, lat=state.lat + d[1] / (rm + state.h),
-                   lon=state.lon + d[0] / ((rn + state.h) * np.cos(state.lat)),
-                   h=state.h + d[2], v_enu=state.v_enu + a_enu * dt, t=state.t + dt)
+    v = np.empty(3)
+    # Compiled: called for every measurement, where the numpy arithmetic on 3-vectors cost
+    # several times the kernel's call.
+    lat, lon, h = _kernels.extrapolate(float(state.lat), float(state.lon), float(state.h),
+                                       state.v_enu, a_enu, float(dt), WGS84.a, WGS84.e2, v)
+    return NavState(lat, lon, h, v, state.q_nb, state.t + dt)
 
 
 def propagate(s, rows, noise, cov_interval, gaps, space):

@@ -119,8 +119,11 @@ class _Columns:
         """The current epoch's value (a writable view for an array value)."""
         return self._data[name][self.n - 1]
 
-    def set_last(self, name, value) -> None:
-        self._data[name][self.n - 1] = value
+    def set_last(self, values: dict) -> None:
+        """Overwrite the current epoch's values of the names in `values`."""
+        k, data = self.n - 1, self._data
+        for name, value in values.items():
+            data[name][k] = value
 
     def view(self, name) -> np.ndarray:
         return self._data[name][:self.n] if self._data else np.empty(0)
@@ -149,6 +152,7 @@ class Recorder:
         self._record = record
         self._store_covariance = store_covariance
         self._estimates = dict(estimate_sizes(space))
+        self._estimate_keys = {name: "est:" + name for name in self._estimates}
         self._out = _Columns()
         self._updates = []
         self._updates_dropped = 0   # update results forgotten in streaming use (record=False)
@@ -178,22 +182,21 @@ class Recorder:
         if not self._record:
             return
         o, nav = self._out, state.nav
-        for name, value in (("lat", nav.lat), ("lon", nav.lon), ("h", nav.h),
-                            ("v", nav.v_enu), ("q", nav.q_nb), ("mode", state.mode),
-                            ("published_var", published_var),
-                            *self._estimate_values(state).items()):
-            o.set_last(name, value)
-        o.last("dx")[:] += dx
+        values = {"lat": nav.lat, "lon": nav.lon, "h": nav.h, "v": nav.v_enu, "q": nav.q_nb,
+                  "mode": state.mode, "published_var": published_var,
+                  **self._estimate_values(state)}
         if self._store_covariance:
-            o.set_last("P", state.ekf.P)
+            values["P"] = state.ekf.P
+        o.set_last(values)
+        o.last("dx")[:] += dx
 
     def _estimate_values(self, state):
-        return {"est:" + name: state.estimates[name] for name in self._estimates}
+        return {key: state.estimates[name] for name, key in self._estimate_keys.items()}
 
     def set_mode(self, mode):
         """The current epoch's mode changed."""
         if self._record:
-            self._out.set_last("mode", mode)
+            self._out.set_last({"mode": mode})
 
     def widen_prior(self, s, variances):
         """Add `variances` to the block `s` (slice) of the current epoch's P-: process noise of
@@ -243,8 +246,7 @@ class Recorder:
         self._out.n = min(self._out.n, epochs)
         del self._updates[update_count - self._updates_dropped:]
         if last_epoch is not None and epochs > 0:
-            for k, value in last_epoch.items():
-                self._out.set_last(k, value)
+            self._out.set_last(last_epoch)
 
     def output(self):
         """The record so far, as a :class:`NavigatorOutput` of views, not copies, of the
