@@ -17,7 +17,7 @@ from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
 from ins_gnss_ros.nav.rotations import (quat_angle_between, quat_from_euler,
                                         quat_from_rotvec, quat_mul, quat_to_dcm)
 from ins_gnss_ros.nav.strapdown import (NavState, Strapdown, VerticalDamping, apply_correction,
-                                        run, strapdown_step)
+                                        correction_to, run, strapdown_step)
 from ins_gnss_ros.sim import imu_truth
 
 
@@ -203,3 +203,25 @@ def test_lever_arm_against_rigid_body_finite_difference():
     np.testing.assert_allclose(v, v_ant, atol=1e-6)
     # The rotation term is not negligible here (|w x l| ~ 0.5 m/s).
     assert np.linalg.norm(v_ant - v_imu) > 0.3
+
+
+def test_correction_to_lands_on_a_target_thousands_of_km_away():
+    """A strapdown started at its parameters' position (59.9 N, 30.3 E) and the filter's first
+    solution in Colorado: one correction puts it there (position against pymap3d's ECEF, the
+    attitude relative to the local level, the velocity), and a small error is the error
+    model's to first order."""
+    q0 = quat_from_euler(0.02, -0.01, 2.5)
+    start = NavState(np.deg2rad(59.9), np.deg2rad(30.3), 0.0, [0.3, -0.1, 0.0], q0)
+    target = NavState(np.deg2rad(40.0966), np.deg2rad(-105.1474), 1601.5, [4.0, -2.0, 0.1],
+                      quat_from_euler(-0.03, 0.05, -1.2))
+    landed = apply_correction(start, *correction_to(start, target))
+    got = pymap3d.geodetic2ecef(landed.lat, landed.lon, landed.h, deg=False)
+    want = pymap3d.geodetic2ecef(target.lat, target.lon, target.h, deg=False)
+    assert np.linalg.norm(np.subtract(got, want)) < 1e-6
+    np.testing.assert_allclose(landed.v_enu, target.v_enu, atol=1e-12)
+    assert quat_angle_between(landed.q_nb, target.q_nb) < 1e-12
+    near = apply_correction(target, [3.0, -2.0, 1.5], [0.1, 0.0, 0.0], [1e-3, 0.0, 2e-3])
+    from ins_gnss_ros.nav.error_model import nav_error
+    # second order: the radii at latitudes 2 m apart (here 1.5 um)
+    np.testing.assert_allclose(np.concatenate(correction_to(near, target)),
+                               np.concatenate(nav_error(near, target)), atol=1e-5)

@@ -62,6 +62,7 @@ import numpy as np
 
 from . import _kernels
 from .earth import WGS84, Ellipsoid, normal_gravity, radii
+from .error_model import nav_error
 
 
 @dataclass
@@ -225,6 +226,25 @@ def apply_correction(state: NavState, dpos_enu_m, dv_enu, phi_enu,
         float(state.lat), float(state.lon), float(state.h), state.v_enu, state.q_nb,
         _vector(dpos_enu_m), _vector(dv_enu), _vector(phi_enu), ell.a, ell.e2, v, q)
     return NavState(lat, lon, h, v, q, state.t)
+
+
+def correction_to(state: NavState, target: NavState, ell: Ellipsoid = WGS84):
+    """The errors (dpos_enu_m, dv_enu, phi_enu) whose removal by :func:`apply_correction` puts
+    ``state`` on ``target`` exactly, however far apart they are.
+
+    The position error is scaled with the radii at ``state``, the ones apply_correction divides
+    by; the error model's :func:`nav_error` scales it at the true position, which is the same to
+    first order only. A strapdown started at its parameters' position, thousands of km from
+    the first fix, thus lands on the filter's solution with the first correction instead of
+    converging over several while its states are published.
+    """
+    rm, rn = radii(state.lat, ell)
+    dlon = (state.lon - target.lon + np.pi) % (2 * np.pi) - np.pi
+    dp = np.array([(rn + state.h) * np.cos(state.lat) * dlon,
+                   (rm + state.h) * (state.lat - target.lat),
+                   state.h - target.h])
+    _, dv, phi = nav_error(state, target, ell)
+    return dp, dv, phi
 
 
 def _vector(x) -> np.ndarray:

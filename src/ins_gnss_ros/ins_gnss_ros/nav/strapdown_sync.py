@@ -13,7 +13,7 @@ of that protocol:
   the filter has corrected its solution (GNSS or a constraint such as the non-holonomic one:
   ``Navigator.revision``), it compares the strapdown's state of a common epoch with the filter's
   solution and makes the difference a :class:`Correction` referred to that epoch (errors
-  "computed minus true", :func:`ins_gnss_ros.nav.error_model.nav_error`). A correction that was
+  "computed minus true", :func:`ins_gnss_ros.nav.strapdown.correction_to`). A correction that was
   lost, a strapdown restarted from its parameters or a state published before the last
   correction arrived are all handled the same way: the next comparison sees the difference and
   removes it.
@@ -40,10 +40,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .error_model import nav_error
 from .increments import BRIDGED, LOST, SENSOR_BLOCKS, SensorErrors, classify_gap, held_increments
 from .modes import ALIGNING, DEAD_RECKONING, INVALID, NAVIGATING
-from .strapdown import NavState, Strapdown
+from .strapdown import NavState, Strapdown, correction_to
 
 __all__ = ["Correction", "ClosedLoopStrapdown", "StrapdownSync"]
 
@@ -353,7 +352,7 @@ class StrapdownSync:
         target = state_at(strapdown.t)
         if target is None:
             return None, resent
-        dp, dv, phi = nav_error(strapdown, target)
+        dp, dv, phi = correction_to(strapdown, target)
         sensor = {}
         for name, blocks in SENSOR_BLOCKS.items():
             estimate = sum(estimates[b] for b in blocks if b in estimates)
