@@ -341,7 +341,7 @@ def test_gnss_step_forced_in_keeps_an_honest_covariance(sim, end):
     """A 20 m north step of every fix from 60 s (spoofing, a multipath lock): gated, then forced
     in after max_reject_time. Whether the step ends at 70 s or stays, the published covariance
     covers the error at every epoch and the mode is not NAVIGATING while the solution and the
-    fixes disagree or the forced kind's floor is large."""
+    fixes disagree, nor until the fixes have confirmed the forced solution for floor_tau."""
     traj, imu, meas, _ = sim
     rm, _ = radii(traj.lat[0])
     faulty = [replace(m, lat=m.lat + 20.0 / rm) if isinstance(m, GnssFix) and 60.0 <= m.t < end
@@ -357,8 +357,11 @@ def test_gnss_step_forced_in_keeps_an_honest_covariance(sim, end):
     # Until the forced update (62 s) the INS is right and its covariance covers it; from then
     # on the published covariance covers the fault too.
     assert np.all(ratio < 5.0), (t[ratio >= 5.0], ratio.max())
-    # Rejected for suspect_time (1 s): DEAD_RECKONING, and still so at the end (floor_tau 30 s).
-    assert np.all(mode[(t > 61.3) & (t < 100.0)] == DEAD_RECKONING)
+    # Rejected for suspect_time (1 s): DEAD_RECKONING, until the fixes have been accepted for
+    # floor_tau (30 s) since the last forced one; NAVIGATING then with the floor published.
+    confirmed = forced[-1].t + 30.0
+    assert np.all(mode[(t > 61.3) & (t < confirmed - 0.1)] == DEAD_RECKONING)
+    assert np.all(mode[t > confirmed + 0.3] == NAVIGATING) and t[-1] > confirmed + 0.3
     assert np.all(mode[t < 60.0] == NAVIGATING)
     if end == 70.0:  # the fixes came back: so did the solution
         assert abs(nav_error(nav.solution, truth_state(traj, nav.solution.t))[0][1]) < 1.0
@@ -373,7 +376,7 @@ def test_gnss_step_forced_in_keeps_an_honest_covariance(sim, end):
 def test_divergence_recovers_through_the_forced_update(sim):
     """The INS jumps 30 m north at 60 s with a covariance that does not know (a divergence):
     the fixes are gated, then forced in; the solution comes back to the fixes, and the mode to
-    NAVIGATING once the forced kind's floor has decayed (floor_tau 5 s here)."""
+    NAVIGATING once they have confirmed it for floor_tau (5 s here)."""
     traj, imu, meas, _ = sim
     cfg = config(floor_tau=5.0)
     nav = Navigator(cfg)
@@ -387,7 +390,8 @@ def test_divergence_recovers_through_the_forced_update(sim):
     t, ratio, mode = _stream(nav, rest, traj, t_min=50.0)
     assert any(u.reason == "forced" for u in nav.updates)
     # Once forced in (62 s), the covariance covers the error again; DR from 61 s until the
-    # floor of the 30 m innovation has decayed below 3 sigma of the fixes.
+    # fixes have been accepted for floor_tau (5 s) since the forced one.
     assert np.all(ratio[t > 62.5] < 5.0)
-    assert np.all(mode[(t > 61.2) & (t < 80.0)] == DEAD_RECKONING)
-    assert mode[-1] == NAVIGATING and ratio[-1] < 3.0
+    confirmed = max(u.t for u in nav.updates if u.reason == "forced") + 5.0
+    assert np.all(mode[(t > 61.2) & (t < confirmed - 0.1)] == DEAD_RECKONING)
+    assert np.all(mode[t > confirmed + 0.3] == NAVIGATING) and ratio[-1] < 3.0

@@ -29,9 +29,14 @@ measurements after the gap, which meet an INS that coasted through it, get the f
 outage forced the first fix after it at once on the real car drive, and its floor of the
 outage's drift kept the solution degraded for minutes).
 
-F decays by exp(-dt / floor_tau) over the time the kind is accepted (not while it is rejected);
-while it exceeds degraded_ratio^2 times the kind's own variance, the solution is degraded
-(mode DEAD_RECKONING, modes.py: it is not confirmed by its aiding). So it is while an aiding
+F decays by exp(-dt / floor_tau) over the time the kind is accepted (not while it is rejected).
+While it exceeds degraded_ratio^2 times the kind's own variance, the solution is degraded
+(mode DEAD_RECKONING, modes.py: it is not confirmed by its aiding) until the kind has been
+accepted for floor_tau without being forced or rejected again: a stream of measurements that
+agree with the solution (at 5 Hz, 150 in the default 30 s) confirms it, while the floor stays in
+the published covariance until it has decayed. Degraded until the floor itself fell below the
+kind's variance, an RTK receiver's 39 cm disagreement before an outage of the real car drive kept
+the solution DEAD_RECKONING for the last 110 s of the drive. So it is while an aiding
 kind keeps being rejected for `suspect_time` before it is forced: the other kinds may still be
 accepted (a GNSS clock jump shifts the velocities a little and the positions a lot), but the
 solution and the rejected kind disagree.
@@ -72,12 +77,16 @@ class NoiseFloor:
         State blocks ("pos", "vel") the kind measures directly.
     r : float
         Largest variance of the kind's own noise at its last measurement.
+    suspect : float
+        Epoch of the kind's last forced update or rejection, s: it is confirmed once accepted
+        for floor_tau after it.
     """
 
     var: np.ndarray
     t: float
     blocks: list
     r: float
+    suspect: float
 
     def variances(self, m):
         """The floor as m variances (a kind whose dimension varies, e.g. pseudoranges, gets
@@ -144,19 +153,22 @@ class Integrity:
         """An aiding measurement of kind `name` was rejected at `epoch` (s)."""
         first = rejection_start(self.rejecting.get(name), epoch, self.config.max_reject_time)
         self.rejecting[name] = (epoch if first is None else first, epoch)
+        if name in self.floors:
+            self.floors[name].suspect = epoch
 
     def accepted(self, name):
         """A measurement of kind `name` was accepted: its rejection is over."""
         self.rejecting.pop(name, None)
 
     def degraded(self, epoch):
-        """A forced kind's noise floor is still large, or an aiding kind is being rejected for
-        `suspect_time` (module docstring)."""
+        """A forced kind's noise floor is still large and not yet confirmed, or an aiding kind
+        is being rejected for `suspect_time` (module docstring)."""
         if not self.floors and not self.rejecting:
             return False  # the usual case, asked after every update
         cfg = self.config
         ratio2 = cfg.degraded_ratio ** 2
-        return any(np.max(f.var) > ratio2 * f.r for f in self.floors.values()) or any(
+        return any(np.max(f.var) > ratio2 * f.r and epoch - f.suspect < cfg.floor_tau
+                   for f in self.floors.values()) or any(
             epoch - first >= cfg.suspect_time and epoch - last <= cfg.suspect_time
             for first, last in self.rejecting.values())
 
@@ -195,4 +207,4 @@ class Integrity:
         if old is not None:
             nu2 = np.maximum(nu2, old.variances(len(nu2)))
         self.floors[innov.name] = NoiseFloor(nu2, epoch, blocks,
-                                             float(np.max(np.diag(innov.R))))
+                                             float(np.max(np.diag(innov.R))), epoch)

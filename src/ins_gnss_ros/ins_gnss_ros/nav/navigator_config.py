@@ -33,7 +33,8 @@ class NavigatorConfig:
         decays by exp(-dt / floor_tau) over the time its measurements are accepted, s.
     degraded_ratio : float
         While a forced kind's floor exceeds degraded_ratio^2 times the measurement's own
-        variance, the mode is DEAD_RECKONING (degraded: not confirmed by the aiding), -.
+        variance and the kind has not yet been accepted for floor_tau since it was last forced
+        or rejected, the mode is DEAD_RECKONING (degraded: not confirmed by the aiding), -.
     suspect_time : float
         While an aiding kind has been rejected continuously for this long (and is still
         arriving), the mode is DEAD_RECKONING too: the INS or that aiding is wrong, s.
