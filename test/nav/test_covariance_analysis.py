@@ -137,3 +137,17 @@ def test_filter_noise_models():
     assert "gmg" not in rw.blocks
     with pytest.raises(ValueError):
         se.filter_noise(se.TACTICAL, "ar2")
+
+
+def test_the_exact_bias_model_only_in_a_layout_with_its_gauss_markov_states():
+    """bias_model gm in a layout without gmg/gma would leave the in-run instability to no state
+    and no noise (constant biases): the ekf's noise is then the reduced model's."""
+    from ins_gnss_ros.nav.filter_config import PARAMS, noise_model
+    p = {param.name: param.default for param in PARAMS}
+    reduced = se.filter_noise(se.GRADES[p["imu_grade"]], "rw")
+    for layout, exact in (("15", False), ("21", False), ("21gm", True)):
+        noise = noise_model({**p, "layout": layout, "bias_model": "gm"})
+        assert ("gmg" in noise.blocks) == exact
+        if not exact:
+            assert noise.blocks["bg"].psd == reduced.blocks["bg"].psd > 0.0
+            assert noise.blocks["ba"].psd == reduced.blocks["ba"].psd > 0.0
