@@ -108,8 +108,12 @@ PARAMS = (
     Param("time_offset_sigma_s", 0.0,
           "initial sigma of the IMU-GNSS time-offset state, s (0: no state)", 0.0, 1.0),
     Param("nonholonomic_sigma_mps", [0.0, 0.0],
-          "wheeled-vehicle constraint noise (lateral, vertical), m/s; 0 disables", 0.0, 10.0,
-          length=2),
+          "wheeled-vehicle constraint noise (lateral, vertical), m/s; 0: learned or off "
+          "(nonholonomic.learn)", 0.0, 10.0, length=2),
+    Param("nonholonomic.learn", True,
+          "without nonholonomic_sigma_mps: learn from the GNSS-aided solution whether the "
+          "vehicle moves like a wheeled one (body lateral and vertical velocity RMS within "
+          "0.3 m/s over 30 s of motion) and apply the constraint with the noise learned"),
     Param("init.position_sigma_m", 1.0, "initial position sigma at the first fix, m", 0.0, 1e4),
     Param("init.velocity_sigma_mps", 0.1, "initial velocity sigma, m/s", 0.0, 100.0),
     Param("init.tilt_sigma_deg", 1.0, "initial roll/pitch sigma, deg", 0.0, 90.0),
@@ -206,7 +210,8 @@ def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
         sigma_pos0=p["init.position_sigma_m"], sigma_vel0=p["init.velocity_sigma_mps"],
         sigma_tilt0=np.radians(p["init.tilt_sigma_deg"]), align_speed=p["align.speed_mps"],
         static_speed=p["align.static_speed_mps"], dr_timeout=p["dead_reckoning_after_s"],
-        nhc_sigma=nhc if min(nhc) > 0.0 else None, history=p["history_s"],
+        nhc_sigma=nhc if min(nhc) > 0.0 else None, nhc_learn=p["nonholonomic.learn"],
+        history=p["history_s"],
         wheel_lever_b=np.array(p["wheel.lever_arm"], float),
         floor_tau=p["forced.floor_tau_s"], degraded_ratio=p["forced.degraded_ratio"],
         gap_accel_sigma=p["imu_gap.accel_sigma_mps2"],

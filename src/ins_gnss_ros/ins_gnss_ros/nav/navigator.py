@@ -49,6 +49,7 @@ from .rest_noise import RestNoise
 from .rotations import quat_from_rotvec, quat_rotate
 from .rewind import Rewind, RunState
 from .strapdown import apply_correction
+from .vehicle_constraint import LearnedConstraint
 
 #: A zero-velocity update tells the vehicle at rest for this long after its epoch, s (the
 #: front end sends one per still IMU block, nav/rest_detector.py).
@@ -103,6 +104,9 @@ class Navigator:
         self._rewind = Rewind(cfg.history, cfg.checkpoint_interval)
         self._integrity = Integrity(cfg)                # not rewound (integrity.py)
         self._rest_noise = RestNoise(cfg.noise)         # a property of the IMU: not rewound
+        # a property of the vehicle: not rewound (it passes over re-run epochs)
+        self._learned_nhc = LearnedConstraint() \
+            if cfg.nhc_learn and cfg.nhc_sigma is None else None
         self._recorder = Recorder(self._space, cfg.record, cfg.store_covariance)
         self._gaps = BridgedGaps(cfg.gap_accel_sigma, cfg.gap_rate_sigma)
         # The fixes' common error (GnssFix.common_var) of the latest fix used, m^2: a property
@@ -221,6 +225,13 @@ class Navigator:
 
     imu_noise_at_rest = _view("_rest_noise", "summary", "The IMU's white noise measured at "
                               "rest against the grade's (rest_noise.py), or None.")
+
+    @property
+    def learned_constraint(self):
+        """What the learned non-holonomic constraint has seen (vehicle_constraint.py), or None
+        where it is configured or off."""
+        self._catch_up()
+        return None if self._learned_nhc is None else self._learned_nhc.summary()
 
     def velocity_latency(self):
         """The GNSS velocity's latency estimate and its sigma (s, "vd" state), or None."""
@@ -370,17 +381,21 @@ class Navigator:
         s.next_sample = j
         self._recorder.epoch(s, phi, s.ekf.P, self._published_var())  # stored as a copy
         if s.mode != ALIGNING:
-            if cfg.nhc_sigma is not None and s.nav.t - s.t_nhc >= cfg.nhc_interval - 1e-9:
+            learned = self._learned_nhc
+            nhc_sigma = cfg.nhc_sigma if learned is None else learned.sigma
+            if nhc_sigma is not None and s.nav.t - s.t_nhc >= cfg.nhc_interval - 1e-9:
                 s.t_nhc = s.nav.t
                 # An unknown distance to the rear axle turns the yaw rate into lateral
                 # velocity at the IMU: widen the lateral noise with the rate.
-                sigma_lat = np.hypot(cfg.nhc_sigma[0], cfg.nhc_rate_arm * s.omega[2])
-                self._update(meas.nonholonomic(self._space, s.nav, sigma_lat, cfg.nhc_sigma[1],
+                sigma_lat = np.hypot(nhc_sigma[0], cfg.nhc_rate_arm * s.omega[2])
+                self._update(meas.nonholonomic(self._space, s.nav, sigma_lat, nhc_sigma[1],
                                                s.omega, cfg.nhc_lever_b,
                                                s.estimates.get("nhc", np.zeros(2))),
                              s.nav.t, aiding=False)
             s.mode = modes.after_epoch(s.mode, s.nav.t, s.t_last_aid, cfg.dr_timeout)
             self._recorder.set_mode(s.mode)
+            if learned is not None and s.mode == NAVIGATING:
+                learned.add(s.nav.t, s.nav.v_enu, s.nav.q_nb)
         oldest = self._rewind.keep(s, self._recorder.epochs, self._recorder.update_count,
                                    self._recorder.last_epoch)
         if oldest is not None:

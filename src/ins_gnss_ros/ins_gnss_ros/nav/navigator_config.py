@@ -57,6 +57,10 @@ class NavigatorConfig:
     nhc_sigma : tuple of 2 float or None
         Non-holonomic constraint noise (lateral, vertical), m/s, applied every epoch while
         navigating (wheeled vehicles only); None disables it.
+    nhc_learn : bool
+        Without nhc_sigma: learn from the aided solution whether the vehicle moves like a
+        wheeled one and apply the constraint then, with the noise learned
+        (vehicle_constraint.py).
     nhc_interval : float
         Least time between two constraint updates, s.
     nhc_rate_arm : float
@@ -109,6 +113,7 @@ class NavigatorConfig:
     level_time: float = 1.0
     dr_timeout: float = 2.0
     nhc_sigma: tuple | None = None
+    nhc_learn: bool = False
     nhc_lever_b: np.ndarray = field(default_factory=lambda: np.zeros(3))
     nhc_interval: float = 0.1
     nhc_rate_arm: float = 0.0

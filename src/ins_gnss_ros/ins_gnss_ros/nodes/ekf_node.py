@@ -248,6 +248,8 @@ class EkfNode(EkfServices, NavNode):
             self.diag.set_value(name, stats.summary(t))
         if nav.imu_noise_at_rest is not None:
             self.diag.set_value("IMU noise at rest", nav.imu_noise_at_rest)
+        if nav.learned_constraint is not None:
+            self.diag.set_value("non-holonomic constraint", nav.learned_constraint)
         latency = nav.velocity_latency()
         if latency is not None:
             self.diag.set_value("gnss/vel latency estimate",
