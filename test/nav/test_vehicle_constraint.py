@@ -28,16 +28,40 @@ def test_a_body_moving_along_its_x_axis_is_constrained_after_the_learning_time()
     assert learner.sigma is None and "29 of 30 s" in learner.summary()
     feed(learner, 2.0, lambda t: np.array([8.0, *0.05 * rng.standard_normal(2)]), t0=t)
     assert learner.sigma == (vc.SIGMA_FLOOR, vc.SIGMA_FLOOR)  # 2 x 0.05 m/s: the floor
-    assert learner.summary().startswith("on: lateral 0.05")
+    forward, axes, rms = learner.learned()
+    np.testing.assert_allclose(forward, [1.0, 0.0, 0.0], atol=1e-3)
+    np.testing.assert_allclose(np.abs(axes), [[0, 1, 0], [0, 0, 1]], atol=0.03)  # ~level body
+    np.testing.assert_allclose(rms, [0.05, 0.05], atol=0.01)
+    assert learner.summary().startswith("on: travel along body (+1.000")
+
+
+def test_any_mounting_reversing_included():
+    """An IMU in its own axes, yawed 175 deg and pitched 7 deg from the vehicle (the real car
+    drive's), the vehicle backing up a third of the time: the axis of travel is learned, and
+    the velocity across it is what is constrained."""
+    rng = np.random.default_rng(2)
+    q_mount = quat_from_euler(0.0, np.radians(7.0), np.radians(175.0))
+    axis = quat_to_dcm(q_mount).T @ np.array([1.0, 0.0, 0.0])  # vehicle x in the IMU's axes
+
+    def velocity(t):
+        speed = -3.0 if int(t) % 3 == 0 else 8.0
+        return speed * axis + 0.05 * rng.standard_normal(3)
+    learner = vc.LearnedConstraint()
+    feed(learner, 60.0, velocity)
+    forward, axes, rms = learner.learned()
+    assert forward @ axis > 0.9999
+    np.testing.assert_allclose(axes @ axis, 0.0, atol=2e-3)  # the noise moves it a little
+    assert learner.sigma is not None and np.all(rms < 0.07)
 
 
 def test_sway_beyond_the_limit_is_not_constrained_and_releases_a_constrained_body():
     learner = vc.LearnedConstraint()
     t = feed(learner, 60.0, lambda t: np.array([5.0, 0.2 * np.sin(t), 0.0]))
-    assert np.allclose(learner.rms(), [0.2 / np.sqrt(2), 0.0], atol=0.01)
-    assert np.allclose(learner.sigma, [2 * 0.2 / np.sqrt(2), vc.SIGMA_FLOOR], atol=0.02)
+    np.testing.assert_allclose(learner.learned()[2], [0.2 / np.sqrt(2), 0.0], atol=0.01)
+    np.testing.assert_allclose(learner.sigma, [2 * 0.2 / np.sqrt(2), vc.SIGMA_FLOOR], atol=0.02)
     feed(learner, 600.0, lambda t: np.array([5.0, 0.8 * np.sin(t), 0.0]), t0=t)  # a ship
-    assert learner.sigma is None and learner.summary().startswith("off: lateral 0.5")
+    assert learner.sigma is None and learner.axes is None
+    assert learner.summary().startswith("off:") and "lateral 0.5" in learner.summary()
 
 
 def test_slow_motion_and_re_run_epochs_are_not_learned():

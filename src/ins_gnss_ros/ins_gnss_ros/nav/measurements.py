@@ -301,7 +301,7 @@ def zero_angular_rate(space, state, omega_ib_b, sigma):
 
 
 def nonholonomic(space, state, sigma_lateral, sigma_vertical, omega_ib_b=np.zeros(3),
-                 lever_b=np.zeros(3), boresight=np.zeros(2)):
+                 lever_b=np.zeros(3), boresight=np.zeros(2), axes=None):
     """Non-holonomic constraint of a wheeled vehicle: no lateral or vertical velocity at the
     constraint point (the rear axle's centre).
 
@@ -322,17 +322,23 @@ def nonholonomic(space, state, sigma_lateral, sigma_vertical, omega_ib_b=np.zero
         Constraint point relative to the IMU, FLU, m.
     boresight : array_like, shape (2,)
         Current estimate of the vehicle-axes pitch and yaw relative to the IMU axes, rad.
+    axes : array_like, shape (2, 3), optional
+        The vehicle's lateral and vertical axes as unit vectors in the body axes, in place of
+        the boresight (any mounting: a learned constraint, vehicle_constraint.py).
 
     Returns
     -------
     Innovation
         z = predicted (lateral, vertical) velocity of the point in vehicle axes - 0.
     """
-    theta, psi = boresight
-    # Lateral and vertical vehicle-axes components of a body vector.
-    A = np.array([[-psi, 1.0, 0.0], [theta, 0.0, 1.0]])
+    if axes is None:
+        theta, psi = boresight
+        # Lateral and vertical vehicle-axes components of a body vector.
+        A = np.array([[-psi, 1.0, 0.0], [theta, 0.0, 1.0]])
+    else:
+        A = np.asarray(axes, float)
     v_b, H = _point_velocity_rows(space, state, omega_ib_b, lever_b, A)
-    if "nhc" in space:
+    if "nhc" in space and axes is None:
         H[:, space["nhc"]] = [[0.0, v_b[0]], [-v_b[0], 0.0]]
     z = A @ v_b
     return Innovation("nhc", z, H, np.diag([sigma_lateral ** 2, sigma_vertical ** 2]))

@@ -390,7 +390,8 @@ class Navigator:
                 sigma_lat = np.hypot(nhc_sigma[0], cfg.nhc_rate_arm * s.omega[2])
                 self._update(meas.nonholonomic(self._space, s.nav, sigma_lat, nhc_sigma[1],
                                                s.omega, cfg.nhc_lever_b,
-                                               s.estimates.get("nhc", np.zeros(2))),
+                                               s.estimates.get("nhc", np.zeros(2)),
+                                               None if learned is None else learned.axes),
                              s.nav.t, aiding=False)
             s.mode = modes.after_epoch(s.mode, s.nav.t, s.t_last_aid, cfg.dr_timeout)
             self._recorder.set_mode(s.mode)

@@ -1,21 +1,25 @@
 """The non-holonomic constraint, learned from the aided solution instead of configured.
 
-A wheeled vehicle moves along its body x axis: the lateral and vertical velocities of its body
-are zero but for side slip, suspension travel and the yaw rate times the distance to the rear
-axle (the constraint of Sukkarieh, Nebot and Durrant-Whyte, IEEE Trans. Robotics and
-Automation 15(3), 1999; Shin, "Estimation techniques for low-cost inertial navigation", UCGE
-report 20219, 2005, section 5.4). Used as a measurement, it bounds the drift of a MEMS INS in a
-GNSS outage (the real car drive with config/default.yaml: 6.7 m RMS of the per-outage maximum
-without it, 2.9 m with it), but only a profile knows whether the IMU is on wheels, and a ship's
+A wheeled vehicle moves along one axis of its body: its lateral and vertical velocities are zero
+but for side slip, suspension travel and the yaw rate times the distance to the rear axle (the
+constraint of Sukkarieh, Nebot and Durrant-Whyte, IEEE Trans. Robotics and Automation 15(3),
+1999; Shin, "Estimation techniques for low-cost inertial navigation", UCGE report 20219, 2005,
+section 5.4). Used as a measurement it bounds the drift of a MEMS INS in a GNSS outage (the real
+car drive with config/default.yaml: 6.7 m RMS of the per-outage maximum without it, 3.4 m with
+it), but only a profile knows whether the IMU is on wheels and how it is mounted, and a ship's
 sway and heave, a walker's or an aircraft's motion break it.
 
-What the vehicle is can be seen while GNSS aids the solution: the body-frame velocity
-``C_bn v`` of the navigating solution. :class:`LearnedConstraint` keeps its mean squares over
-the time moving faster than ``MIN_SPEED`` (forgetting with ``MEMORY_S`` of moving time, so that
-a vehicle that starts to slide stops being constrained); after ``LEARN_S`` s of it, a body whose
-lateral and vertical RMS both stay within ``ENABLE_RMS`` is constrained, with the noise of
-``SIGMA_FACTOR`` times the measured RMS (not below ``SIGMA_FLOOR``): the constraint then says no
-more than the aided solution showed. The same test with ``DISABLE_RMS`` turns it off again.
+Both can be seen while GNSS aids the solution, in the body-axes velocity ``v_b = C_bn v`` of
+the navigating solution. :class:`LearnedConstraint` keeps its second moment ``E[v_b v_b^T]``
+and the body's mean up direction over the time moving faster than ``MIN_SPEED`` (forgetting
+with ``MEMORY_S`` of moving time, so that a vehicle that starts to slide stops being
+constrained). The principal axis of the moment is the direction of travel in the IMU's axes,
+whatever the mounting (a car's roof IMU in its own axes, yawed 175 deg and pitched 7 deg, moves
+along it as well as one mounted square); the lateral axis is perpendicular to it and to up, the
+vertical one to both. After ``LEARN_S`` s of motion, a body whose lateral and vertical RMS both
+stay within ``ENABLE_RMS`` is constrained on those axes, with ``SIGMA_FACTOR`` times the measured
+RMS as the noise (not below ``SIGMA_FLOOR``): the constraint then says no more than the aided
+solution showed. The same test with ``DISABLE_RMS`` releases it again.
 """
 from __future__ import annotations
 
@@ -43,13 +47,24 @@ MAX_STEP_S = 1.0
 
 
 class LearnedConstraint:
-    """Learns whether the vehicle moves like a wheeled one and the constraint's noise."""
+    """Learns whether the vehicle moves like a wheeled one, along which body axis, and the
+    constraint's noise.
+
+    Attributes
+    ----------
+    axes : ndarray, shape (2, 3) or None
+        The lateral and vertical axes (unit vectors in the body axes) once constrained.
+    sigma : tuple of 2 float or None
+        Their constraint noise, m/s, once constrained.
+    """
 
     def __init__(self):
-        self.mean_square = np.zeros(2)  # lateral, vertical body velocity, (m/s)^2
+        self.moment = np.zeros((3, 3))  # E[v_b v_b^T], (m/s)^2
+        self.mean_v = np.zeros(3)       # E[v_b]: which way along the axis is forward
+        self.up = np.zeros(3)           # E[up in body axes]
         self.moving = 0.0               # moving time learned from, s
         self.last_t = -np.inf
-        self.sigma = None               # (lateral, vertical) m/s once enabled, else None
+        self.axes = self.sigma = None
 
     def add(self, t: float, v_enu: np.ndarray, q_nb: np.ndarray) -> None:
         """Learn from the navigating, aided solution at time t (s), standing for the time since
@@ -65,28 +80,42 @@ class LearnedConstraint:
         self.last_t = t
         if np.hypot(v_enu[0], v_enu[1]) < MIN_SPEED:
             return
-        v_b = quat_to_dcm(q_nb).T @ v_enu
-        self.mean_square += -np.expm1(-dt / MEMORY_S) * (v_b[1:] ** 2 - self.mean_square)
+        C = quat_to_dcm(q_nb)
+        v_b = C.T @ v_enu
+        weight = -np.expm1(-dt / MEMORY_S)
+        self.moment += weight * (np.outer(v_b, v_b) - self.moment)
+        self.mean_v += weight * (v_b - self.mean_v)
+        self.up += weight * (C[2] - self.up)  # C^T e_U: the third row
         self.moving += dt
         if self.moving < LEARN_S:
             return
-        rms = self.rms()
+        _, axes, rms = self.learned()
         limit = DISABLE_RMS if self.sigma is not None else ENABLE_RMS
-        self.sigma = tuple(np.maximum(SIGMA_FACTOR * rms, SIGMA_FLOOR)) \
-            if np.all(rms <= limit) else None
+        if np.all(rms <= limit):
+            self.axes, self.sigma = axes, tuple(np.maximum(SIGMA_FACTOR * rms, SIGMA_FLOOR))
+        else:
+            self.axes = self.sigma = None
 
-    def rms(self) -> np.ndarray:
-        """Lateral and vertical RMS of the body velocity learned so far, m/s (the exponential
-        mean started at zero, its bias divided out)."""
-        return np.sqrt(self.mean_square / -np.expm1(-self.moving / MEMORY_S))
+    def learned(self):
+        """The direction of travel in the body axes (unit, forward), the lateral and vertical
+        axes (2, 3) and their velocity RMS (2,), m/s; the exponential means started at zero,
+        their bias divided out."""
+        _, vectors = np.linalg.eigh(self.moment)
+        forward = vectors[:, -1] * np.sign(vectors[:, -1] @ self.mean_v or 1.0)
+        lateral = np.cross(self.up, forward)
+        lateral /= np.linalg.norm(lateral)
+        axes = np.array([lateral, np.cross(forward, lateral)])
+        mean_square = np.einsum("ij,jk,ik->i", axes, self.moment, axes)
+        return forward, axes, np.sqrt(mean_square / -np.expm1(-self.moving / MEMORY_S))
 
     def summary(self) -> str:
         """What was learned, for /diagnostics."""
         if self.moving < LEARN_S:
             return (f"learning the body's lateral and vertical velocity: {self.moving:.0f} of "
                     f"{LEARN_S:.0f} s moving above {MIN_SPEED:g} m/s with GNSS")
-        rms = self.rms()
-        seen = f"lateral {rms[0]:.2f}, vertical {rms[1]:.2f} m/s RMS"
+        f, _, rms = self.learned()
+        seen = (f"travel along body ({f[0]:+.3f}, {f[1]:+.3f}, {f[2]:+.3f}), lateral "
+                f"{rms[0]:.2f}, vertical {rms[1]:.2f} m/s RMS")
         if self.sigma is None:
             return f"off: {seen} (a wheeled vehicle stays within {ENABLE_RMS:g})"
         return f"on: {seen}, sigma {self.sigma[0]:.2f} / {self.sigma[1]:.2f} m/s"
