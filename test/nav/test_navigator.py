@@ -341,7 +341,7 @@ def test_gnss_step_forced_in_keeps_an_honest_covariance(sim, end):
     """A 20 m north step of every fix from 60 s (spoofing, a multipath lock): gated, then forced
     in after max_reject_time. Whether the step ends at 70 s or stays, the published covariance
     covers the error at every epoch and the mode is not NAVIGATING while the solution and the
-    fixes disagree, nor until the fixes have confirmed the forced solution for floor_tau."""
+    fixes disagree, nor until the fixes have confirmed the forced solution for confirm_time."""
     traj, imu, meas, _ = sim
     rm, _ = radii(traj.lat[0])
     faulty = [replace(m, lat=m.lat + 20.0 / rm) if isinstance(m, GnssFix) and 60.0 <= m.t < end
@@ -358,8 +358,8 @@ def test_gnss_step_forced_in_keeps_an_honest_covariance(sim, end):
     # on the published covariance covers the fault too.
     assert np.all(ratio < 5.0), (t[ratio >= 5.0], ratio.max())
     # Rejected for suspect_time (1 s): DEAD_RECKONING, until the fixes have been accepted for
-    # floor_tau (30 s) since the last forced one; NAVIGATING then with the floor published.
-    confirmed = forced[-1].t + 30.0
+    # confirm_time (10 s) since the last forced one; NAVIGATING then with the floor published.
+    confirmed = forced[-1].t + 10.0
     assert np.all(mode[(t > 61.3) & (t < confirmed - 0.1)] == DEAD_RECKONING)
     assert np.all(mode[t > confirmed + 0.3] == NAVIGATING) and t[-1] > confirmed + 0.3
     assert np.all(mode[t < 60.0] == NAVIGATING)
@@ -376,9 +376,9 @@ def test_gnss_step_forced_in_keeps_an_honest_covariance(sim, end):
 def test_divergence_recovers_through_the_forced_update(sim):
     """The INS jumps 30 m north at 60 s with a covariance that does not know (a divergence):
     the fixes are gated, then forced in; the solution comes back to the fixes, and the mode to
-    NAVIGATING once they have confirmed it for floor_tau (5 s here)."""
+    NAVIGATING once they have confirmed it for confirm_time (5 s here)."""
     traj, imu, meas, _ = sim
-    cfg = config(floor_tau=5.0)
+    cfg = config(confirm_time=5.0)
     nav = Navigator(cfg)
     for m in meas:
         nav.add_measurement(m)
@@ -390,7 +390,7 @@ def test_divergence_recovers_through_the_forced_update(sim):
     t, ratio, mode = _stream(nav, rest, traj, t_min=50.0)
     assert any(u.reason == "forced" for u in nav.updates)
     # Once forced in (62 s), the covariance covers the error again; DR from 61 s until the
-    # fixes have been accepted for floor_tau (5 s) since the forced one.
+    # fixes have been accepted for confirm_time (5 s) since the forced one.
     assert np.all(ratio[t > 62.5] < 5.0)
     confirmed = max(u.t for u in nav.updates if u.reason == "forced") + 5.0
     assert np.all(mode[(t > 61.2) & (t < confirmed - 0.1)] == DEAD_RECKONING)

@@ -96,7 +96,7 @@ def test_mode_machine():
 
 
 def test_a_forced_kind_keeps_a_floor_that_decays_while_it_is_accepted():
-    cfg = NavigatorConfig(noise=NOISE, floor_tau=10.0)
+    cfg = NavigatorConfig(noise=NOISE, floor_tau=10.0, confirm_time=10.0)
     guard = Integrity(cfg)
     ekf = ErrorStateEKF(SPACE, NOISE, np.eye(SPACE.size) * 0.01)
     H = np.zeros((3, SPACE.size))
@@ -115,9 +115,9 @@ def test_a_forced_kind_keeps_a_floor_that_decays_while_it_is_accepted():
     small = Innovation("gnss_pos", np.zeros(3), H, np.eye(3))
     guard.update(ekf, SPACE, small, 15.0, None, lambda s, v: None)
     assert np.isclose(guard.floors["gnss_pos"].var[0], 900.0 * np.exp(-1.0))
-    # accepted for floor_tau since it was forced: confirmed, while the floor (331 m^2, far
+    # accepted for confirm_time since it was forced: confirmed, while the floor (331 m^2, far
     # beyond 9 x the 1 m^2 of the fixes) stays in the published covariance
     assert not guard.degraded(15.0) and guard.variances(SPACE)[pos][0] > 300.0
-    guard.rejected("gnss_pos", 16.0)  # rejected again: not confirmed for floor_tau from then
+    guard.rejected("gnss_pos", 16.0)  # rejected again: not confirmed for 10 s from then
     guard.accepted("gnss_pos")
     assert guard.degraded(17.0) and guard.degraded(25.9) and not guard.degraded(26.0)

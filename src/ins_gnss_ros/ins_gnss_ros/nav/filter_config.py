@@ -128,8 +128,11 @@ PARAMS = (
           "keeps after it was forced in (decays while the kind is accepted), s", 0.1, 3600.0),
     Param("forced.degraded_ratio", 3.0, "the mode is DEAD_RECKONING (degraded) while a forced "
           "kind's floor exceeds this many times its own standard deviation, until the kind has "
-          "been accepted for forced.floor_tau_s since it was last forced or rejected, -",
+          "been accepted for forced.confirm_time_s since it was last forced or rejected, -",
           0.0, 1000.0),
+    Param("forced.confirm_time_s", 10.0, "a forced kind accepted this long without being forced "
+          "or rejected again confirms the solution (its floor stays in the covariance), s",
+          0.0, 3600.0),
     Param("max_imu_gap_s", 2.5, "longest gap in imu/delta bridged by holding the rates of the "
           "increment after it; a longer one loses the IMU and the filter aligns again, s",
           0.0, 60.0),
@@ -213,7 +216,8 @@ def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
         nhc_sigma=nhc if min(nhc) > 0.0 else None, nhc_learn=p["nonholonomic.learn"],
         history=p["history_s"],
         wheel_lever_b=np.array(p["wheel.lever_arm"], float),
-        floor_tau=p["forced.floor_tau_s"], degraded_ratio=p["forced.degraded_ratio"],
+        floor_tau=p["forced.floor_tau_s"], confirm_time=p["forced.confirm_time_s"],
+        degraded_ratio=p["forced.degraded_ratio"],
         gap_accel_sigma=p["imu_gap.accel_sigma_mps2"],
         gap_rate_sigma=np.radians(p["imu_gap.rate_sigma_dps"]),
         store_covariance=record, record=record,

@@ -32,11 +32,15 @@ outage's drift kept the solution degraded for minutes).
 F decays by exp(-dt / floor_tau) over the time the kind is accepted (not while it is rejected).
 While it exceeds degraded_ratio^2 times the kind's own variance, the solution is degraded
 (mode DEAD_RECKONING, modes.py: it is not confirmed by its aiding) until the kind has been
-accepted for floor_tau without being forced or rejected again: a stream of measurements that
-agree with the solution (at 5 Hz, 150 in the default 30 s) confirms it, while the floor stays in
-the published covariance until it has decayed. Degraded until the floor itself fell below the
-kind's variance, an RTK receiver's 39 cm disagreement before an outage of the real car drive kept
-the solution DEAD_RECKONING for the last 110 s of the drive. So it is while an aiding
+accepted for confirm_time without being forced or rejected again: a stream of measurements that
+agree with the solution (at 5 Hz, 50 in the default 10 s) confirms it, while the floor stays in
+the published covariance until it has decayed, so that a persistent fault is covered as before
+(a forced step nu keeps sigma >= nu exp(-t / (2 floor_tau)), 0.85 nu at the confirmation).
+Degraded until the floor itself fell below the kind's variance, an RTK receiver's 39 cm
+disagreement before an outage of the real car drive kept the solution DEAD_RECKONING for the
+last 110 s of the drive, and the velocities forced after each 15 s outage (the INS drifts
+1.3 m/s in one with config/default.yaml) most of the time between outages. So it is while an
+aiding
 kind keeps being rejected for `suspect_time` before it is forced: the other kinds may still be
 accepted (a GNSS clock jump shifts the velocities a little and the positions a lot), but the
 solution and the rejected kind disagree.
@@ -79,7 +83,7 @@ class NoiseFloor:
         Largest variance of the kind's own noise at its last measurement.
     suspect : float
         Epoch of the kind's last forced update or rejection, s: it is confirmed once accepted
-        for floor_tau after it.
+        for confirm_time after it.
     """
 
     var: np.ndarray
@@ -100,7 +104,7 @@ class Integrity:
     Parameters
     ----------
     config : NavigatorConfig
-        max_reject_time, gate_prob, floor_tau, degraded_ratio, suspect_time.
+        max_reject_time, gate_prob, floor_tau, confirm_time, degraded_ratio, suspect_time.
     """
 
     def __init__(self, config):
@@ -167,7 +171,7 @@ class Integrity:
             return False  # the usual case, asked after every update
         cfg = self.config
         ratio2 = cfg.degraded_ratio ** 2
-        return any(np.max(f.var) > ratio2 * f.r and epoch - f.suspect < cfg.floor_tau
+        return any(np.max(f.var) > ratio2 * f.r and epoch - f.suspect < cfg.confirm_time
                    for f in self.floors.values()) or any(
             epoch - first >= cfg.suspect_time and epoch - last <= cfg.suspect_time
             for first, last in self.rejecting.values())

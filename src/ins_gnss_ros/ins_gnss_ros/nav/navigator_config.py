@@ -33,8 +33,12 @@ class NavigatorConfig:
         decays by exp(-dt / floor_tau) over the time its measurements are accepted, s.
     degraded_ratio : float
         While a forced kind's floor exceeds degraded_ratio^2 times the measurement's own
-        variance and the kind has not yet been accepted for floor_tau since it was last forced
-        or rejected, the mode is DEAD_RECKONING (degraded: not confirmed by the aiding), -.
+        variance and the kind has not yet been accepted for confirm_time since it was last
+        forced or rejected, the mode is DEAD_RECKONING (degraded: not confirmed by the aiding),
+        -.
+    confirm_time : float
+        Time a forced kind must be accepted without being forced or rejected again to confirm
+        the solution, s.
     suspect_time : float
         While an aiding kind has been rejected continuously for this long (and is still
         arriving), the mode is DEAD_RECKONING too: the INS or that aiding is wrong, s.
@@ -100,6 +104,7 @@ class NavigatorConfig:
     gate_prob: float | None = DEFAULT_GATE_PROB
     max_reject_time: float = 2.0
     floor_tau: float = 30.0
+    confirm_time: float = 10.0
     degraded_ratio: float = 3.0
     suspect_time: float = 1.0
     gap_accel_sigma: float = 1.0
