@@ -39,11 +39,11 @@ the published covariance until it has decayed, so that a persistent fault is cov
 Degraded until the floor itself fell below the kind's variance, an RTK receiver's 39 cm
 disagreement before an outage of the real car drive kept the solution DEAD_RECKONING for the
 last 110 s of the drive, and the velocities forced after each 15 s outage (the INS drifts
-1.3 m/s in one with config/default.yaml) most of the time between outages. So it is while an
-aiding
-kind keeps being rejected for `suspect_time` before it is forced: the other kinds may still be
-accepted (a GNSS clock jump shifts the velocities a little and the positions a lot), but the
-solution and the rejected kind disagree.
+1.3 m/s in one with config/default.yaml) most of the time between outages.
+
+The solution is degraded too while an aiding kind keeps being rejected for `suspect_time` before
+it is forced: the other kinds may still be accepted (a GNSS clock jump shifts the velocities a
+little and the positions a lot), but the solution and the rejected kind disagree.
 """
 from __future__ import annotations
 
