@@ -52,6 +52,17 @@ def test_any_mounting_reversing_included():
     assert forward @ axis > 0.9999
     np.testing.assert_allclose(axes @ axis, 0.0, atol=2e-3)  # the noise moves it a little
     assert learner.sigma is not None and np.all(rms < 0.07)
+    assert "mounting_rpy_deg [0, 7.0, 175.0]" in learner.summary()
+
+
+def test_the_mounting_that_puts_the_travel_on_base_link_x():
+    """The imu_preprocessor's mounting (v_base_link = Rz(yaw) Ry(pitch) Rx(roll) v_imu) of the
+    real car drive's IMU, and others, back from their base_link x axis in the IMU's axes."""
+    from ins_gnss_ros.nav.rotations import dcm_from_euler
+    for pitch_deg, yaw_deg in ((-6.79, 174.65), (0.0, 90.0), (30.0, -45.0), (-80.0, 10.0)):
+        c_bs = dcm_from_euler(0.0, np.radians(pitch_deg), np.radians(yaw_deg))
+        pitch, yaw = vc.mounting_from_travel(c_bs.T @ np.array([1.0, 0.0, 0.0]))
+        np.testing.assert_allclose(np.degrees([pitch, yaw]), [pitch_deg, yaw_deg], atol=1e-9)
 
 
 def test_sway_beyond_the_limit_is_not_constrained_and_releases_a_constrained_body():

@@ -44,6 +44,9 @@ SIGMA_FACTOR = 2.0
 SIGMA_FLOOR = 0.1
 #: Longest time one solution stands for (the first after an outage or a gap), s.
 MAX_STEP_S = 1.0
+#: Angle between the direction of travel and the body x axis beyond which /diagnostics says
+#: which mounting would align them, deg.
+MOUNTING_HINT_DEG = 3.0
 
 
 class LearnedConstraint:
@@ -118,4 +121,19 @@ class LearnedConstraint:
                 f"{rms[0]:.2f}, vertical {rms[1]:.2f} m/s RMS")
         if self.sigma is None:
             return f"off: {seen} (a wheeled vehicle stays within {ENABLE_RMS:g})"
-        return f"on: {seen}, sigma {self.sigma[0]:.2f} / {self.sigma[1]:.2f} m/s"
+        summary = f"on: {seen}, sigma {self.sigma[0]:.2f} / {self.sigma[1]:.2f} m/s"
+        if f[0] < np.cos(np.radians(MOUNTING_HINT_DEG)):
+            pitch, yaw = np.degrees(mounting_from_travel(f))
+            summary += (f"; imu_preprocessor mounting_rpy_deg [0, {pitch:.1f}, {yaw:.1f}] would "
+                        "put the travel on base_link's x axis (the roll is not seen in it)")
+        return summary
+
+
+def mounting_from_travel(forward: np.ndarray):
+    """Pitch and yaw (rad) of the mounting C_bs = Rz(yaw) Ry(pitch) (the imu_preprocessor's
+    ``mounting_rpy_deg`` with roll 0, which the direction of travel cannot show) that puts the
+    direction of travel ``forward`` (unit, the IMU's axes) on base_link's x axis:
+    C_bs^T e_x = (cos p cos y, -sin y, sin p cos y), with |pitch| <= 90 deg."""
+    cos_yaw = np.copysign(np.hypot(forward[0], forward[2]), forward[0])
+    pitch = np.arctan2(forward[2] / cos_yaw, forward[0] / cos_yaw)
+    return pitch, np.arctan2(-forward[1], cos_yaw)
