@@ -23,7 +23,14 @@ from numba import guvectorize, njit
 from . import earth
 
 _radii = njit(cache=True)(earth._radii)
+_ecef = njit(cache=True)(earth._ecef)
 _normal_gravity = njit(cache=True)(earth._normal_gravity)
+
+
+@njit(cache=True)
+def geodetic_to_ecef(lat, lon, h, a, e2):
+    """(x, y, z) of one point; see earth.geodetic_to_ecef."""
+    return _ecef(lat, lon, h, _radii(lat, a, e2)[1], e2)
 
 
 @njit(cache=True)

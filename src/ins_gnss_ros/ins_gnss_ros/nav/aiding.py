@@ -299,7 +299,7 @@ class Aiding:
             self.report(f"gnss/fix without covariance: {sigma:g} m assumed from its status, "
                         "weighted by the fixes' measured fix-to-fix noise", log=False)
         cov = _floored(cov, self.policy.position_sigma_floor)
-        lat, lon = np.radians(lat_deg), np.radians(lon_deg)
+        lat, lon = math.radians(lat_deg), math.radians(lon_deg)
         if self.datum is None:
             self.datum = (lat, lon, h)
         self._course.observe(t, lat, lon, h)

@@ -19,6 +19,8 @@ References
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -241,21 +243,30 @@ def geodetic_to_ecef(lat, lon, h, ell: Ellipsoid = WGS84) -> np.ndarray:
         ECEF position, m.
     """
     if np.ndim(lat) == np.ndim(lon) == np.ndim(h) == 0:
-        # One point (every GNSS fix of the front end): the same arithmetic on scalars, without
-        # the broadcasting and stacking that cost more than it.
-        return np.array(_geodetic_to_ecef(float(lat), float(lon), float(h), ell))
+        # One point (every GNSS fix of the front end): the same arithmetic compiled, without
+        # the numpy calls on scalars, broadcasting and stacking that cost ten times more.
+        from . import _kernels  # (the kernels compile this module's formulas: imported late)
+
+        return np.array(_kernels.geodetic_to_ecef(float(lat), float(lon), float(h), ell.a,
+                                                  ell.e2))
     lat, lon, h = np.broadcast_arrays(np.asarray(lat, float), np.asarray(lon, float),
                                       np.asarray(h, float))
-    return np.stack(_geodetic_to_ecef(lat, lon, h, ell), axis=-1)
+    return np.stack(_geodetic_to_ecef(lat, lon, h, ell.a, ell.e2), axis=-1)
 
 
-def _geodetic_to_ecef(lat, lon, h, ell):
-    """(x, y, z) of geodetic_to_ecef, scalars or arrays of one shape."""
-    _, rn = radii(lat, ell)
+def _geodetic_to_ecef(lat, lon, h, a, e2):
+    """(x, y, z) of geodetic_to_ecef from raw ellipsoid parameters, scalars or arrays of one
+    shape."""
+    return _ecef(lat, lon, h, _radii(lat, a, e2)[1], e2)
+
+
+def _ecef(lat, lon, h, rn, e2):
+    """ECEF (x, y, z) of a geodetic point with prime-vertical radius rn (shared with the numba
+    kernels)."""
     cl = np.cos(lat)
     x = (rn + h) * cl * np.cos(lon)
     y = (rn + h) * cl * np.sin(lon)
-    z = (rn * (1.0 - ell.e2) + h) * np.sin(lat)
+    z = (rn * (1.0 - e2) + h) * np.sin(lat)
     return x, y, z
 
 
@@ -306,9 +317,10 @@ def ecef_to_enu_matrix(lat, lon) -> np.ndarray:
         One matrix per (lat, lon) pair, rad.
     """
     if np.ndim(lat) == np.ndim(lon) == 0:
-        # One matrix (per GNSS fix): the same values without broadcasting and stacking.
-        sl, cl = np.sin(float(lat)), np.cos(float(lat))
-        so, co = np.sin(float(lon)), np.cos(float(lon))
+        # One matrix (per GNSS fix): the same values without broadcasting and stacking, the
+        # functions of the math module (numpy's on a scalar cost ten times more).
+        sl, cl = math.sin(lat), math.cos(lat)
+        so, co = math.sin(lon), math.cos(lon)
         return np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
     lat, lon = np.broadcast_arrays(np.asarray(lat, float), np.asarray(lon, float))
     sl, cl = np.sin(lat), np.cos(lat)

@@ -606,11 +606,12 @@ class Navigator:
         return res
 
     def _feedback(self):
-        s, S = self._state, self._space
+        s, S = self._state, self._space.slices
         dx = s.ekf.take_correction()
         s.nav = apply_correction(s.nav, dx[S["pos"]], dx[S["vel"]], dx[S["att"]])
-        for name in s.estimates:
-            s.estimates[name] = s.estimates[name] + dx[S[name]]
+        estimates = s.estimates
+        for name, value in estimates.items():
+            estimates[name] = value + dx[S[name]]
         if "vd" in s.estimates:  # projected onto its physical range (measurements.py)
             s.estimates["vd"] = np.clip(s.estimates["vd"], *meas.VELOCITY_LATENCY_RANGE)
         self._recorder.correct(s, dx, self._published_var())
