@@ -72,7 +72,8 @@ class CourseFromFixes:
             median = values[n // 2] if n % 2 else (values[n // 2 - 1] + values[n // 2]) / 2
             self._white = median / CHI2_1_MEDIAN / 6.0
         out = cov.copy()
-        out[:2, :2] = np.eye(2) * min(self._white, 0.5 * (cov[0, 0] + cov[1, 1]))
+        out[0, 0] = out[1, 1] = min(self._white, 0.5 * (cov[0, 0] + cov[1, 1]))
+        out[0, 1] = out[1, 0] = 0.0  # (a variance: never NaN or negative, as np.eye(2) * it)
         return out
 
     def add(self, t: float, lat: float, lon: float, h: float, cov: np.ndarray):
