@@ -234,6 +234,11 @@ def transport_rate_enu(lat, h, v_enu, ell: Ellipsoid = WGS84) -> np.ndarray:
     return np.stack([-vn / (rm + h), ve / (rn + h), ve * np.tan(lat) / (rn + h)], -1)
 
 
+def _scalars(*values) -> bool:
+    """All of `values` are scalars (floats checked first: np.ndim costs a microsecond)."""
+    return all(isinstance(v, float) for v in values) or all(np.ndim(v) == 0 for v in values)
+
+
 def geodetic_to_ecef(lat, lon, h, ell: Ellipsoid = WGS84) -> np.ndarray:
     """Geodetic to ECEF coordinates (Groves ch. 2), vectorised.
 
@@ -242,7 +247,7 @@ def geodetic_to_ecef(lat, lon, h, ell: Ellipsoid = WGS84) -> np.ndarray:
     ndarray, shape (..., 3)
         ECEF position, m.
     """
-    if np.ndim(lat) == np.ndim(lon) == np.ndim(h) == 0:
+    if _scalars(lat, lon, h):
         # One point (every GNSS fix of the front end): the same arithmetic compiled, without
         # the numpy calls on scalars, broadcasting and stacking that cost ten times more.
         from . import _kernels  # (the kernels compile this module's formulas: imported late)
@@ -316,7 +321,7 @@ def ecef_to_enu_matrix(lat, lon) -> np.ndarray:
     ndarray, shape (..., 3, 3)
         One matrix per (lat, lon) pair, rad.
     """
-    if np.ndim(lat) == np.ndim(lon) == 0:
+    if _scalars(lat, lon):
         # One matrix (per GNSS fix): the same values without broadcasting and stacking, the
         # functions of the math module (numpy's on a scalar cost ten times more).
         sl, cl = math.sin(lat), math.cos(lat)

@@ -196,4 +196,6 @@ class Rewind:
 
     def needed_sample(self, state):
         """Number of the oldest IMU sample a rewind (or `state`) can still need."""
-        return min([c.state.next_sample for c in self.checkpoints] + [state.next_sample])
+        # The checkpoints are in the order of the run: the first one's is the smallest.
+        cps = self.checkpoints
+        return min(cps[0].state.next_sample, state.next_sample) if cps else state.next_sample
