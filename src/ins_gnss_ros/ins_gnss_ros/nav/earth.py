@@ -250,8 +250,6 @@ def geodetic_to_ecef(lat, lon, h, ell: Ellipsoid = WGS84) -> np.ndarray:
     if _scalars(lat, lon, h):
         # One point (every GNSS fix of the front end): the same arithmetic compiled, without
         # the numpy calls on scalars, broadcasting and stacking that cost ten times more.
-        from . import _kernels  # (the kernels compile this module's formulas: imported late)
-
         return np.array(_kernels.geodetic_to_ecef(float(lat), float(lon), float(h), ell.a,
                                                   ell.e2))
     lat, lon, h = np.broadcast_arrays(np.asarray(lat, float), np.asarray(lon, float),
@@ -360,3 +358,7 @@ def enu_to_ecef(enu, lat0, lon0, h0, ell: Ellipsoid = WGS84) -> np.ndarray:
     :func:`ecef_to_enu`."""
     return np.asarray(enu, float) @ ecef_to_enu_matrix(lat0, lon0) + geodetic_to_ecef(
         lat0, lon0, h0, ell)
+
+
+# The kernels compile this module's formulas (geodetic_to_ecef's one point): imported after them.
+from . import _kernels  # noqa: E402
