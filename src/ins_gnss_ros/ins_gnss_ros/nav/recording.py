@@ -129,8 +129,8 @@ class _Columns:
 
     def last_values(self) -> dict:
         """A copy of the current epoch's values."""
-        return {k: np.copy(v[self.n - 1]) if v.dtype != object else v[self.n - 1]
-                for k, v in self.data.items()}
+        k = self.n - 1
+        return {name: v[k].copy() if v.dtype != object else v[k] for name, v in self.data.items()}
 
 
 class Recorder:
