@@ -52,7 +52,7 @@ class Ellipsoid:
     gamma_e: float
     gamma_p: float
 
-    @property
+    @cached_property  # read at every filter update: computed once (the ellipsoid is immutable)
     def e2(self) -> float:
         """First eccentricity squared, dimensionless."""
         return self.f * (2.0 - self.f)
@@ -236,7 +236,10 @@ def transport_rate_enu(lat, h, v_enu, ell: Ellipsoid = WGS84) -> np.ndarray:
 
 def _scalars(*values) -> bool:
     """All of `values` are scalars (floats checked first: np.ndim costs a microsecond)."""
-    return all(isinstance(v, float) for v in values) or all(np.ndim(v) == 0 for v in values)
+    for v in values:
+        if not isinstance(v, float):
+            return all(np.ndim(v) == 0 for v in values)
+    return True
 
 
 def geodetic_to_ecef(lat, lon, h, ell: Ellipsoid = WGS84) -> np.ndarray:
