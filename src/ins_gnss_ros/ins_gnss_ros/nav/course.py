@@ -87,7 +87,7 @@ class CourseFromFixes:
         dt = t - first.t
         if dt <= 0.0:
             return None
-        d = R @ (r - r0)
+        d = R.dot(r - r0)  # (the array's dot: numpy's matmul, at half the cost on a 3-vector)
         white0, white1 = self.fix_to_fix(first.cov_enu), self.fix_to_fix(cov)
         cov_d = white0 + white1
         if np.hypot(d[0], d[1]) < MIN_SIGMAS * np.sqrt(cov_d[0, 0] + cov_d[1, 1]):
@@ -111,7 +111,8 @@ class CourseFromFixes:
         (t0, r0), (t1, r1), (t2, r2) = self._last3
         if abs((t2 - t1) - (t1 - t0)) > 0.1 * (t2 - t0):
             return  # a dropped fix: not equally spaced
-        s = (ecef_to_enu_matrix(lat, lon) @ (r2 - 2.0 * r1 + r0))[:2]
+        # (the array's dot: the same BLAS product as @, at half the cost on a 3-vector)
+        s = ecef_to_enu_matrix(lat, lon).dot(r2 - 2.0 * r1 + r0)[:2]
         pair = tuple((s * s).tolist())
         if len(self._second_differences) == SCATTER_SAMPLES:
             for x in self._second_differences[0]:  # the pair the append below drops

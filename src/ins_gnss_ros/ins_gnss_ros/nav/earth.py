@@ -327,7 +327,7 @@ def ecef_to_enu_matrix(lat, lon) -> np.ndarray:
         # functions of the math module (numpy's on a scalar cost ten times more).
         sl, cl = math.sin(lat), math.cos(lat)
         so, co = math.sin(lon), math.cos(lon)
-        return np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
+        return np.array((-so, co, 0.0, -sl * co, -sl * so, cl, cl * co, cl * so, sl)).reshape(3, 3)
     lat, lon = np.broadcast_arrays(np.asarray(lat, float), np.asarray(lon, float))
     sl, cl = np.sin(lat), np.cos(lat)
     so, co = np.sin(lon), np.cos(lon)
