@@ -87,7 +87,7 @@ class CourseFromFixes:
         dt = t - first.t
         if dt <= 0.0:
             return None
-        d = R.dot(r - r0)  # (the array's dot: numpy's matmul, at half the cost on a 3-vector)
+        d = R.dot(r - r0)  # (the array's dot: the same BLAS product as @, at half the cost)
         white0, white1 = self.fix_to_fix(first.cov_enu), self.fix_to_fix(cov)
         cov_d = white0 + white1
         if np.hypot(d[0], d[1]) < MIN_SIGMAS * np.sqrt(cov_d[0, 0] + cov_d[1, 1]):
