@@ -1,11 +1,18 @@
 """The navigator's time update of a segment (nav/propagation.py): its compiled loop
 (_kernels.mech_segment) against the two modules it stands for, SensorErrors.compensate and
-strapdown.run."""
+strapdown.run, and the whole compiled step (_kernels.time_update) against that loop and the
+filter's own prediction (ErrorStateEKF.predict)."""
 import numpy as np
 
 from ins_gnss_ros.nav import _kernels
 from ins_gnss_ros.nav.earth import WGS84
+from ins_gnss_ros.nav.ekf import ErrorStateEKF, ExtraState, StateSpace
+from ins_gnss_ros.nav.error_model import make_layout
+from ins_gnss_ros.nav.imu_gaps import BridgedGaps
 from ins_gnss_ros.nav.increments import SensorErrors
+from ins_gnss_ros.nav.propagation import propagate
+from ins_gnss_ros.nav.rewind import RunState
+from ins_gnss_ros.nav.sensor_errors import GRADES, filter_noise
 from ins_gnss_ros.nav.strapdown import NavState, run
 
 
@@ -38,3 +45,41 @@ def test_the_compiled_segment_equals_compensation_then_mechanisation():
     np.testing.assert_allclose(v, ref["v_enu"][-1], rtol=0, atol=1e-12)
     np.testing.assert_allclose(q, ref["q_nb"][-1], rtol=0, atol=1e-14)
     np.testing.assert_allclose(sums, [c_th.sum(axis=0), c_dv.sum(axis=0)], rtol=0, atol=1e-15)
+
+
+def test_the_compiled_time_update_is_the_segment_loop_then_the_filter_prediction():
+    # Bit for bit: the navigator's decisions (gates, modes) can hinge on the last bit.
+    rng = np.random.default_rng(3)
+    # Gauss-Markov, clock and extra blocks: the model's constant terms are in F too.
+    noise = filter_noise(GRADES["mems_adis16405"])
+    space = StateSpace(make_layout(("pos", "vel", "att", "bg", "ba", "gmg", "gma", "sg", "sa",
+                                    "clock"), noise), {"td": ExtraState(1, 0.01, 1e-6, 50.0)})
+    q0 = np.array([0.9, 0.1, -0.2, 0.37]) / np.linalg.norm([0.9, 0.1, -0.2, 0.37])
+    start = NavState(0.9, 0.5, 120.0, np.array([12.0, -3.0, 0.4]), q0, 0.0)
+    P0 = np.diag(rng.uniform(1e-6, 1.0, space.size))
+    n = 10
+    t = 0.01 * np.arange(1, n + 1) + 1e-4 * rng.standard_normal(n)
+    th = rng.normal(0.0, 2e-3, (n, 3))
+    dv = rng.normal(0.0, 5e-2, (n, 3)) + np.array([0.0, 0.0, 0.098])
+    cth, cdv = rng.normal(0.0, 1e-7, (n, 3)), rng.normal(0.0, 1e-6, (n, 3))
+    estimates = {"bg": np.array([1e-3, -2e-3, 5e-4]), "ba": np.array([0.05, -0.02, 0.1]),
+                 "sg": np.array([1e-3, -5e-4, 2e-3]), "sa": np.array([-1e-3, 2e-3, 5e-4])}
+
+    s = RunState(nav=start, ekf=ErrorStateEKF(space, noise, P0), estimates=dict(estimates))
+    phi = propagate(s, (t, th, dv, cth, cdv), noise, 0.1, BridgedGaps(1.0, 0.1), space)
+
+    errors = SensorErrors.of_estimates(estimates)
+    dts = np.diff(t, prepend=0.0)
+    T = float(dts.sum())
+    v, q, sums = start.v_enu.copy(), start.q_nb.copy(), np.empty((2, 3))
+    lat, lon, h = _kernels.mech_segment(start.lat, start.lon, start.h, v, q, th, dv, cth, cdv,
+                                        dts, errors.gyro_bias, errors.gyro_scale,
+                                        errors.accel_bias, errors.accel_scale, T / n,
+                                        WGS84.kernel_params, sums)
+    ekf = ErrorStateEKF(space, noise, P0)
+    phi_ref = ekf.predict(start, sums[1] / T, sums[0] / T, T)
+    assert (s.nav.lat, s.nav.lon, s.nav.h, s.nav.t) == (lat, lon, h, t[-1])
+    assert np.array_equal(s.nav.v_enu, v) and np.array_equal(s.nav.q_nb, q)
+    assert np.array_equal(s.a_enu, (v - start.v_enu) / T)
+    assert np.array_equal(s.omega, sums[0] / T)
+    assert np.array_equal(phi, phi_ref) and np.array_equal(s.ekf.P, ekf.P)

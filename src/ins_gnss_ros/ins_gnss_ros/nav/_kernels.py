@@ -23,7 +23,14 @@ from numba import guvectorize, njit
 from . import earth
 
 _radii = njit(cache=True)(earth._radii)
+_ecef = njit(cache=True)(earth._ecef)
 _normal_gravity = njit(cache=True)(earth._normal_gravity)
+
+
+@njit(cache=True)
+def geodetic_to_ecef(lat, lon, h, a, e2):
+    """(x, y, z) of one point; see earth.geodetic_to_ecef."""
+    return _ecef(lat, lon, h, _radii(lat, a, e2)[1], e2)
 
 
 @njit(cache=True)
@@ -429,6 +436,44 @@ def picard_step(F, P, Q, dt, order):
     """Transition matrix and predicted covariance of one step (ekf.ErrorStateEKF.predict): the
     two series above in one call."""
     return picard_transition(F, dt, order), lyapunov_series(F, P, Q, dt, order)
+
+
+@njit(cache=True)
+def covariance_step(F, refresh, lat, h, v, q, f_b, w_ib_b, ell_par, sensors, misalign_index, P,
+                    Q, dt, order):
+    """ekf.ErrorStateEKF.predict: when `refresh`, the navigation and sensor rows of F (its
+    other entries the model's constant ones, error_model.constant_system_matrix) filled by
+    :func:`system_matrix` at the solution (lat, h, v, q) with the compensated specific force
+    and rate f_b, w_ib_b; then :func:`picard_step`. Returns (phi, P)."""
+    if refresh:
+        system_matrix(F, lat, h, v, q, f_b, w_ib_b, ell_par, sensors, misalign_index)
+    return picard_step(F, P, Q, dt, order)
+
+
+@njit(cache=True)
+def time_update(lat, lon, h, v, q, th, dv, cth, cdv, dts, T, gyro_bias, gyro_scale, accel_bias,
+                accel_scale, ell_par, out_v, out_q, a_enu, omega, F, refresh, sensors,
+                misalign_index, P, Q, order):
+    """The navigator's time update of one segment (propagation.propagate): the solution (lat,
+    lon, h, v, q) mechanised over the samples by :func:`mech_segment` at their mean step T / N
+    into (returned lat, lon, h) out_v, out_q; the segment's mean acceleration (ENU) and
+    compensated rate into a_enu, omega; the covariance by :func:`covariance_step` with the
+    model at the segment's start and its mean specific force. Returns (lat, lon, h, phi, P).
+    """
+    sums = np.empty((2, 3))
+    out_v[:] = v
+    out_q[:] = q
+    lat1, lon1, h1 = mech_segment(lat, lon, h, out_v, out_q, th, dv, cth, cdv, dts, gyro_bias,
+                                  gyro_scale, accel_bias, accel_scale, T / th.shape[0], ell_par,
+                                  sums)
+    f_b = np.empty(3)
+    for j in range(3):
+        a_enu[j] = (out_v[j] - v[j]) / T
+        omega[j] = sums[0, j] / T
+        f_b[j] = sums[1, j] / T
+    phi, P = covariance_step(F, refresh, lat, h, v, q, f_b, omega, ell_par, sensors,
+                             misalign_index, P, Q, T, order)
+    return lat1, lon1, h1, phi, P
 
 
 @njit(cache=True)

@@ -202,7 +202,9 @@ class Aiding:
         self.wheel_still_since = math.inf  # stamp of the first of the zero wheel speeds, s
 
     def _seen(self, name: str, t: float, used: bool) -> bool:
-        stats = self.inputs.setdefault(name, InputStats(first_t=t))
+        stats = self.inputs.get(name)
+        if stats is None:
+            stats = self.inputs[name] = InputStats(first_t=t)
         stats.received += 1
         stats.refused += not used
         stats.last_t = t
@@ -299,7 +301,7 @@ class Aiding:
             self.report(f"gnss/fix without covariance: {sigma:g} m assumed from its status, "
                         "weighted by the fixes' measured fix-to-fix noise", log=False)
         cov = _floored(cov, self.policy.position_sigma_floor)
-        lat, lon = np.radians(lat_deg), np.radians(lon_deg)
+        lat, lon = math.radians(lat_deg), math.radians(lon_deg)
         if self.datum is None:
             self.datum = (lat, lon, h)
         self._course.observe(t, lat, lon, h)
@@ -377,11 +379,11 @@ class Aiding:
         (rad^2) from ``source`` (a key of :data:`HEADING_SOURCES`: which bias state it has).
         ``declination`` (rad) refers an azimuth from magnetic north to true north (None:
         already true)."""
-        if declination is not None and not np.isfinite(declination):
+        if declination is not None and not math.isfinite(declination):
             declination = self._declination(t)
         if declination is not None:
             azimuth = azimuth + declination
-        if not (np.isfinite(azimuth) and np.isfinite(variance) and variance > 0.0):
+        if not (math.isfinite(azimuth) and math.isfinite(variance) and variance > 0.0):
             self.report(f"{source} without a finite azimuth, declination and variance rejected")
             return self._seen(source, t, False)
         if source == "gnss/heading" and self.policy.phase_differences and \

@@ -34,6 +34,8 @@ All angles are radians; the conversion to/from degrees belongs to the importers.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .rotations import quat_from_euler, quat_mul, quat_normalize, quat_to_euler
@@ -45,17 +47,23 @@ _Q_FRD_FLU = np.array([0.0, 1.0, 0.0, 0.0])
 
 def wrap_pi(angle):
     """Wrap angle(s) to [-pi, pi), rad."""
+    if isinstance(angle, float):
+        # One angle (every heading update): Python's float remainder is numpy's (fmod, then
+        # the divisor's sign), without numpy's per-call cost on a scalar.
+        return np.float64((angle + math.pi) % (2.0 * math.pi) - math.pi)
     return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def wrap_2pi(angle):
     """Wrap angle(s) to [0, 2 pi), rad."""
+    if isinstance(angle, float):
+        return np.float64(angle % (2.0 * math.pi))  # one angle: as in wrap_pi
     return np.asarray(angle) % (2.0 * np.pi)
 
 
 def azimuth_from_yaw(yaw):
     """Azimuth (clockwise from North, [0, 2 pi)) from ENU yaw (counter-clockwise from East)."""
-    return wrap_2pi(0.5 * np.pi - np.asarray(yaw))
+    return wrap_2pi(0.5 * np.pi - (yaw if isinstance(yaw, float) else np.asarray(yaw)))
 
 
 def yaw_from_azimuth(azimuth):

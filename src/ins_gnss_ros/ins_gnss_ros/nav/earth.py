@@ -19,6 +19,7 @@ References
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -50,7 +51,7 @@ class Ellipsoid:
     gamma_e: float
     gamma_p: float
 
-    @property
+    @cached_property  # read at every filter update: computed once (the ellipsoid is immutable)
     def e2(self) -> float:
         """First eccentricity squared, dimensionless."""
         return self.f * (2.0 - self.f)
@@ -232,6 +233,14 @@ def transport_rate_enu(lat, h, v_enu, ell: Ellipsoid = WGS84) -> np.ndarray:
     return np.stack([-vn / (rm + h), ve / (rn + h), ve * np.tan(lat) / (rn + h)], -1)
 
 
+def _scalars(*values) -> bool:
+    """All of `values` are scalars (floats checked first: np.ndim costs a microsecond)."""
+    for v in values:
+        if not isinstance(v, float):
+            return all(np.ndim(v) == 0 for v in values)
+    return True
+
+
 def geodetic_to_ecef(lat, lon, h, ell: Ellipsoid = WGS84) -> np.ndarray:
     """Geodetic to ECEF coordinates (Groves ch. 2), vectorised.
 
@@ -240,22 +249,29 @@ def geodetic_to_ecef(lat, lon, h, ell: Ellipsoid = WGS84) -> np.ndarray:
     ndarray, shape (..., 3)
         ECEF position, m.
     """
-    if np.ndim(lat) == np.ndim(lon) == np.ndim(h) == 0:
-        # One point (every GNSS fix of the front end): the same arithmetic on scalars, without
-        # the broadcasting and stacking that cost more than it.
-        return np.array(_geodetic_to_ecef(float(lat), float(lon), float(h), ell))
+    if _scalars(lat, lon, h):
+        # One point (every GNSS fix of the front end): the same arithmetic compiled, without
+        # the numpy calls on scalars, broadcasting and stacking that cost ten times more.
+        return np.array(_kernels.geodetic_to_ecef(float(lat), float(lon), float(h), ell.a,
+                                                  ell.e2))
     lat, lon, h = np.broadcast_arrays(np.asarray(lat, float), np.asarray(lon, float),
                                       np.asarray(h, float))
-    return np.stack(_geodetic_to_ecef(lat, lon, h, ell), axis=-1)
+    return np.stack(_geodetic_to_ecef(lat, lon, h, ell.a, ell.e2), axis=-1)
 
 
-def _geodetic_to_ecef(lat, lon, h, ell):
-    """(x, y, z) of geodetic_to_ecef, scalars or arrays of one shape."""
-    _, rn = radii(lat, ell)
+def _geodetic_to_ecef(lat, lon, h, a, e2):
+    """(x, y, z) of geodetic_to_ecef from raw ellipsoid parameters, scalars or arrays of one
+    shape."""
+    return _ecef(lat, lon, h, _radii(lat, a, e2)[1], e2)
+
+
+def _ecef(lat, lon, h, rn, e2):
+    """ECEF (x, y, z) of a geodetic point with prime-vertical radius rn (shared with the numba
+    kernels)."""
     cl = np.cos(lat)
     x = (rn + h) * cl * np.cos(lon)
     y = (rn + h) * cl * np.sin(lon)
-    z = (rn * (1.0 - ell.e2) + h) * np.sin(lat)
+    z = (rn * (1.0 - e2) + h) * np.sin(lat)
     return x, y, z
 
 
@@ -305,11 +321,12 @@ def ecef_to_enu_matrix(lat, lon) -> np.ndarray:
     ndarray, shape (..., 3, 3)
         One matrix per (lat, lon) pair, rad.
     """
-    if np.ndim(lat) == np.ndim(lon) == 0:
-        # One matrix (per GNSS fix): the same values without broadcasting and stacking.
-        sl, cl = np.sin(float(lat)), np.cos(float(lat))
-        so, co = np.sin(float(lon)), np.cos(float(lon))
-        return np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
+    if _scalars(lat, lon):
+        # One matrix (per GNSS fix): the same values without broadcasting and stacking, the
+        # functions of the math module (numpy's on a scalar cost ten times more).
+        sl, cl = math.sin(lat), math.cos(lat)
+        so, co = math.sin(lon), math.cos(lon)
+        return np.array((-so, co, 0.0, -sl * co, -sl * so, cl, cl * co, cl * so, sl)).reshape(3, 3)
     lat, lon = np.broadcast_arrays(np.asarray(lat, float), np.asarray(lon, float))
     sl, cl = np.sin(lat), np.cos(lat)
     so, co = np.sin(lon), np.cos(lon)
@@ -343,3 +360,7 @@ def enu_to_ecef(enu, lat0, lon0, h0, ell: Ellipsoid = WGS84) -> np.ndarray:
     :func:`ecef_to_enu`."""
     return np.asarray(enu, float) @ ecef_to_enu_matrix(lat0, lon0) + geodetic_to_ecef(
         lat0, lon0, h0, ell)
+
+
+# The kernels compile this module's formulas (geodetic_to_ecef's one point): imported after them.
+from . import _kernels  # noqa: E402

@@ -27,7 +27,9 @@ import numpy as np
 
 from . import _kernels
 from .discretize import DEFAULT_ORDER
-from .error_model import DEFAULT_CLOCK_PSD, StateLayout, noise_input, system_matrix
+from .earth import WGS84
+from .error_model import DEFAULT_CLOCK_PSD, MISALIGN_COLUMNS, StateLayout, _vector, \
+    constant_system_matrix, noise_input
 from .gating import DEFAULT_GATE_PROB, UpdateResult, chi2_gate
 
 #: Smallest variance kept on the diagonal after an update (state units squared); guards the
@@ -155,56 +157,55 @@ class ErrorStateEKF:
         self.joseph = joseph
         self.P = np.array(P0, dtype=float)
         self.x = np.zeros(space.size)
-        # The extra blocks' dynamics do not depend on the navigation state: build them once.
-        n0 = space.layout.size
-        self._F_extra = np.zeros((space.size - n0,) * 2)
-        self._Q_extra = np.zeros_like(self._F_extra)
+        # The model's constant part (Gauss-Markov and clock terms, the extra blocks' dynamics)
+        # does not depend on the navigation state: built once, copied for each new model.
+        lay = space.layout
+        n0 = lay.size
+        self._F_constant = np.zeros((space.size,) * 2)
+        self._F_constant[:n0, :n0] = constant_system_matrix(lay)
+        self._Q_extra = np.zeros((space.size - n0,) * 2)
         i = 0
         for block in space.extras.values():
-            s = slice(i, i + block.size)
+            s = slice(n0 + i, n0 + i + block.size)
             if np.isfinite(block.tau):
-                self._F_extra[s, s] = -np.eye(block.size) / block.tau
-            self._Q_extra[s, s] = block.psd * np.eye(block.size)
+                self._F_constant[s, s] = -np.eye(block.size) / block.tau
+            self._Q_extra[i:i + block.size, i:i + block.size] = block.psd * np.eye(block.size)
             i += block.size
         self._Q = None
         self.F_model = None
-
-    def continuous_model(self, nav_state, f_b, w_ib_b):
-        """Continuous F and Q = G Qc G^T of the whole state (error_model.py plus extras).
-
-        Q does not depend on the navigation state: the white noises are the same on the three
-        axes of a triad, so C Qc C^T = Qc for any attitude C. It is computed once.
-
-        Parameters
-        ----------
-        nav_state : NavState
-            Current (corrected) navigation solution.
-        f_b, w_ib_b : array_like, shape (3,)
-            Compensated specific force (m/s^2) and angular rate (rad/s), body FLU.
-
-        Returns
-        -------
-        F : (n, n) ndarray [1/s]
-        Q : (n, n) ndarray [state^2 / s]
-        """
-        lay = self.space.layout
-        n0 = lay.size
-        F = np.zeros((self.space.size,) * 2)
-        F[:n0, :n0] = system_matrix(lay, nav_state, f_b, w_ib_b)
-        F[n0:, n0:] = self._F_extra
-        if self._Q is None:
-            G, Qc = noise_input(lay, nav_state, self.noise, self.clock_psd)
-            Q = np.zeros_like(F)
-            Q[:n0, :n0] = (G * np.diag(Qc)) @ G.T
-            Q[n0:, n0:] = self._Q_extra
-            self._Q = Q
-        return F, self._Q
 
     def set_noise(self, noise):
         """Use the IMU noise model `noise` from the next step on (the densities measured at
         rest, rest_noise.py): F and Q are rebuilt then."""
         if noise is not self.noise:
             self.noise, self.F_model, self._Q = noise, None, None
+
+    def model(self, nav_state, refresh):
+        """The continuous model of the next step: (F, Q, rebuild), F to be filled at the step's
+        state by :func:`_kernels.system_matrix` (rebuild True: a copy of the constant part, on
+        `refresh` or without a model) or the last one's.
+
+        Q = G Qc G^T of the whole state (error_model.py plus extras) does not depend on the
+        navigation state (the white noises are the same on the three axes of a triad, so
+        C Qc C^T = Qc for any attitude C, to round-off): it is computed once per noise model,
+        at the state of that step.
+        """
+        if self._Q is None:
+            lay = self.space.layout
+            n0 = lay.size
+            G, Qc = noise_input(lay, nav_state, self.noise, self.clock_psd)
+            Q = np.zeros((self.space.size,) * 2)
+            Q[:n0, :n0] = (G * np.diag(Qc)) @ G.T
+            Q[n0:, n0:] = self._Q_extra
+            self._Q = Q
+        if refresh or self.F_model is None:
+            return self._F_constant.copy(), self._Q, True
+        return self.F_model, self._Q, False
+
+    def predicted(self, F, phi, P):
+        """Take the result of a step of the model F: its transition matrix and covariance."""
+        self.F_model, self.P = F, P
+        self.x = phi.dot(self.x)  # (the array's dot: the same BLAS product as @, cheaper)
 
     def predict(self, nav_state, f_b, w_ib_b, dt, refresh=True):
         """Propagate x and P over dt with the model frozen at the given state.
@@ -225,12 +226,15 @@ class ErrorStateEKF:
         phi : (n, n) ndarray
             Transition matrix of the step (kept by the navigator for the RTS smoother).
         """
-        if refresh or self.F_model is None:
-            self.F_model, self._Q = self.continuous_model(nav_state, f_b, w_ib_b)
-        # Both Picard series in one compiled call (discretize.picard_transition, picard_predict).
-        phi, self.P = _kernels.picard_step(self.F_model, np.ascontiguousarray(self.P, float),
-                                           self._Q, float(dt), int(self.order))
-        self.x = phi @ self.x
+        F, Q, rebuild = self.model(nav_state, refresh)
+        # The system matrix and both Picard series in one compiled call
+        # (discretize.picard_transition, picard_predict).
+        phi, P = _kernels.covariance_step(
+            F, rebuild, float(nav_state.lat), float(nav_state.h), _vector(nav_state.v_enu),
+            _vector(nav_state.q_nb), _vector(f_b), _vector(w_ib_b), WGS84.kernel_params,
+            self.space.layout.sensor_plan, MISALIGN_COLUMNS, np.ascontiguousarray(self.P, float),
+            Q, float(dt), int(self.order))
+        self.predicted(F, phi, P)
         return phi
 
     def update(self, name, t, z, H, R, gate_prob=DEFAULT_GATE_PROB, force=False):

@@ -138,7 +138,8 @@ _SENSOR_COLUMNS = {"bg": (_kernels.BIAS, True), "gmg": (_kernels.BIAS, True),
                    "gs": (_kernels.G_SENSITIVITY, True),
                    "ba": (_kernels.BIAS, False), "gma": (_kernels.BIAS, False),
                    "sa": (_kernels.SCALE, False), "na": (_kernels.NONORTHOGONALITY, False)}
-_MISALIGN_INDEX = np.array(MISALIGN_INDEX, dtype=np.int64)
+#: sensor_errors.MISALIGN_INDEX as :func:`_kernels.system_matrix` takes it.
+MISALIGN_COLUMNS = np.array(MISALIGN_INDEX, dtype=np.int64)
 
 
 def _vector(a):
@@ -151,7 +152,8 @@ def system_matrix(layout, nav_state, f_b, w_ib_b, ell=WGS84):
 
     The navigation and sensor-error rows are filled by the compiled :func:`_kernels.system_matrix`
     (the equations of the module docstring; F is rebuilt at every covariance epoch, where some
-    sixty small numpy operations took ~0.3 ms), the Gauss-Markov and clock terms here.
+    sixty small numpy operations took ~0.3 ms), the Gauss-Markov and clock terms are those of
+    :func:`constant_system_matrix`.
 
     Parameters
     ----------
@@ -168,10 +170,18 @@ def system_matrix(layout, nav_state, f_b, w_ib_b, ell=WGS84):
     -------
     (n, n) ndarray [1/s]
     """
-    F = np.zeros((layout.size, layout.size))
+    F = constant_system_matrix(layout)
     _kernels.system_matrix(F, float(nav_state.lat), float(nav_state.h), _vector(nav_state.v_enu),
                            _vector(nav_state.q_nb), _vector(f_b), _vector(w_ib_b),
-                           ell.kernel_params, layout.sensor_plan, _MISALIGN_INDEX)
+                           ell.kernel_params, layout.sensor_plan, MISALIGN_COLUMNS)
+    return F
+
+
+def constant_system_matrix(layout):
+    """The part of the system matrix that does not depend on the navigation state, (n, n): the
+    Gauss-Markov and clock terms, zeros elsewhere. :func:`_kernels.system_matrix` fills the rest
+    (the navigation rows, which these terms never touch) by assignment."""
+    F = np.zeros((layout.size, layout.size))
     S = layout.slices
     for name, tau in layout.tau.items():
         F[S[name], S[name]] = -np.eye(BLOCK_SIZES[name]) / tau

@@ -49,11 +49,15 @@ class ImuBuffer:
 
     def rows(self, i, j):
         """(t, dtheta, dv, cth, cdv) of samples i..j-1 (views)."""
-        return tuple(a[i - self.first:j - self.first] for a in self._store)
+        i, j = i - self.first, j - self.first
+        t, th, dv, cth, cdv = self._store
+        return t[i:j], th[i:j], dv[i:j], cth[i:j], cdv[i:j]
 
     def search(self, t):
         """Number of the first sample ending after time t (s), or :attr:`end`."""
-        return self.first + int(np.searchsorted(self._store[0][:self._n], t, side="right"))
+        # The array's method with a positional side: np.searchsorted's wrapper and keyword cost
+        # more than the search (the navigator searches a few times per sample).
+        return self.first + int(self._store[0][:self._n].searchsorted(t, "right"))
 
     def add(self, t, dtheta, dv, needed, compensated=False):
         """Add samples (t (N,) s, raw dtheta (N, 3) rad and dv (N, 3) m/s) with their coning

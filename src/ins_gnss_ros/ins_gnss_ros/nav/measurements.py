@@ -171,8 +171,8 @@ def azimuth_of_axis(q_nb, axis_b=(1.0, 0.0, 0.0)):
     """
     grad = np.empty(3)
     c = _kernels.axis_direction(np.asarray(q_nb, float), np.asarray(axis_b, float), grad)
-    # azimuth = pi/2 - yaw.
-    return azimuth_from_yaw(np.arctan2(c[1], c[0])), grad
+    # azimuth = pi/2 - yaw (numpy's arctan2: it differs from math.atan2 in the last bit).
+    return azimuth_from_yaw(float(np.arctan2(c[1], c[0]))), grad
 
 
 _X_AXIS = np.array([1.0, 0.0, 0.0])

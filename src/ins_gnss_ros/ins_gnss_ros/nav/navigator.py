@@ -83,6 +83,8 @@ class Navigator:
         if "gs" in self._space or "ng" in self._space or "na" in self._space:
             raise ValueError("the navigator compensates bias and scale-factor blocks only")
         self._lever = np.asarray(config.lever_arm_b, float)
+        self._no_var = np.zeros(self._space.size)  # (_published_var: read, never written)
+        self._no_var.flags.writeable = False
         # Corrections of the solution so far, pseudo-measurements (NHC, ZARU) included: what a
         # follower of the solution (the strapdown node) must hear of. Monotonic, neither reset
         # nor rewound: a re-run after a delayed measurement changes the solution again.
@@ -124,9 +126,10 @@ class Navigator:
             Gyro (rad) and accelerometer (m/s) increments over each interval, body FLU: raw,
             or compensated (``NavigatorConfig.compensated_increments``).
         """
-        t = np.atleast_1d(np.asarray(t, float))
-        dtheta = np.atleast_2d(np.asarray(dtheta, float))
-        dv = np.atleast_2d(np.asarray(dv, float))
+        # (reshape rather than atleast_1d/2d: the same arrays at a third of the cost per sample)
+        t = np.asarray(t, float).reshape(-1)
+        dtheta = np.asarray(dtheta, float).reshape(-1, 3)
+        dv = np.asarray(dv, float).reshape(-1, 3)
         if len(self._imu) and t[0] <= self._imu.last_time:
             self.reset()
         self._behind = False  # caught up by the _advance below
@@ -257,6 +260,8 @@ class Navigator:
         forced measurement kinds (integrity.py) and, on the horizontal position, the error
         common to the fixes the filter follows (GnssFix.common_var: the filter's position is
         relative to them)."""
+        if not self._integrity.floors and not self._fix_common_var:
+            return self._no_var  # the usual case, asked at every epoch and update
         var = self._integrity.variances(self._space)
         if self._fix_common_var:
             east = self._space["pos"].start
@@ -283,8 +288,9 @@ class Navigator:
     # -- main loop -------------------------------------------------------------------------
     def _epoch_of(self, m):
         est = self._state.estimates
-        td = est["td"][0] if "td" in est else 0.0
-        return m.t - td if isinstance(m, GNSS_TYPES) else m.t
+        if "td" not in est:
+            return m.t
+        return m.t - est["td"][0] if isinstance(m, GNSS_TYPES) else m.t
 
     def _queue(self, m):
         bisect.insort(self._pending, (self._epoch_of(m), self._seq, m))
@@ -622,11 +628,12 @@ class Navigator:
         return res
 
     def _feedback(self):
-        s, S = self._state, self._space
+        s, S = self._state, self._space.slices
         dx = s.ekf.take_correction()
         s.nav = apply_correction(s.nav, dx[S["pos"]], dx[S["vel"]], dx[S["att"]])
-        for name in s.estimates:
-            s.estimates[name] = s.estimates[name] + dx[S[name]]
+        estimates = s.estimates
+        for name, value in estimates.items():
+            estimates[name] = value + dx[S[name]]
         if "vd" in s.estimates:  # projected onto its physical range (measurements.py)
             s.estimates["vd"] = np.clip(s.estimates["vd"], *meas.VELOCITY_LATENCY_RANGE)
         self._recorder.correct(s, dx, self._published_var())

@@ -6,6 +6,7 @@ import numpy as np
 
 from . import _kernels
 from .earth import WGS84
+from .error_model import MISALIGN_COLUMNS
 from .increments import SensorErrors
 from .strapdown import NavState
 
@@ -55,24 +56,25 @@ def propagate(s, rows, noise, cov_interval, gaps, space):
     np.maximum(dts, 1e-6, out=dts)
     T = float(dts.sum())
     start = s.nav
-    # Compensation with the running estimates, coning terms and mechanisation in one compiled
-    # loop over the segment (a chain of numpy calls on 20-sample arrays cost more than it).
-    errors = SensorErrors.of_estimates(s.estimates)
-    v, q, sums = start.v_enu.copy(), start.q_nb.copy(), np.empty((2, 3))
-    lat, lon, h = _kernels.mech_segment(
-        float(start.lat), float(start.lon), float(start.h), v, q, th, dv, cth, cdv, dts,
-        errors.gyro_bias, errors.gyro_scale, errors.accel_bias, errors.accel_scale,
-        T / len(t), WGS84.kernel_params, sums)
-    s.nav = NavState(lat, lon, h, v, q, float(t[-1]))
-    s.a_enu = (v - start.v_enu) / T
-    s.omega = sums[0] / T
-    s.omega_time = T
-    f_b = sums[1] / T
+    ekf = s.ekf
     # F is rebuilt every cov_interval; shorter segments (cut by measurement epochs) reuse it.
     refresh = start.t - s.t_model >= cov_interval - 1e-9
     if refresh:
         s.t_model = start.t
-    phi = s.ekf.predict(start, f_b, s.omega, T, refresh)
+    F, Q, rebuild = ekf.model(start, refresh)
+    # Compensation with the running estimates, coning terms, mechanisation, the model at the
+    # segment's start and its Picard step in one compiled call (a chain of numpy calls on
+    # 20-sample arrays, and their glue, cost more than it).
+    errors = SensorErrors.of_estimates(s.estimates)
+    v, q, s.a_enu, s.omega = np.empty(3), np.empty(4), np.empty(3), np.empty(3)
+    lat, lon, h, phi, P = _kernels.time_update(
+        float(start.lat), float(start.lon), float(start.h), start.v_enu, start.q_nb, th, dv, cth,
+        cdv, dts, T, errors.gyro_bias, errors.gyro_scale, errors.accel_bias, errors.accel_scale,
+        WGS84.kernel_params, v, q, s.a_enu, s.omega, F, rebuild, ekf.space.layout.sensor_plan,
+        MISALIGN_COLUMNS, np.ascontiguousarray(ekf.P, float), Q, int(ekf.order))
+    ekf.predicted(F, phi, P)
+    s.nav = NavState(lat, lon, h, v, q, float(t[-1]))
+    s.omega_time = T
     if gaps.gaps:
         gaps.add_noise(s.ekf.P, space, start.t, s.nav.t, s.heading_known)
     for name in ("gmg", "gma"):

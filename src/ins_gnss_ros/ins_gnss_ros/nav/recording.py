@@ -91,47 +91,46 @@ class _Columns:
     """Per-epoch values in numpy columns that grow by doubling, so that a long run costs no
     Python object per value and the record's output is a view of them. A doubled column is
     only resident as far as it is written (the pages beyond are address space), and the old
-    one is freed at once: the copy is the only transient."""
+    one is freed at once: the copy is the only transient.
 
-    def __init__(self):
+    Parameters
+    ----------
+    schema : dict of str to (tuple, dtype)
+        Each column's per-epoch shape and type.
+    """
+
+    def __init__(self, schema):
         self.n = 0
+        self._schema = schema
         self._capacity = 0
-        self._data: dict[str, np.ndarray] = {}
+        self.data: dict[str, np.ndarray] = {}
 
-    def append(self, values: dict) -> None:
-        if not self._data:
-            self._capacity = 1024
-            self._data = {k: np.empty((self._capacity,) + np.shape(v),
-                                      object if isinstance(v, str) else float)
-                          for k, v in values.items()}
-        n, data = self.n, self._data
+    def new_row(self) -> int:
+        """Add an epoch (its values to be written into :attr:`data`); returns its row."""
+        n, data = self.n, self.data
         if n == self._capacity:
-            self._capacity = 2 * n
-            for k, old in data.items():
-                grown = np.empty((2 * n,) + old.shape[1:], old.dtype)
-                grown[:n] = old
+            self._capacity = max(1024, 2 * n)
+            for k, (shape, dtype) in self._schema.items():
+                grown = np.empty((self._capacity,) + shape, dtype)
+                if n:
+                    grown[:n] = data[k][:n]
                 data[k] = grown
-        for k, v in values.items():
-            data[k][n] = v
         self.n = n + 1
-
-    def last(self, name) -> np.ndarray:
-        """The current epoch's value (a writable view for an array value)."""
-        return self._data[name][self.n - 1]
+        return n
 
     def set_last(self, values: dict) -> None:
         """Overwrite the current epoch's values of the names in `values`."""
-        k, data = self.n - 1, self._data
+        k, data = self.n - 1, self.data
         for name, value in values.items():
             data[name][k] = value
 
     def view(self, name) -> np.ndarray:
-        return self._data[name][:self.n] if self._data else np.empty(0)
+        return self.data[name][:self.n] if self.data else np.empty(0)
 
     def last_values(self) -> dict:
         """A copy of the current epoch's values."""
-        return {k: np.copy(v[self.n - 1]) if v.dtype != object else v[self.n - 1]
-                for k, v in self._data.items()}
+        k = self.n - 1
+        return {name: v[k].copy() if v.dtype != object else v[k] for name, v in self.data.items()}
 
 
 class Recorder:
@@ -153,7 +152,15 @@ class Recorder:
         self._store_covariance = store_covariance
         self._estimates = dict(estimate_sizes(space))
         self._estimate_keys = {name: "est:" + name for name in self._estimates}
-        self._out = _Columns()
+        n, f = space.size, float
+        schema = {"t": ((), f), "lat": ((), f), "lon": ((), f), "h": ((), f), "v": ((3,), f),
+                  "q": ((4,), f), "mode": ((), object), "dx": ((n,), f),
+                  "published_var": ((n,), f),
+                  **{key: ((self._estimates[name],), f)
+                     for name, key in self._estimate_keys.items()}}
+        if store_covariance:
+            schema.update(P=((n, n), f), Pp=((n, n), f), phi=((n, n), f))
+        self._out = _Columns(schema)
         self._updates = []
         self._updates_dropped = 0   # update results forgotten in streaming use (record=False)
 
@@ -168,30 +175,40 @@ class Recorder:
         what the published covariance adds to P's diagonal at the moment (n,)."""
         if not self._record:
             return
-        nav = state.nav
-        values = {"t": nav.t, "lat": nav.lat, "lon": nav.lon, "h": nav.h, "v": nav.v_enu,
-                  "q": nav.q_nb, "mode": state.mode, "dx": np.zeros(self.space.size),
-                  "published_var": published_var, **self._estimate_values(state)}
+        o = self._out
+        k = o.new_row()
+        d = o.data
+        d["t"][k] = state.nav.t
+        d["dx"][k] = 0.0
         if self._store_covariance:
-            values.update(P=state.ekf.P, Pp=P_prior, phi=phi)
-        self._out.append(values)
+            d["Pp"][k] = P_prior
+            d["phi"][k] = phi
+        self._write(d, k, state, published_var)
 
     def correct(self, state, dx, published_var):
         """Replace the current epoch's record by the corrected state (after an update) and
         what the published covariance adds to P's diagonal after it (n,)."""
         if not self._record:
             return
-        o, nav = self._out, state.nav
-        values = {"lat": nav.lat, "lon": nav.lon, "h": nav.h, "v": nav.v_enu, "q": nav.q_nb,
-                  "mode": state.mode, "published_var": published_var,
-                  **self._estimate_values(state)}
-        if self._store_covariance:
-            values["P"] = state.ekf.P
-        o.set_last(values)
-        o.last("dx")[:] += dx
+        d, k = self._out.data, self._out.n - 1
+        self._write(d, k, state, published_var)
+        d["dx"][k] += dx
 
-    def _estimate_values(self, state):
-        return {key: state.estimates[name] for name, key in self._estimate_keys.items()}
+    def _write(self, d, k, state, published_var):
+        """The state's values of row k (written one by one: a dict of them per epoch and
+        update cost more than the writes)."""
+        nav = state.nav
+        d["lat"][k] = nav.lat
+        d["lon"][k] = nav.lon
+        d["h"][k] = nav.h
+        d["v"][k] = nav.v_enu
+        d["q"][k] = nav.q_nb
+        d["mode"][k] = state.mode
+        d["published_var"][k] = published_var
+        for name, key in self._estimate_keys.items():
+            d[key][k] = state.estimates[name]
+        if self._store_covariance:
+            d["P"][k] = state.ekf.P
 
     def set_mode(self, mode):
         """The current epoch's mode changed."""
@@ -202,7 +219,7 @@ class Recorder:
         """Add `variances` to the block `s` (slice) of the current epoch's P-: process noise of
         this epoch as far as the smoother is concerned."""
         if self._record and self._store_covariance:
-            self._out.last("Pp")[s, s] += np.diag(variances)
+            self._out.data["Pp"][self._out.n - 1][s, s] += np.diag(variances)
 
     # -- update results ----------------------------------------------------------------------
     @property

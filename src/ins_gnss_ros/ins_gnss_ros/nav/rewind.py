@@ -105,7 +105,11 @@ class RunState:
 
     def copy(self):
         """A copy that shares nothing mutable with this state (every field, by construction)."""
-        return RunState(**{f.name: _independent(getattr(self, f.name)) for f in fields(self)})
+        return RunState(**{name: _independent(getattr(self, name)) for name in _FIELDS})
+
+
+#: RunState's field names (dataclasses.fields costs more than the copy of the numbers).
+_FIELDS = tuple(f.name for f in fields(RunState))
 
 
 def _independent(value):
@@ -192,4 +196,6 @@ class Rewind:
 
     def needed_sample(self, state):
         """Number of the oldest IMU sample a rewind (or `state`) can still need."""
-        return min([c.state.next_sample for c in self.checkpoints] + [state.next_sample])
+        # The checkpoints are in the order of the run: the first one's is the smallest.
+        cps = self.checkpoints
+        return min(cps[0].state.next_sample, state.next_sample) if cps else state.next_sample
