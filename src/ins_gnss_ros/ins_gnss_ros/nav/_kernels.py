@@ -623,7 +623,8 @@ def position_residual(lat, lon, h, lat_ref, lon_ref, h_ref, a, e2):
 
 @njit(cache=True)
 def _rotate_dcm(q, x):
-    """C x with C = _dcm(q), summed as numpy's matrix-vector product of quat_to_dcm(q) @ x."""
+    """C x with C = _dcm(q), each row summed left to right (numpy's 3x3 @ 3 may round
+    differently in the last bit: where both are used, this kernel is the reference)."""
     C = _dcm(q)
     return (C[0, 0] * x[0] + C[0, 1] * x[1] + C[0, 2] * x[2],
             C[1, 0] * x[0] + C[1, 1] * x[1] + C[1, 2] * x[2],
