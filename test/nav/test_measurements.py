@@ -13,7 +13,8 @@ from ins_gnss_ros.nav.earth import ecef_to_enu_matrix, geodetic_to_ecef
 from ins_gnss_ros.nav.ekf import ExtraState, StateSpace
 from ins_gnss_ros.nav.error_model import make_layout
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
-from ins_gnss_ros.nav.rotations import quat_from_euler, quat_from_rotvec, quat_mul, quat_to_dcm
+from ins_gnss_ros.nav.rotations import quat_conj, quat_from_euler, quat_from_rotvec, quat_mul, \
+    quat_to_dcm
 from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405, filter_noise
 from ins_gnss_ros.nav.strapdown import NavState, apply_correction
 
@@ -132,6 +133,25 @@ def test_nonholonomic_and_zupt_zaru():
         return M.nonholonomic(SPACE, st, 0.1, 0.1, OMEGA + res["bg"], arm,
                               bore - res["nhc"]).z
     check(model, z_of, 1e-6)
+
+    # The same vehicle with the IMU in its own axes (yawed 175 deg, pitched -7 deg from it):
+    # the vehicle axes given to the model, the small boresight about them.
+    c_bs = M.quat_to_dcm(quat_from_euler(0.0, np.radians(-7.0), np.radians(175.0)))
+    axes = c_bs  # rows: the vehicle's forward, lateral, vertical axes in the IMU's axes
+    turned = NavState(TRUE.lat, TRUE.lon, TRUE.h, state.v_enu,
+                      quat_mul(TRUE.q_nb, quat_from_euler(0.0, np.radians(-7.0),
+                                                          np.radians(175.0))))
+    model = M.nonholonomic(SPACE, turned, 0.1, 0.1, c_bs.T @ OMEGA, c_bs.T @ arm, bore, axes)
+    np.testing.assert_allclose(model.z, 0.0, atol=1e-2)
+
+    def z_axes(dx):
+        st, res = perturbed(dx)
+        # the attitude error of the IMU's frame is the same rotation in ENU
+        q = quat_mul(quat_mul(st.q_nb, quat_conj(TRUE.q_nb)), turned.q_nb)
+        st = NavState(st.lat, st.lon, st.h, st.v_enu + state.v_enu - TRUE.v_enu, q)
+        return M.nonholonomic(SPACE, st, 0.1, 0.1, c_bs.T @ OMEGA + res["bg"], c_bs.T @ arm,
+                              bore - res["nhc"], axes).z
+    check(model, z_axes, 1e-6)
 
     def z_zupt(dx):
         st, _ = perturbed(dx)

@@ -7,6 +7,7 @@ of a GNSS outage as the configured one does.
 import numpy as np
 
 from ins_gnss_ros.nav import vehicle_constraint as vc
+from ins_gnss_ros.nav.ekf import ExtraState
 from ins_gnss_ros.nav.error_model import nav_error
 from ins_gnss_ros.nav.rotations import quat_from_euler, quat_to_dcm
 
@@ -28,10 +29,8 @@ def test_a_body_moving_along_its_x_axis_is_constrained_after_the_learning_time()
     assert learner.sigma is None and "29 of 30 s" in learner.summary()
     feed(learner, 2.0, lambda t: np.array([8.0, *0.05 * rng.standard_normal(2)]), t0=t)
     assert learner.sigma == (vc.SIGMA_FLOOR, vc.SIGMA_FLOOR)  # 2 x 0.05 m/s: the floor
-    forward, axes, rms = learner.learned()
-    np.testing.assert_allclose(forward, [1.0, 0.0, 0.0], atol=1e-3)
-    np.testing.assert_allclose(np.abs(axes), [[0, 1, 0], [0, 0, 1]], atol=0.03)  # ~level body
-    np.testing.assert_allclose(rms, [0.05, 0.05], atol=0.01)
+    np.testing.assert_allclose(np.abs(learner.axes), np.eye(3), atol=0.03)  # ~level body
+    np.testing.assert_allclose(learner.rms(learner.axes), [0.05, 0.05], atol=0.01)
     assert learner.summary().startswith("on: travel along body (+1.000")
 
 
@@ -48,10 +47,10 @@ def test_any_mounting_reversing_included():
         return speed * axis + 0.05 * rng.standard_normal(3)
     learner = vc.LearnedConstraint()
     feed(learner, 60.0, velocity)
-    forward, axes, rms = learner.learned()
-    assert forward @ axis > 0.9999
-    np.testing.assert_allclose(axes @ axis, 0.0, atol=2e-3)  # the noise moves it a little
-    assert learner.sigma is not None and np.all(rms < 0.07)
+    axes = learner.axes
+    assert axes[0] @ axis > 0.9999
+    np.testing.assert_allclose(axes[1:] @ axis, 0.0, atol=2e-3)  # the noise moves it a little
+    assert learner.sigma is not None and np.all(learner.rms(axes) < 0.07)
     assert "mounting_rpy_deg [0, 7.0, 175.0]" in learner.summary()
 
 
@@ -68,7 +67,7 @@ def test_the_mounting_that_puts_the_travel_on_base_link_x():
 def test_sway_beyond_the_limit_is_not_constrained_and_releases_a_constrained_body():
     learner = vc.LearnedConstraint()
     t = feed(learner, 60.0, lambda t: np.array([5.0, 0.2 * np.sin(t), 0.0]))
-    np.testing.assert_allclose(learner.learned()[2], [0.2 / np.sqrt(2), 0.0], atol=0.01)
+    np.testing.assert_allclose(learner.rms(learner.axes), [0.2 / np.sqrt(2), 0.0], atol=0.01)
     np.testing.assert_allclose(learner.sigma, [2 * 0.2 / np.sqrt(2), vc.SIGMA_FLOOR], atol=0.02)
     feed(learner, 600.0, lambda t: np.array([5.0, 0.8 * np.sin(t), 0.0]), t0=t)  # a ship
     assert learner.sigma is None and learner.axes is None
@@ -94,7 +93,9 @@ def test_the_learned_constraint_bounds_a_simulated_outage_like_the_configured_on
     meas = [m for m in gnss(traj, np.random.default_rng(5))
             if not outage[0] <= m.t < outage[1]]
     errors = {}
-    for name, kw in (("off", {}), ("learned", {"nhc_learn": True}),
+    boresight = ExtraState(2, np.radians(vc.BORESIGHT_SIGMA_DEG))  # as filter_config adds it
+    for name, kw in (("off", {}), ("learned", {"nhc_learn": True,
+                                               "extras": {"nhc": boresight}}),
                      ("configured", {"nhc_sigma": (0.1, 0.1)})):
         out = run(imu, meas, config(**kw))
         dp = nav_error(out.state(len(out.t) - 1), truth_state(traj, out.t[-1]))[0]

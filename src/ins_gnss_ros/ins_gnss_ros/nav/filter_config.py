@@ -14,6 +14,7 @@ from .ekf import ExtraState
 from .error_model import LAYOUTS
 from .navigator_config import NavigatorConfig
 from .sensor_errors import GRADES, BlockNoise, FilterNoise, filter_noise
+from .vehicle_constraint import BORESIGHT_SIGMA_DEG
 
 __all__ = ["PARAMS", "navigator_config", "noise_model"]
 
@@ -193,6 +194,10 @@ def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
         extras["td"] = ExtraState(1, p["time_offset_sigma_s"])
     if p["gnss.velocity_latency_sigma_s"] > 0.0:
         extras["vd"] = ExtraState(1, p["gnss.velocity_latency_sigma_s"])
+    nhc = tuple(p["nonholonomic_sigma_mps"])
+    learn_nhc = p["nonholonomic.learn"] and min(nhc) <= 0.0
+    if learn_nhc:  # the learned axes' boresight (vehicle_constraint.py)
+        extras["nhc"] = ExtraState(2, np.radians(BORESIGHT_SIGMA_DEG))
     if p["use_magnetic_heading"] and p["magnetic_bias_sigma_deg"] > 0.0:
         extras["mag"] = ExtraState(1, np.radians(p["magnetic_bias_sigma_deg"]))
     if p["use_imu_heading"] and p["imu_heading_bias_sigma_deg"] > 0.0:
@@ -205,7 +210,6 @@ def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
     if p["use_wheel_odometry"]:
         # the tyre radius drifts slowly (temperature, pressure, load): 1e-4/sqrt(s)
         extras["wheel"] = ExtraState(1, p["wheel.scale_sigma"], psd=1e-8)
-    nhc = tuple(p["nonholonomic_sigma_mps"])
     return NavigatorConfig(
         noise=noise_model(p),
         layout=p["layout"], extras=extras, lever_arm_b=np.array(p["lever_arm"], float),
@@ -213,7 +217,7 @@ def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
         sigma_pos0=p["init.position_sigma_m"], sigma_vel0=p["init.velocity_sigma_mps"],
         sigma_tilt0=np.radians(p["init.tilt_sigma_deg"]), align_speed=p["align.speed_mps"],
         static_speed=p["align.static_speed_mps"], dr_timeout=p["dead_reckoning_after_s"],
-        nhc_sigma=nhc if min(nhc) > 0.0 else None, nhc_learn=p["nonholonomic.learn"],
+        nhc_sigma=nhc if min(nhc) > 0.0 else None, nhc_learn=learn_nhc,
         history=p["history_s"],
         wheel_lever_b=np.array(p["wheel.lever_arm"], float),
         floor_tau=p["forced.floor_tau_s"], confirm_time=p["forced.confirm_time_s"],

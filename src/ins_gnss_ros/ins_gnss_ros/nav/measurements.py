@@ -22,6 +22,7 @@ from .conventions import azimuth_from_yaw, wrap_pi
 from .earth import WGS84, earth_rate_enu, ecef_to_enu_matrix, geodetic_to_ecef
 from .lever_arm import lever_arm_position, lever_arm_velocity, lever_arm_velocity_jacobians
 from .rotations import cross, quat_to_dcm, skew
+from .vehicle_constraint import turned
 
 
 @dataclass(frozen=True)
@@ -301,16 +302,18 @@ def zero_angular_rate(space, state, omega_ib_b, sigma):
 
 
 def nonholonomic(space, state, sigma_lateral, sigma_vertical, omega_ib_b=np.zeros(3),
-                 lever_b=np.zeros(3), boresight=np.zeros(2), axes=None):
+                 lever_b=np.zeros(3), boresight=np.zeros(2), axes=np.eye(3)):
     """Non-holonomic constraint of a wheeled vehicle: no lateral or vertical velocity at the
     constraint point (the rear axle's centre).
 
     v_point_b = C^T v_n + omega x l (the Earth rate is negligible over a lever arm); its error is
     C^T dv - C^T [v x] phi - [l x] d_omega (from C_computed^T = C^T (I + [phi x]) and the
-    residual gyro error d_omega). The vehicle axes may differ from the IMU's by small boresight
-    angles (pitch theta, yaw psi): v_vehicle = v_b + v_b x (0, theta, psi), i.e. lateral
-    v_y - v_x psi and vertical v_z + v_x theta. With an "nhc" extra state (the residual boresight,
-    true minus `boresight`) H_nhc = [[0, v_x], [-v_x, 0]].
+    residual gyro error d_omega). The vehicle's forward, lateral and vertical axes are ``axes``
+    in the body (the IMU's axes: the identity for an IMU mounted square, or as learned,
+    vehicle_constraint.py), turned by small boresight angles (pitch theta, yaw psi): lateral
+    v_l - v_f psi and vertical v_v + v_f theta, with v_f, v_l, v_v the body velocity's components
+    on the axes. With an "nhc" extra state (the residual boresight, true minus `boresight`)
+    H_nhc = [[0, v_f], [-v_f, 0]].
 
     Parameters
     ----------
@@ -321,25 +324,22 @@ def nonholonomic(space, state, sigma_lateral, sigma_vertical, omega_ib_b=np.zero
     lever_b : array_like, shape (3,)
         Constraint point relative to the IMU, FLU, m.
     boresight : array_like, shape (2,)
-        Current estimate of the vehicle-axes pitch and yaw relative to the IMU axes, rad.
-    axes : array_like, shape (2, 3), optional
-        The vehicle's lateral and vertical axes as unit vectors in the body axes, in place of
-        the boresight (any mounting: a learned constraint, vehicle_constraint.py).
+        Current estimate of the vehicle-axes pitch and yaw relative to ``axes``, rad.
+    axes : array_like, shape (3, 3)
+        Rows: the vehicle's forward, lateral and vertical axes as unit vectors in the body.
 
     Returns
     -------
     Innovation
         z = predicted (lateral, vertical) velocity of the point in vehicle axes - 0.
     """
-    if axes is None:
-        theta, psi = boresight
-        # Lateral and vertical vehicle-axes components of a body vector.
-        A = np.array([[-psi, 1.0, 0.0], [theta, 0.0, 1.0]])
-    else:
-        A = np.asarray(axes, float)
+    # Lateral and vertical vehicle-axes components of a body vector.
+    forward, *A = turned(np.asarray(axes, float), boresight)
+    A = np.array(A)
     v_b, H = _point_velocity_rows(space, state, omega_ib_b, lever_b, A)
-    if "nhc" in space and axes is None:
-        H[:, space["nhc"]] = [[0.0, v_b[0]], [-v_b[0], 0.0]]
+    if "nhc" in space:
+        v_f = forward @ v_b
+        H[:, space["nhc"]] = [[0.0, v_f], [-v_f, 0.0]]
     z = A @ v_b
     return Innovation("nhc", z, H, np.diag([sigma_lateral ** 2, sigma_vertical ** 2]))
 

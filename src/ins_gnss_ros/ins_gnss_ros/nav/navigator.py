@@ -397,12 +397,13 @@ class Navigator:
                 self._update(meas.nonholonomic(self._space, s.nav, sigma_lat, nhc_sigma[1],
                                                s.omega, cfg.nhc_lever_b,
                                                s.estimates.get("nhc", np.zeros(2)),
-                                               None if learned is None else learned.axes),
+                                               np.eye(3) if learned is None else learned.axes),
                              s.nav.t, aiding=False)
             s.mode = modes.after_epoch(s.mode, s.nav.t, s.t_last_aid, cfg.dr_timeout)
             self._recorder.set_mode(s.mode)
             if learned is not None and s.mode == NAVIGATING:
-                learned.add(s.nav.t, s.nav.v_enu, s.nav.q_nb)
+                learned.add(s.nav.t, s.nav.v_enu, s.nav.q_nb,
+                            s.estimates.get("nhc", np.zeros(2)))
         oldest = self._rewind.keep(s, self._recorder.epochs, self._recorder.update_count,
                                    self._recorder.last_epoch)
         if oldest is not None:

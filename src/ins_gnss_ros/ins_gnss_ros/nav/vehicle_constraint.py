@@ -37,8 +37,10 @@ MEMORY_S = 300.0
 #: Lateral and vertical body-velocity RMS within which the body counts as on wheels, m/s (a car:
 #: ~0.1; a ship's sway and heave, a hand-held receiver: beyond).
 ENABLE_RMS = 0.3
-#: RMS beyond which a constrained body is released again, m/s.
+#: RMS across the kept (and boresight-turned) axes beyond which a constrained body is released
+#: again, m/s, and the moving time it is taken over, s.
 DISABLE_RMS = 0.45
+RELEASE_MEMORY_S = 60.0
 #: Constraint noise per measured RMS, and its least value, m/s.
 SIGMA_FACTOR = 2.0
 SIGMA_FLOOR = 0.1
@@ -47,6 +49,9 @@ MAX_STEP_S = 1.0
 #: Angle between the direction of travel and the body x axis beyond which /diagnostics says
 #: which mounting would align them, deg.
 MOUNTING_HINT_DEG = 3.0
+#: Initial sigma of the filter's boresight state ("nhc": pitch and yaw of the vehicle's axes
+#: from the learned ones), deg: the solution's attitude error when they were learned.
+BORESIGHT_SIGMA_DEG = 3.0
 
 
 class LearnedConstraint:
@@ -55,8 +60,10 @@ class LearnedConstraint:
 
     Attributes
     ----------
-    axes : ndarray, shape (2, 3) or None
-        The lateral and vertical axes (unit vectors in the body axes) once constrained.
+    axes : ndarray, shape (3, 3) or None
+        Rows: the vehicle's forward, lateral and vertical axes (unit vectors in the body axes)
+        once constrained; kept from then on, the filter's boresight state ("nhc",
+        ``BORESIGHT_SIGMA_DEG``) estimating how far the true ones lie from them.
     sigma : tuple of 2 float or None
         Their constraint noise, m/s, once constrained.
     """
@@ -68,10 +75,13 @@ class LearnedConstraint:
         self.moving = 0.0               # moving time learned from, s
         self.last_t = -np.inf
         self.axes = self.sigma = None
+        self.across = np.zeros(2)       # mean square across the kept axes, once constrained
 
-    def add(self, t: float, v_enu: np.ndarray, q_nb: np.ndarray) -> None:
+    def add(self, t: float, v_enu: np.ndarray, q_nb: np.ndarray,
+            boresight: np.ndarray = np.zeros(2)) -> None:
         """Learn from the navigating, aided solution at time t (s), standing for the time since
-        the last one it was given (at most ``MAX_STEP_S``).
+        the last one it was given (at most ``MAX_STEP_S``); ``boresight`` is the filter's
+        estimate of the vehicle axes' pitch and yaw from the kept ones, rad.
 
         Epochs at or before the last learned one are passed over: a delayed measurement re-runs
         the filter over them, and learning them twice would count them twice.
@@ -92,31 +102,48 @@ class LearnedConstraint:
         self.moving += dt
         if self.moving < LEARN_S:
             return
-        _, axes, rms = self.learned()
-        limit = DISABLE_RMS if self.sigma is not None else ENABLE_RMS
-        if np.all(rms <= limit):
-            self.axes, self.sigma = axes, tuple(np.maximum(SIGMA_FACTOR * rms, SIGMA_FLOOR))
-        else:
+        # The axes are learned from the solution, whose heading error at the time turns them
+        # as a mounting would: once constrained they are kept with their noise, and the
+        # boresight state takes that error (learning them on from a solution the constraint
+        # itself pulls would chase it); the release is judged across the axes as the filter
+        # corrects them.
+        if self.axes is None:
+            axes = self.learned()
+            rms = self.rms(axes)
+            if np.all(rms <= ENABLE_RMS):
+                self.axes, self.sigma = axes, tuple(np.maximum(SIGMA_FACTOR * rms, SIGMA_FLOOR))
+                self.across = rms ** 2
+            return
+        across = turned(self.axes, boresight)[1:] @ v_b
+        self.across += -np.expm1(-dt / RELEASE_MEMORY_S) * (across ** 2 - self.across)
+        if np.any(self.across > DISABLE_RMS ** 2):
             self.axes = self.sigma = None
 
-    def learned(self):
-        """The direction of travel in the body axes (unit, forward), the lateral and vertical
-        axes (2, 3) and their velocity RMS (2,), m/s; the exponential means started at zero,
-        their bias divided out."""
+    def learned(self) -> np.ndarray:
+        """The vehicle's axes learned so far (3, 3): rows forward (the direction of travel in the
+        body axes), lateral (across it and up) and vertical."""
         _, vectors = np.linalg.eigh(self.moment)
         forward = vectors[:, -1] * np.sign(vectors[:, -1] @ self.mean_v or 1.0)
         lateral = np.cross(self.up, forward)
         lateral /= np.linalg.norm(lateral)
-        axes = np.array([lateral, np.cross(forward, lateral)])
-        mean_square = np.einsum("ij,jk,ik->i", axes, self.moment, axes)
-        return forward, axes, np.sqrt(mean_square / -np.expm1(-self.moving / MEMORY_S))
+        return np.array([forward, lateral, np.cross(forward, lateral)])
+
+    def rms(self, axes) -> np.ndarray:
+        """RMS of the body velocity along the lateral and vertical rows of ``axes`` (2,), m/s; the
+        exponential means started at zero, their bias divided out."""
+        mean_square = np.einsum("ij,jk,ik->i", axes[1:], self.moment, axes[1:])
+        return np.sqrt(mean_square / -np.expm1(-self.moving / MEMORY_S))
 
     def summary(self) -> str:
         """What was learned, for /diagnostics."""
         if self.moving < LEARN_S:
             return (f"learning the body's lateral and vertical velocity: {self.moving:.0f} of "
                     f"{LEARN_S:.0f} s moving above {MIN_SPEED:g} m/s with GNSS")
-        f, _, rms = self.learned()
+        if self.axes is None:
+            axes = self.learned()
+            f, rms = axes[0], self.rms(axes)
+        else:
+            f, rms = self.axes[0], np.sqrt(self.across)
         seen = (f"travel along body ({f[0]:+.3f}, {f[1]:+.3f}, {f[2]:+.3f}), lateral "
                 f"{rms[0]:.2f}, vertical {rms[1]:.2f} m/s RMS")
         if self.sigma is None:
@@ -127,6 +154,15 @@ class LearnedConstraint:
             summary += (f"; imu_preprocessor mounting_rpy_deg [0, {pitch:.1f}, {yaw:.1f}] would "
                         "put the travel on base_link's x axis (the roll is not seen in it)")
         return summary
+
+
+def turned(axes: np.ndarray, boresight) -> np.ndarray:
+    """The vehicle axes (rows forward, lateral, vertical) turned by the small boresight angles
+    (pitch, yaw), as the non-holonomic measurement model turns them
+    (:func:`ins_gnss_ros.nav.measurements.nonholonomic`)."""
+    theta, psi = boresight
+    forward, lateral, vertical = axes
+    return np.array([forward, lateral - psi * forward, vertical + theta * forward])
 
 
 def mounting_from_travel(forward: np.ndarray):
