@@ -18,6 +18,7 @@ import os
 import sys
 import time
 from collections import Counter, defaultdict, deque
+from functools import partial
 from typing import Any, Callable, Sequence
 
 import rclpy
@@ -219,17 +220,25 @@ class Latest:
 
     For a node that needs a state now and then from a stream published at the navigation rate
     (``ins/state`` at 100-1000 Hz, read by ``mag_compass`` per field sample and by
-    ``phase_heading`` per GNSS epoch). On DDS ``take_newest`` takes the newest message
-    serialized (or None) from a subscription no executor dispatches
-    (:meth:`NavNode.subscribe_latest`): nothing runs in Python per message published, and
+    ``phase_heading`` per GNSS epoch). On DDS ``subscribe()`` makes a subscription no executor
+    dispatches (:meth:`NavNode.subscribe_latest`) and returns ``take_newest``, which takes the
+    newest message serialized (or None): nothing runs in Python per message published, and
     :meth:`take` decodes only the one it reads; on an :class:`InProcessBus` the bus
     :meth:`put` s each message object and the newest is kept.
     """
 
-    def __init__(self, msg_type, handler, take_newest: Callable[[], Any] | None = None):
+    def __init__(self, msg_type, handler,
+                 subscribe: Callable[[], Callable[[], Any]] | None = None):
         self._codec, self._handler = codec(msg_type), handler
-        self._take_newest = take_newest
+        self._subscribe = subscribe  # makes the DDS subscription, returns its take_newest
+        self._take_newest = None
         self._pending = None
+
+    def start(self) -> None:
+        """Subscribe on DDS, if not yet (:meth:`NavNode.subscribe_latest` with ``start``
+        false): what was published before is not received."""
+        if self._subscribe is not None:
+            self._take_newest, self._subscribe = self._subscribe(), None
 
     def put(self, data) -> None:
         self._pending = data
@@ -369,7 +378,8 @@ class NavNode(Node):
             callback(data)
         return counted
 
-    def subscribe_latest(self, msg_type, topic: str, qos, handler) -> Latest:
+    def subscribe_latest(self, msg_type, topic: str, qos, handler,
+                         start: bool = True) -> Latest:
         """A subscription that keeps only the newest message, decoded when it is taken
         and handed to ``handler`` by :meth:`Latest.handle`.
 
@@ -377,13 +387,20 @@ class NavNode(Node):
         process that no executor spins, so that no callback runs per message (~190 us of CPU
         each here, docs/results/live_cost.md); the message is taken when the node reads it,
         and counted then in ``diag.traffic["taken <topic>"]``: what was used, not what was
-        published."""
+        published. With ``start`` false it is made at :meth:`Latest.start`: a node with
+        nothing to do until some other input comes does not receive the stream meanwhile (an
+        undispatched subscription still wakes its process for every message, and costs the
+        publisher a delivery). On the bus the topic is subscribed at once either way (a
+        replay then reads as it always did)."""
         if self.bus is not None:
             latest = Latest(msg_type, handler)
             self.bus.subscribe(topic, latest.put)
             return latest
-        return Latest(msg_type, handler,
-                      self._undispatched_take(msg_type, topic, qos, 1, "taken"))
+        latest = Latest(msg_type, handler,
+                        partial(self._undispatched_take, msg_type, topic, qos, 1, "taken"))
+        if start:
+            latest.start()
+        return latest
 
     def subscribe_queued(self, msg_type, topic: str, qos, handler) -> Queued:
         """A subscription whose messages reach ``handler`` when the node calls
