@@ -88,6 +88,54 @@ def test_a_volatile_output_is_wanted_while_someone_subscribes(executor, probe, r
     assert node.diag.traffic["published /base_test/imu"] == 1
 
 
+def test_a_queued_subscription_hands_over_every_message_in_order_when_asked(
+        executor, probe, ros_context):
+    from ins_gnss_msgs.msg import InsState
+
+    from ins_gnss_ros.io import sec_to_stamp
+    from ins_gnss_ros.nodes.base import SENSOR_QOS
+
+    node = _Counting(context=ros_context)
+    executor.add_node(node)
+    handled = []
+    queued = node.subscribe_queued(InsState, "base_test/state", SENSOR_QOS, handled.append)
+    pub = probe.create_publisher(InsState, "base_test/state", SENSOR_QOS)
+    spin_until(executor, lambda: pub.get_subscription_count() > 0, what="the subscription")
+    for k in range(1, 4):
+        state = InsState(correction_sequence=k)
+        state.header.stamp = sec_to_stamp(0.01 * k)
+        pub.publish(state)
+    # Nothing is dispatched: the messages wait until the node asks for them.
+    spin_until(executor, lambda: queued.handle() or len(handled) == 3, what="three states")
+    assert [m.correction_sequence for m in handled] == [1, 2, 3]
+    assert handled[2].header.stamp == sec_to_stamp(0.03)
+    assert node.diag.traffic["received /base_test/state"] == 3
+    assert "/base_test/state" not in {sub.topic_name for sub in node.subscriptions}
+    # What came is handed over, and counted, before the node reports its counts (1 Hz)
+    pub.publish(InsState(correction_sequence=4))
+    spin_until(executor, lambda: len(handled) == 4, what="the fourth state, at /diagnostics")
+    assert node.diag.traffic["received /base_test/state"] == 4
+
+
+def test_on_the_bus_a_queued_subscription_is_handled_as_it_comes(ros_context):
+    from ins_gnss_msgs.msg import InsState
+
+    from ins_gnss_ros.nodes.base import SENSOR_QOS, InProcessBus
+
+    bus = InProcessBus()
+    node = _Counting(context=ros_context, bus=bus)
+    handled = []
+    queued = node.subscribe_queued(InsState, "state", SENSOR_QOS, handled.append)
+    msgs = [InsState(correction_sequence=k) for k in range(3)]
+    for msg in msgs:
+        bus.publish("state", msg)
+    bus.drain()
+    assert [id(m) for m in handled] == [id(m) for m in msgs]
+    queued.handle()  # nothing waits
+    assert len(handled) == 3
+    node.destroy_node()
+
+
 @pytest.mark.parametrize("kind", EXECUTORS)
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_node_process_shuts_down_cleanly_on_signal(sig, kind, probe, executor, monkeypatch):

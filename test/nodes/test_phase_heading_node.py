@@ -518,7 +518,7 @@ def test_recorded_single_antenna_stream_end_to_end(ros_context, bus):
 
 
 def test_publishes_over_ros(executor, ros_context, probe, static_two):
-    from ins_gnss_msgs.msg import GnssEphemeris, GnssObservations, Heading
+    from ins_gnss_msgs.msg import GnssEphemeris, GnssObservations, Heading, InsState
 
     from ins_gnss_ros.nodes.base import SENSOR_QOS, STATE_QOS
     from rosutil import spin_until
@@ -530,8 +530,11 @@ def test_publishes_over_ros(executor, ros_context, probe, static_two):
     probe.create_subscription(Heading, "gnss/heading", got.append, SENSOR_QOS)
     pub_eph = probe.create_publisher(GnssEphemeris, "gnss/ephemeris", STATE_QOS)
     pub_obs = probe.create_publisher(GnssObservations, "gnss/observations", SENSOR_QOS)
+    pub_ins = probe.create_publisher(InsState, "ins/state", SENSOR_QOS)
     spin_until(executor, lambda: pub_obs.get_subscription_count() > 0
                and pub_eph.get_subscription_count() > 0, what="phase_heading subscriptions")
+    # ins/state is not received before the first observations (nothing would use it)
+    assert pub_ins.get_subscription_count() == 0
     for m in ephs:
         pub_eph.publish(m)
     spin_until(executor, lambda: len(node.pipeline.broadcast) == len(ephs), what="ephemerides")
@@ -541,3 +544,5 @@ def test_publishes_over_ros(executor, ros_context, probe, static_two):
     spin_until(executor, lambda: len(got) == 3, what="3 gnss/heading")
     assert got[-1].status == FIXED
     assert got[-1].header.stamp == epochs[2][2][0].header.stamp
+    spin_until(executor, lambda: pub_ins.get_subscription_count() == 1,
+               what="the ins/state subscription made at the first observations")

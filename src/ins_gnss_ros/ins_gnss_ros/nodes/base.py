@@ -18,6 +18,7 @@ import os
 import sys
 import time
 from collections import Counter, defaultdict, deque
+from functools import partial
 from typing import Any, Callable, Sequence
 
 import rclpy
@@ -108,6 +109,9 @@ class Diagnostics:
         self._message = "ok"
         self._values: dict[str, str] = {}
         self._state = (DiagnosticStatus.OK, "ok")  # a lasting condition, see set_state
+        # Called first by publish: inputs the node takes only when it asks for them
+        # (NavNode.subscribe_queued) are handled, and counted, before the counts go out.
+        self.before_publish: list[Callable[[], None]] = []
         if node.bus is None:  # on a bus the replay publishes diagnostics on bag time
             node.create_timer(period_s, self.publish)
 
@@ -130,6 +134,8 @@ class Diagnostics:
         self._state = (level, message)
 
     def publish(self) -> None:
+        for hook in self.before_publish:
+            hook()
         level, message = max((self._state, (self._level, self._message)),
                              key=lambda state: state[0])
         status = DiagnosticStatus(
@@ -214,17 +220,25 @@ class Latest:
 
     For a node that needs a state now and then from a stream published at the navigation rate
     (``ins/state`` at 100-1000 Hz, read by ``mag_compass`` per field sample and by
-    ``phase_heading`` per GNSS epoch). On DDS ``take_newest`` takes the newest message
-    serialized (or None) from a subscription no executor dispatches
-    (:meth:`NavNode.subscribe_latest`): nothing runs in Python per message published, and
+    ``phase_heading`` per GNSS epoch). On DDS ``subscribe()`` makes a subscription no executor
+    dispatches (:meth:`NavNode.subscribe_latest`) and returns ``take_newest``, which takes the
+    newest message serialized (or None): nothing runs in Python per message published, and
     :meth:`take` decodes only the one it reads; on an :class:`InProcessBus` the bus
     :meth:`put` s each message object and the newest is kept.
     """
 
-    def __init__(self, msg_type, handler, take_newest: Callable[[], Any] | None = None):
+    def __init__(self, msg_type, handler,
+                 subscribe: Callable[[], Callable[[], Any]] | None = None):
         self._codec, self._handler = codec(msg_type), handler
-        self._take_newest = take_newest
+        self._subscribe = subscribe  # makes the DDS subscription, returns its take_newest
+        self._take_newest = None
         self._pending = None
+
+    def start(self) -> None:
+        """Subscribe on DDS, if not yet (:meth:`NavNode.subscribe_latest` with ``start``
+        false): what was published before is not received."""
+        if self._subscribe is not None:
+            self._take_newest, self._subscribe = self._subscribe(), None
 
     def put(self, data) -> None:
         self._pending = data
@@ -253,6 +267,29 @@ class Latest:
         msg = self.take()
         if msg is not None:
             self._handler(msg)
+
+
+class Queued:
+    """Every message of a topic, handed to the handler when the node is ready for them rather
+    than as each comes.
+
+    For a node that needs every message of a stream but not at once (the ``ekf`` keeps each
+    ``ins/state`` for the comparison with its filter at a common epoch, and reads them at its
+    next increment). On DDS :meth:`handle` takes the messages that came, serialized and in
+    order, from a subscription no executor dispatches (:meth:`NavNode.subscribe_queued`); on an
+    :class:`InProcessBus` the bus delivers each to the handler as it comes, in the replay's
+    order, and :meth:`handle` has nothing to do.
+    """
+
+    def __init__(self, msg_type, handler, take: Callable[[], Any] | None = None):
+        self._decode, self._handler, self._take = codec(msg_type).decode, handler, take
+
+    def handle(self) -> None:
+        """Hand every message that came since the last call to the handler, oldest first."""
+        if self._take is None:
+            return
+        while (data := self._take()) is not None:
+            self._handler(self._decode(data))
 
 
 class _CountedPublisher:
@@ -341,7 +378,8 @@ class NavNode(Node):
             callback(data)
         return counted
 
-    def subscribe_latest(self, msg_type, topic: str, qos, handler) -> Latest:
+    def subscribe_latest(self, msg_type, topic: str, qos, handler,
+                         start: bool = True) -> Latest:
         """A subscription that keeps only the newest message, decoded when it is taken
         and handed to ``handler`` by :meth:`Latest.handle`.
 
@@ -349,30 +387,62 @@ class NavNode(Node):
         process that no executor spins, so that no callback runs per message (~190 us of CPU
         each here, docs/results/live_cost.md); the message is taken when the node reads it,
         and counted then in ``diag.traffic["taken <topic>"]``: what was used, not what was
-        published."""
+        published. With ``start`` false it is made at :meth:`Latest.start`: a node with
+        nothing to do until some other input comes does not receive the stream meanwhile (an
+        undispatched subscription still wakes its process for every message, and costs the
+        publisher a delivery). On the bus the topic is subscribed at once either way (a
+        replay then reads as it always did)."""
         if self.bus is not None:
             latest = Latest(msg_type, handler)
             self.bus.subscribe(topic, latest.put)
             return latest
+        latest = Latest(msg_type, handler,
+                        partial(self._undispatched_take, msg_type, topic, qos, 1, "taken"))
+        if start:
+            latest.start()
+        return latest
+
+    def subscribe_queued(self, msg_type, topic: str, qos, handler) -> Queued:
+        """A subscription whose messages reach ``handler`` when the node calls
+        :meth:`Queued.handle`, all of them and in order, and at the latest at the node's next
+        /diagnostics publication (1 s: when the node's other inputs stop, what came is still
+        handled, and counted before the counts are reported).
+
+        On DDS, as :meth:`subscribe_latest`, from a hidden node no executor spins, keeping
+        ``qos.depth`` messages; each is counted in ``diag.traffic["received <topic>"]`` when
+        taken. On the bus each message is handled as it comes."""
+        if self.bus is not None:
+            self.bus.subscribe(topic, handler)
+            return Queued(msg_type, handler)
+        queued = Queued(msg_type, handler,
+                        self._undispatched_take(msg_type, topic, qos, qos.depth, "received"))
+        self.diag.before_publish.append(queued.handle)
+        return queued
+
+    def _undispatched_take(self, msg_type, topic: str, qos, depth: int, counted_as: str):
+        """``take()``: the oldest message not taken yet of a subscription (``depth``, ``qos``
+        otherwise) of :meth:`_undispatched_node`, serialized, or None; counted in
+        ``diag.traffic["<counted_as> <topic>"]``."""
         name = self.resolve_topic_name(topic)  # this node's namespace and remappings
         sub = self._undispatched_node().create_subscription(
             msg_type, name, lambda _: None,
-            QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=qos.reliability,
+            QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=qos.reliability,
                        durability=qos.durability), raw=True)
-        key, traffic = f"taken {name}", self.diag.traffic
+        key, traffic = f"{counted_as} {name}", self.diag.traffic
 
-        def take_newest():
+        def take():
             taken = sub.handle.take_message(sub.msg_type, True)  # as rclpy.wait_for_message
             if taken is None:
                 return None
             traffic[key] += 1
             return taken[0]
-        return Latest(msg_type, handler, take_newest)
+        return take
 
     def _undispatched_node(self) -> Node:
         """The hidden node (``_<name>_latest``: ``ros2 node list`` omits it) that holds the
-        subscriptions of :meth:`subscribe_latest`. It ignores the process' arguments (a node
-        name remapping would give it this node's name); topics are resolved by this node."""
+        subscriptions of :meth:`subscribe_latest` and :meth:`subscribe_queued`. It ignores the
+        process' arguments (a node name remapping would give it this node's name); topics are
+        resolved by this node."""
         if self._undispatched is None:
             self._undispatched = Node(
                 f"_{self.get_name()}_latest", context=self.context,

@@ -121,13 +121,19 @@ class EkfNode(EkfServices, NavNode):
             if p["publish_tf"] else None
         self.register_services()
         self.subscribe(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS)
-        self.subscribe(InsState, "ins/state", self.on_ins_state, SENSOR_QOS)
+        # Every state is kept for the synchronisation, but none is needed before the filter's
+        # next step: on DDS they are taken at the next increment or aiding message instead of
+        # each waking this process's executor (~190 us of CPU each, at the moment the
+        # strapdown's other readers want the CPU; docs/results/live_cost.md).
+        self.ins_states = self.subscribe_queued(InsState, "ins/state", SENSOR_QOS,
+                                                self.on_ins_state)
         for topic, (msg_type, handler) in self.inputs.handlers().items():
             self.subscribe(msg_type, topic, partial(self.on_input, handler),
                            INPUT_QOS.get(topic, SENSOR_QOS))
 
     # -- inputs --------------------------------------------------------------------------------
     def on_delta(self, msg: ImuDelta) -> None:
+        self.ins_states.handle()
         if self.pub_tf_static is not None:
             self.publish_static_tf(msg.header.stamp)
         problem, dtheta, dv = increment_of(msg)
@@ -141,6 +147,7 @@ class EkfNode(EkfServices, NavNode):
         self.after_filter()
 
     def on_input(self, handler, msg) -> None:
+        self.ins_states.handle()
         if handler(msg):
             self.note_datum(msg.header.stamp)  # a first fix sets the datum
             self.after_filter()

@@ -196,9 +196,11 @@ class PhaseHeadingNode(NavNode):
         self.subscribe(GnssObservations, "gnss/observations", self.on_observations, SENSOR_QOS)
         self.subscribe(GnssEphemeris, "gnss/ephemeris", self.on_ephemeris, STATE_QOS)
         self.subscribe(NavSatFix, "gnss/fix", self.on_fix, DRIVER_QOS)
-        # Read per GNSS epoch (and fix), not decoded at the navigation rate.
+        # Read per GNSS epoch (and fix), not decoded at the navigation rate; on DDS subscribed
+        # from the first gnss/observations on: a set-up without raw observations has no use
+        # for the navigation-rate stream.
         self.ins_state = self.subscribe_latest(InsState, "ins/state", SENSOR_QOS,
-                                             self.on_ins_state)
+                                               self.on_ins_state, start=False)
         self.subscribe(FilterStatus, "nav/status", self.on_filter_status, STATE_QOS)
 
     # -- inputs ---------------------------------------------------------------------------------
@@ -236,6 +238,7 @@ class PhaseHeadingNode(NavNode):
                                     [std.get(f"att[{i}]", math.nan) for i in range(3)])
 
     def on_observations(self, msg: GnssObservations) -> None:
+        self.ins_state.start()
         self.ins_state.handle()
         obs = AntennaObservations(
             msg.antenna_id, gps_seconds(msg.gps_week, msg.time_of_week),
