@@ -14,7 +14,6 @@ from ins_gnss_ros.nav.error_model import nav_error
 from ins_gnss_ros.nav import NAVIGATING
 from conftest import REPO
 
-sys.path.insert(0, str(REPO / "bench"))  # bench_car_oracle imports bench_car_drive
 sys.path.insert(0, str(REPO / "test" / "nav"))
 from test_navigator import config, gnss, run, simulate, truth_state  # noqa: E402
 
