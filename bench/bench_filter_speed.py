@@ -1,12 +1,14 @@
-"""Offline navigator on the simulated car: throughput, and NEES over Monte Carlo runs.
+"""The filter core (`Navigator`) on the simulated car: throughput, and tight coupling with
+synthetic satellites.
 
-Speed: IMU samples per CPU second of the whole offline path (compensation, mechanisation,
-covariance propagation, GNSS position + velocity updates at 4 Hz, output records) on the
-simulated car of seed 004 Lab 1 (sim/scenarios.car, ADIS16405-class MEMS from sim/imu_sim).
+Both drive the `Navigator` with this bench's own measurements (no imu_preprocessor, no Aiding
+front end, no bag): figures of the filter core, not of the product. The product's offline path
+is timed by bench/bench_replay.py (``trial replay --offline``), its accuracy and NEES by
+bench/bench_car_drive.py, bench_vessel.py and bench_nees.py.
 
-NEES (--nees N): mean normalised estimation error squared of position, velocity and attitude
-over N runs (same route, independent IMU errors and GNSS noise), averaged over the epochs after
-the first 40 s; a consistent filter gives the dimension, 3.
+Speed: IMU samples per CPU second of the navigator (compensation, mechanisation, covariance
+propagation, GNSS position + velocity updates at 4 Hz, output records) on the simulated car of
+seed 004 Lab 1 (sim/scenarios.car, ADIS16405-class MEMS from sim/imu_sim).
 
 Tight coupling (--tight): loose GNSS for the first 60 s, then 60 s with pseudoranges and range
 rates of only 3 or 2 satellites (tightly coupled, receiver clock states), against no GNSS at all
@@ -16,8 +18,7 @@ drift; noise 1 m and 0.05 m/s.
 
 Usage::
 
-    .venv/bin/python bench/bench_filter_speed.py [--rate 200] [--duration 300] [--nees 20]
-        [--tight]
+    .venv/bin/python bench/bench_filter_speed.py [--rate 200] [--duration 300] [--tight]
 """
 from __future__ import annotations
 
@@ -69,19 +70,6 @@ def run(imu, measurements, cfg):
     nav.add_imu(imu.t, imu.dtheta, imu.dv)
     nav.flush()
     return nav.output()
-
-
-def nees(out, traj, t_min):
-    S = out.space
-    rate = 1.0 / traj.dt
-    vals = []
-    for k in np.flatnonzero(out.t > t_min):
-        i = int(round(out.t[k] * rate))
-        true = NavState(traj.lat[i], traj.lon[i], traj.h[i], traj.v_enu[i], traj.q_nb[i])
-        errs = nav_error(out.state(k), true)
-        vals.append([e @ np.linalg.solve(out.P[k][S[b], S[b]], e)
-                     for e, b in zip(errs, ("pos", "vel", "att"))])
-    return np.mean(vals, axis=0)
 
 
 def satellite_ranges(traj, rng, n_sats, t_start, rate_hz=4.0):
@@ -142,7 +130,6 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rate", type=float, default=200.0, help="IMU rate, Hz")
     parser.add_argument("--duration", type=float, default=300.0, help="s")
-    parser.add_argument("--nees", type=int, default=0, help="Monte Carlo runs for NEES")
     parser.add_argument("--tight", action="store_true", help="3 and 2 satellites vs pure INS")
     args = parser.parse_args()
     if args.tight:
@@ -163,21 +150,6 @@ def main():
     print(f"speed: {n} IMU samples at {args.rate:g} Hz, {len(meas)} GNSS measurements, "
           f"{len(out.t)} filter epochs: {cpu:.2f} s CPU ({n / cpu:.0f} samples per CPU s), "
           f"{wall:.2f} s wall ({n / wall:.0f} samples/s)")
-    if args.nees:
-        short = car(duration=90.0, seed=12, rate=100.0, static=15.0).trajectory
-        values = []
-        for r in range(args.nees):
-            imu_r = simulate_imu(short, ImuSpec(MEMS_ADIS16405, rate=100.0), seed=100 + r)
-            out_r = run(imu_r, gnss(short, np.random.default_rng(200 + r)), config())
-            values.append(nees(out_r, short, 40.0))
-        values = np.array(values)
-        mean = values.mean(axis=0)
-        print(f"NEES over {args.nees} runs of 90 s (epochs after 40 s), dimension 3: "
-              f"position {mean[0]:.2f}, velocity {mean[1]:.2f}, attitude {mean[2]:.2f}; "
-              f"per-run spread (min-max) position {values[:, 0].min():.2f}-"
-              f"{values[:, 0].max():.2f}, velocity {values[:, 1].min():.2f}-"
-              f"{values[:, 1].max():.2f}, attitude {values[:, 2].min():.2f}-"
-              f"{values[:, 2].max():.2f}")
 
 
 if __name__ == "__main__":

@@ -104,8 +104,8 @@ def test_modes_and_convergence(sim):
 
 def test_nees_is_sane(sim):
     traj, _, _, out = sim
-    # One short run: a loose band around the dimension 3 (the Monte Carlo average is in
-    # bench/bench_filter_speed.py --nees).
+    # One short run of the filter core: a loose band around the dimension 3 (the product's
+    # Monte Carlo average is bench/bench_nees.py's).
     values = nees(out, traj, t_min=40.0)
     assert np.all(values > 0.2 * 3) and np.all(values < 4 * 3), values
 
@@ -301,7 +301,7 @@ def test_real_car_drive_first_minutes():
             continue
         nav.add_measurement(GnssFix(tr.time[k], tr.lat[k], tr.lon[k], tr.height[k],
                                     tr.pos_cov_enu[k] + 0.03 ** 2 * np.eye(3)))
-        # The solution's velocities lag its positions by 0.125 s (bench_car_drive.py).
+        # The solution's velocities lag its positions by 0.125 s (docs/results/ekf.md).
         nav.add_measurement(GnssVelocity(tr.time[k] - 0.125, tr.vel_enu[k], 0.03 ** 2 * np.eye(3)))
     nav.add_imu(t[keep], drive.gyro_flu[keep] * dt[:, None], drive.accel_flu[keep] * dt[:, None])
     nav.flush()
