@@ -189,6 +189,26 @@ def test_shading_limits_satellites_and_leaves_no_fix(ros_context):
     node.destroy_node()
 
 
+def test_broadcast_residuals_move_the_ranges_by_metres(ros_context):
+    """broadcast_residuals: the same seed's pseudoranges, with a truth apart from the broadcast
+    models (ionosphere 2x Klobuchar, zenith troposphere, 1 m SISRE), differ by metres."""
+    from ins_gnss_ros.nodes.base import InProcessBus
+
+    ranges = {}
+    for residuals in (False, True):
+        bus = InProcessBus()
+        out = []
+        bus.subscribe("gnss/observations", out.append)
+        node = _node(ros_context, bus, broadcast_residuals=residuals,
+                     **{"lever_arms": [0.0, 0.0, 1.0], "multipath.enabled": False})
+        bus.publish("sim/truth", _truth(50.0))
+        bus.drain()
+        ranges[residuals] = np.array(out[0].pseudorange)
+        node.destroy_node()
+    change = np.abs(ranges[True] - ranges[False])
+    assert np.all(change > 0.1) and np.median(change) > 1.0, change
+
+
 def test_internal_scenario_follows_its_trajectory(ros_context):
     from ins_gnss_ros.nodes.base import InProcessBus
 

@@ -42,6 +42,7 @@ from sensor_msgs.msg import NavSatFix, NavSatStatus, TimeReference
 from ..gnss import (GALILEO, GPS, OCXO, TCXO, GnssSimulator, HalfCycleTracker, MultipathModel,
                     NoiseModel, SimulatorConfig, antenna_positions, default_start, ephemeris_data,
                     gps_to_posix, gps_to_utc, leap_seconds, solve_fix, time_reference)
+from ..gnss.broadcast_residuals import BroadcastResiduals
 from ..io import sec_to_stamp, stamp_to_sec
 from ..sim import scenarios
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, ParameterError, run
@@ -88,6 +89,9 @@ class GnssSimulatorNode(NavNode):
         Param("multipath.tau_s", 30.0, "multipath correlation time, s", 0.1, 3600.0),
         Param("ionosphere", True, "apply the Klobuchar ionosphere"),
         Param("troposphere", True, "apply the Saastamoinen troposphere"),
+        Param("broadcast_residuals", False, "simulate a truth apart from the broadcast models "
+              "the receiver corrects with (gnss/broadcast_residuals.py: ionosphere 2x "
+              "Klobuchar, 5 cm zenith troposphere, 1 m SISRE per satellite)"),
         Param("oscillator", "tcxo", "receiver oscillator class (Allan h0, h-2)",
               choices=("tcxo", "ocxo")),
         Param("slip_rate_per_s", 0.0, "random cycle slips per satellite and antenna, 1/s",
@@ -138,7 +142,8 @@ class GnssSimulatorNode(NavNode):
             ionosphere=p["ionosphere"], troposphere=p["troposphere"],
             oscillator=TCXO if p["oscillator"] == "tcxo" else OCXO,
             slip_rate=p["slip_rate_per_s"], half_cycle_resolve_s=p["half_cycle_resolve_s"],
-            seed=p["seed"])
+            seed=p["seed"],
+            residuals=BroadcastResiduals() if p["broadcast_residuals"] else None)
         self.sim: GnssSimulator | None = None
         self.rng_pps = np.random.default_rng(np.random.SeedSequence(p["seed"]).spawn(5)[4])
         self.next_epoch_ns = None

@@ -98,6 +98,9 @@ def _simulate_args(p):
     p.add_argument("--array", type=_array, default=SimOptions.array, metavar="LxW",
                    help="antenna array length (fore-aft) x width, m, centred 1.5 m above the "
                    "IMU (e.g. 2.7x1.2)")
+    p.add_argument("--broadcast-residuals", action="store_true",
+                   help="with --antennas: the simulated ionosphere, troposphere, orbits and "
+                   "clocks differ from the broadcast models the receiver corrects with")
     p.add_argument("--out", required=True, help="new bag folder")
 
 
@@ -267,7 +270,8 @@ def cmd_simulate(args) -> int:
                                wheel_scale_error=args.wheel_scale_error,
                                wheel_slip_interval=args.wheel_slip_interval,
                                gnss_latency=args.gnss_latency, antennas=args.antennas,
-                               array=args.array))
+                               array=args.array,
+                               broadcast_residuals=args.broadcast_residuals))
     print(path)
     return 0
 

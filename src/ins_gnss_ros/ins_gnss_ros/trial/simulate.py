@@ -98,6 +98,9 @@ class SimOptions:
         antennas from the GNSS simulator node (the fix and velocity from its solution).
     array : tuple of 2 float
         Length (fore-aft) and width (athwartship) of the antenna array, m.
+    broadcast_residuals : bool
+        With ``antennas``: the simulated ionosphere, troposphere, orbits and clocks differ from
+        the broadcast models (the gnss_simulator node's ``broadcast_residuals``).
     mag_rate : float
         Magnetometer rate, Hz.
     mag_noise : float
@@ -143,6 +146,7 @@ class SimOptions:
     antenna_lever_arm: tuple = (0.0, 0.0, 1.5)
     antennas: int = 0
     array: tuple = (1.5, 1.0)
+    broadcast_residuals: bool = False
     mag_rate: float = 50.0
     mag_noise: float = 100e-9
     mag_iron: int | None = None
@@ -191,6 +195,8 @@ def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions
     writer = bag.BagWriter(out)  # an existing output is refused before the work
     if not 0 <= options.antennas <= 4:
         raise ValueError(f"antennas must be 0 to 4, got {options.antennas}")
+    if options.broadcast_residuals and not options.antennas:
+        raise ValueError("broadcast residuals need the raw GNSS of antennas >= 1")
     # Words of one SeedSequence: a fifth (the wheels), a sixth (the raw GNSS) leave the first
     # ones as they were.
     seeds = np.random.SeedSequence(seed).generate_state(6)
@@ -334,7 +340,8 @@ def _write_raw_gnss(writer, traj, options, seed):
         node = GnssSimulatorNode(bus=bus, context=context, parameter_overrides=[
             Parameter("source", value="truth"),
             Parameter("lever_arms", value=[v for a in antennas for v in a]),
-            Parameter("rate_hz", value=float(options.gnss_rate)), Parameter("seed", value=seed)])
+            Parameter("rate_hz", value=float(options.gnss_rate)), Parameter("seed", value=seed),
+            Parameter("broadcast_residuals", value=options.broadcast_residuals)])
         for topic in RAW_GNSS_TOPICS:
             bus.subscribe(topic, lambda msg, topic=topic: writer.write(topic, msg))
         k = _every(traj, options.gnss_rate)
