@@ -34,6 +34,11 @@ CONFIG = "config/car.yaml"
 TRUTH = ("--truth-point", "0", "0.05", "0", "--truth-velocity-delay", "0.125")
 
 
+def number(value):
+    """A metric of trial evaluate --json: None (not computable) as NaN."""
+    return float("nan") if value is None else value
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--protocol", action="append", default=None,
@@ -60,8 +65,8 @@ def main():
                 per = " ".join(f"{o['max_horizontal_m']:.2f}" for o in m["outages"])
                 print(f"| {mode} | {len(m['outages'])} | {m['outage_drift_rms_m']:.3f} / "
                       f"{m['outage_drift_max_m']:.3f} | {per} | {m['horizontal_rms_m']:.3f} | "
-                      f"{m['nees_position_mean'] or float('nan'):.2f} / "
-                      f"{m['nees_velocity_mean'] or float('nan'):.2f} |",
+                      f"{number(m['nees_position_mean']):.2f} / "
+                      f"{number(m['nees_velocity_mean']):.2f} |",
                       flush=True)
             print("commands: " + "; ".join(
                 product_path.command_line(mode, BAG, CONFIG, "--outages", spec)
