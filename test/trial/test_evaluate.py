@@ -223,6 +223,27 @@ def test_nees_leaves_out_epochs_without_a_covariance():
     assert evaluate(est, truth).nees["position"] == pytest.approx(1.0)
 
 
+def test_nees_is_also_given_inside_and_outside_the_outages():
+    """A covariance that holds inside the outages and is 4x too small outside them (as against
+    a truth that shares the aiding's errors): the split shows it, the mean over all does not."""
+    t = np.arange(0.0, 100.0, 0.5)
+    truth = _circle(t)
+    windows = np.array([[20.0, 40.0], [60.0, 80.0]])
+    inside = ((t >= 20.0) & (t < 40.0)) | ((t >= 60.0) & (t < 80.0))
+    pos_cov = np.broadcast_to(np.eye(3), (len(t), 3, 3)).copy()
+    pos_cov[~inside] /= 4.0
+    est = Trajectory(**{**vars(_shift(truth, east=1.0)), "pos_cov_enu": pos_cov})
+    result = evaluate(est, truth, windows=windows)
+    assert result.nees_by_aiding["inside"]["position"] == pytest.approx(1.0)
+    assert result.nees_by_aiding["outside"]["position"] == pytest.approx(4.0)
+    assert result.nees["position"] == pytest.approx(0.4 * 1.0 + 0.6 * 4.0)
+    out = result.to_json()
+    assert out["nees_position_inside_outages_mean"] == pytest.approx(1.0)
+    assert out["nees_velocity_outside_outages_mean"] is None  # no velocity covariance
+    assert "| inside the outages | 1.00 |" in markdown_table(result)
+    assert evaluate(est, truth).nees_by_aiding == {}
+
+
 def test_odometry_covariance_is_attached_only_near_published_messages():
     from nav_msgs.msg import Odometry
 

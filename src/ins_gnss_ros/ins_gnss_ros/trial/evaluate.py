@@ -17,7 +17,7 @@ NEES (normalised estimation error squared, Bar-Shalom, Li and Kirubarajan, "Esti
 Applications to Tracking and Navigation", section 5.4.2) is e^T P^-1 e per epoch; a consistent
 filter has mean NEES equal to the dimension (3).
 """
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -26,6 +26,7 @@ from ins_gnss_ros.nav.conventions import azimuth_from_yaw, wrap_pi
 from ins_gnss_ros.nav.earth import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef
 from ins_gnss_ros.nav.rotations import quat_conj, quat_mul, quat_normalize, quat_to_euler
 from ins_gnss_ros.nav.rotations import quat_to_rotvec
+from ins_gnss_ros.trial.outages import in_outage
 
 #: Largest spacing, s, of estimate samples across which the estimate is interpolated; truth
 #: epochs inside larger gaps of the estimate are not evaluated.
@@ -161,6 +162,11 @@ class Evaluation:
         Mean NEES of ``position``, ``velocity``, ``attitude`` (NaN without covariances).
     offset_enu : ndarray, shape (3,) or None
         The mean position error taken out of `errors` (``remove_offset``), m.
+    nees_by_aiding : dict of str to dict
+        With outage windows: the mean NEES as `nees` over the epochs ``inside`` the outages and
+        ``outside`` them. They test different things: inside, the truth is independent of
+        everything the filter took; outside, a truth from the same receiver as the aiding (an
+        RTK solution both as gnss/fix and as truth/state) shares its errors.
     """
 
     errors: ErrorSeries
@@ -168,6 +174,7 @@ class Evaluation:
     outages: tuple
     nees: dict
     offset_enu: np.ndarray | None = None
+    nees_by_aiding: dict = field(default_factory=dict)
 
     def outage_drift(self):
         """(RMS, max) over outages of the maximum horizontal error within each window, m."""
@@ -194,7 +201,8 @@ class Evaluation:
         entry of `stats` (so ``horizontal_rms_m``, ``vertical_rms_m``, ``roll_rms_deg``,
         ``pitch_rms_deg``, ``heading_rms_deg`` ...), ``nees_<name>_mean``, ``epochs``; with
         outage windows also ``outage_drift_rms_m`` / ``outage_drift_max_m`` (maximum error
-        within each window), ``outage_end_rms_m`` / ``outage_end_max_m``,
+        within each window), ``nees_<name>_inside_outages_mean`` and
+        ``nees_<name>_outside_outages_mean``, ``outage_end_rms_m`` / ``outage_end_max_m``,
         ``outage_change_rms_m`` / ``outage_change_max_m`` (largest change of the error within
         each window) and the list ``outages``; with a removed offset ``removed_offset_enu_m``.
         Values that cannot be computed are None (JSON null).
@@ -208,6 +216,9 @@ class Evaluation:
                 out[f"{name}_{field}_{unit}"] = _finite_or_none(getattr(stat, field))
         for name, value in self.nees.items():
             out[f"nees_{name}_mean"] = _finite_or_none(value)
+        for where, nees in self.nees_by_aiding.items():
+            for name, value in nees.items():
+                out[f"nees_{name}_{where}_outages_mean"] = _finite_or_none(value)
         if self.outages:
             for prefix, (rms, peak) in (("outage_drift", self.outage_drift()),
                                         ("outage_end", self.outage_end_drift()),
@@ -309,13 +320,23 @@ def evaluate(estimate, truth, windows=None, max_gap=DEFAULT_MAX_GAP_S, remove_of
         "pitch_deg": _maybe(errors.euler, lambda e: np.degrees(e[:, 1])),
         "heading_deg": _maybe(errors.euler, lambda e: np.degrees(e[:, 2])),
     }
-    # over the epochs with a known covariance
-    nees = {name: float(np.nanmean(values)) if values is not None and np.isfinite(values).any()
+    by_aiding = {}
+    if windows is not None:
+        inside = in_outage(errors.time, windows)
+        by_aiding = {"inside": _mean_nees(errors, inside), "outside": _mean_nees(errors, ~inside)}
+    return Evaluation(errors=errors, stats=stats, nees=_mean_nees(errors), offset_enu=offset,
+                      outages=outage_drifts(errors, windows, true) if windows is not None else (),
+                      nees_by_aiding=by_aiding)
+
+
+def _mean_nees(errors, epochs=slice(None)):
+    """Mean NEES of position, velocity and attitude over `epochs` with a known covariance."""
+    def mean(values):
+        values = None if values is None else values[epochs]
+        return float(np.nanmean(values)) if values is not None and np.isfinite(values).any() \
             else np.nan
-            for name, values in (("position", errors.nees_pos), ("velocity", errors.nees_vel),
-                                 ("attitude", errors.nees_att))}
-    return Evaluation(errors=errors, stats=stats, nees=nees, offset_enu=offset,
-                      outages=outage_drifts(errors, windows, true) if windows is not None else ())
+    return {"position": mean(errors.nees_pos), "velocity": mean(errors.nees_vel),
+            "attitude": mean(errors.nees_att)}
 
 
 def outage_drifts(errors, windows, truth=None):
@@ -366,7 +387,10 @@ def markdown_table(evaluation):
     if nees:
         lines += ["", "| NEES (mean, expect 3) | " + " | ".join(nees) + " |",
                   "|---|" + "---:|" * len(nees),
-                  "| | " + " | ".join(f"{value:.2f}" for value in nees.values()) + " |"]
+                  "| all epochs | " + " | ".join(f"{value:.2f}" for value in nees.values()) + " |"]
+        lines += [f"| {where} the outages | " + " | ".join(
+                      f"{values[name]:.2f}" for name in nees) + " |"
+                  for where, values in evaluation.nees_by_aiding.items()]
     if evaluation.outages:
         t0 = evaluation.errors.time[0]
         lines += ["", "| outage | start (s from first epoch) | length (s) | max horizontal (m) "
