@@ -99,9 +99,12 @@ def test_wheel_odometry_variances_delay_and_zero_speed():
 
 def test_a_profile_section_configures_the_filter_the_node_would():
     p = resolve(PARAMS, {"layout": "21", "lever_arm": [0.5, 0.0, 1.0],
-                         "nonholonomic_sigma_mps": [0.1, 0.05]})
+                         "nonholonomic_sigma_mps": [0.1, 0.05],
+                         "nonholonomic.lever_arm": [-1.2, 0.0, -0.8],
+                         "nonholonomic.rate_arm_m": 0.5})
     config = navigator_config(p, record=True)
     assert config.layout == "21" and config.nhc_sigma == (0.1, 0.05) and config.record
+    assert np.array_equal(config.nhc_lever_b, [-1.2, 0.0, -0.8]) and config.nhc_rate_arm == 0.5
     assert np.array_equal(config.lever_arm_b, [0.5, 0.0, 1.0])
     with pytest.raises(ParameterError, match="unknown parameter"):
         resolve(PARAMS, {"lever_arms": [0.0, 0.0, 0.0]})

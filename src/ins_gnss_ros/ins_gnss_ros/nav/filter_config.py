@@ -111,6 +111,13 @@ PARAMS = (
     Param("nonholonomic_sigma_mps", [0.0, 0.0],
           "wheeled-vehicle constraint noise (lateral, vertical), m/s; 0: learned or off "
           "(nonholonomic.learn)", 0.0, 10.0, length=2),
+    Param("nonholonomic.lever_arm", [0.0, 0.0, 0.0],
+          "point where the non-holonomic constraint holds (rear-axle centre) relative to the "
+          "IMU, base_link (FLU), m", -100.0, 100.0, length=3),
+    Param("nonholonomic.rate_arm_m", 0.0,
+          "how far the rear axle may be along x from nonholonomic.lever_arm, m: the yaw rate "
+          "times it widens the lateral constraint noise (a turn moves the IMU sideways)",
+          0.0, 100.0),
     Param("nonholonomic.learn", True,
           "without nonholonomic_sigma_mps: learn from the GNSS-aided solution whether the "
           "vehicle moves like a wheeled one (body lateral and vertical velocity RMS within "
@@ -218,6 +225,8 @@ def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
         sigma_tilt0=np.radians(p["init.tilt_sigma_deg"]), align_speed=p["align.speed_mps"],
         static_speed=p["align.static_speed_mps"], dr_timeout=p["dead_reckoning_after_s"],
         nhc_sigma=nhc if min(nhc) > 0.0 else None, nhc_learn=learn_nhc,
+        nhc_lever_b=np.array(p["nonholonomic.lever_arm"], float),
+        nhc_rate_arm=p["nonholonomic.rate_arm_m"],
         history=p["history_s"],
         wheel_lever_b=np.array(p["wheel.lever_arm"], float),
         floor_tau=p["forced.floor_tau_s"], confirm_time=p["forced.confirm_time_s"],
