@@ -258,7 +258,7 @@ def write_ordered(writer, messages) -> Counter:
 OUTPUT_BLOCK = 4096
 
 
-def output_messages(result, config, datum, frames, prefix="", sensor_errors=False) -> Iterator:
+def output_messages(result, config, datum, frames, prefix="") -> Iterator:
     """ins/state, nav/odom, nav/fix, /tf at every epoch of a recorded pass, nav/status once a
     second and /tf_static at the first, as (t_ns, topic, type name, CDR payload) in stamp
     order: the messages the nodes would publish for the solution.
@@ -283,8 +283,6 @@ def output_messages(result, config, datum, frames, prefix="", sensor_errors=Fals
     prefix : str
         Put before every topic name (``forward/``); /tf and /tf_static only for the solution
         without one (a bag holds one tree).
-    sensor_errors : bool
-        Fill the sensor-error fields of ins/state from ``result.estimates``.
     """
     from sensor_msgs.msg import NavSatStatus
 
@@ -334,8 +332,10 @@ def output_messages(result, config, datum, frames, prefix="", sensor_errors=Fals
         P = published_covariance(result.P[k], result.published_var[k])
         mode = result.mode[k]
         stamp = stamps_ns[k]
+        # The sensor errors the solution was compensated with, as the strapdown's ins/state
+        # carries its applied ones.
         errors = SensorErrors.of_estimates({name: values[k] for name, values in
-                                            result.estimates.items()}) if sensor_errors else None
+                                            result.estimates.items()})
         # The input's augmentation is not kept per epoch: a NAVIGATING solution is a FIX here.
         payloads = [(topic["ins/state"], types["ins/state"], ins_state_payloads(
                         stamp, lat, lon, h, v, q, [MODE_VALUES[m] for m in mode], errors=errors)),

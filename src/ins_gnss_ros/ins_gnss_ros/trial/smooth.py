@@ -122,8 +122,8 @@ def smooth(bag_path, profile_path, out, outages=None, point=None, exports=(),
     toc_smooth = time.perf_counter()
     # Both solutions (and their points) merged in stamp order, written as they are made.
     streams = []
-    for prefix, result, errors in (("", smoothed, True), (FORWARD_PREFIX, forward, False)):
-        streams.append(output_messages(result, config, run.datum, run.frames, prefix, errors))
+    for prefix, result in (("", smoothed), (FORWARD_PREFIX, forward)):
+        streams.append(output_messages(result, config, run.datum, run.frames, prefix))
         if lever is not None:
             streams.append(_point_messages(prefix + POINT_TOPIC, result, lever, *increments))
     with bagio.BagWriter(out / "bag", ordered=True) as writer:
