@@ -22,6 +22,7 @@ import numpy as np
 
 from ..magnetic.wmm import decimal_year, field_elements
 from .course import CourseFromFixes
+from .imu_timing import ImuTimingCheck
 from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
 from .measurement_types import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, SpeedLog, \
     StillImu, WheelOdometry, ZeroVelocity
@@ -193,6 +194,7 @@ class Aiding:
         self.last_accepted_t = -math.inf  # newest accepted update, s
         self.forced: set[str] = set()  # kinds forced in since the filter last NAVIGATED
         self._course = CourseFromFixes()
+        self.timing = ImuTimingCheck()  # the IMU's clock against the fixes' (for diagnostics)
         noise = navigator.config.noise
         self._rest = RestDetector(noise.accel_psd, noise.gyro_psd)
         self._wmm_declination = None  # at the datum, once a magnetic heading needs it
@@ -248,6 +250,7 @@ class Aiding:
         the IMU was lost and the filter aligns again. Returns None, "bridged" or "lost"."""
         interval = t - self.last_increment_t
         self.last_increment_t = t
+        self.timing.increment(t, dtheta, dv)
         gap = classify_gap(interval, dt, self.policy.max_imu_gap)
         if gap == LOST:
             self.report("imu lost: gap in increments beyond max_imu_gap_s, aligning again")
@@ -305,6 +308,7 @@ class Aiding:
         if self.datum is None:
             self.datum = (lat, lon, h)
         self._course.observe(t, lat, lon, h)
+        self.timing.fix(t, lat, lon, h)
         common_var = 0.0
         if assumed:
             # The assumed sigma is the receiver's unknown absolute accuracy, mostly an error

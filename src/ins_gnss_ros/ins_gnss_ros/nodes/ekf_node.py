@@ -257,6 +257,7 @@ class EkfNode(EkfServices, NavNode):
             self.diag.set_value("IMU noise at rest", nav.imu_noise_at_rest)
         if nav.learned_constraint is not None:
             self.diag.set_value("non-holonomic constraint", nav.learned_constraint)
+        self.diag.set_value("IMU time offset from turns", self.aiding.timing.summary())
         latency = nav.velocity_latency()
         if latency is not None:
             self.diag.set_value("gnss/vel latency estimate",

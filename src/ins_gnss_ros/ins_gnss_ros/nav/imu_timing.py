@@ -1,0 +1,154 @@
+"""The IMU's clock against GNSS time, checked on turns: the gyros' turn against the course's.
+
+IMU stamps that are s off GNSS time (a driver stamping on arrival, a log mapped onto GNSS time by
+its start and end) put every turn the gyros measure s early or late against the fixes, and an
+INS aided by those fixes errs by about the speed times the turn rate times s in every turn (on
+the bundled car drive a 75 ms error gave 0.3-0.5 m/s within a second of a sharp turn). Groves
+("Principles of GNSS, Inertial, and Multisensor Integrated Navigation Systems", 2nd ed., section
+14.1.5) treats such an offset as a filter state; this module measures it outside the filter, from
+two quantities that need no attitude: the rotation of the vehicle about the vertical (the gyro
+increments projected on the mean specific force, which is gravity whatever the mounting) and the
+turn of its course over ground (the fixes).
+
+For fixes p_(j-1), p_j, p_(j+1) the chord p_(j+1) - p_(j-1) points along the course at t_j to
+second order; the course turns by c_(j+1) - c_(j-1) between t_(j-1) and t_(j+1), and the IMU's
+rotation over the same GNSS-time interval is Y(t_(j+1) - s) - Y(t_(j-1) - s) on its own stamps
+(Y the accumulated vertical rotation; the stamps plus s are GNSS time, the sign of the
+imu_preprocessor's ``time_offset_s``). Summed squared differences over every such pair give, on
+a grid of candidate offsets, the one that fits; its sigma follows from the residual scatter and
+the yaw-rate changes that carry the information (linearised least squares:
+sigma^2 = residual variance / sum((w(t_(j+1)) - w(t_(j-1)))^2)).
+
+A check, not a correction: the course is that of the antenna, and a wheeled vehicle's antenna
+ahead of its rear axle slips sideways in proportion to the turn rate, which leads the course by
+about (distance to the axle) / speed; on the car drive the fitted offset was the same within 20
+ms at 3-5 m/s and at 10-14 m/s. A ship's drift angle in a turn would bias it more. Only fixes
+above MIN_SPEED (the course is defined) and equally spaced ones are used.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from .earth import ecef_to_enu_matrix, geodetic_to_ecef
+
+#: Candidate offsets, s: the IMU stamps plus the offset are GNSS time.
+OFFSETS = np.round(np.arange(-0.5, 0.5 + 1e-9, 0.005), 3)
+#: Least speed over the three fixes of a course, m/s.
+MIN_SPEED = 3.0
+#: Fixes farther apart than this ratio of the median spacing break the sequence.
+SPACING_TOLERANCE = 0.2
+#: An estimate is reported once its sigma is below this, s.
+REPORT_SIGMA = 0.02
+#: IMU history kept, s: a course change spans two fix intervals (2 s with 1 Hz fixes), and the
+#: candidate offsets reach half a second beyond either end.
+HISTORY_S = 4.0
+#: Least spacing of the stored rotation samples, s (linear interpolation between them is exact
+#: to a fraction of a millirad for a car's turns; a 1 kHz IMU does not need every sample kept).
+SAMPLE_S = 0.005
+#: Interval over which the turn rate at either end of a course change is taken, s.
+RATE_STEP_S = 0.01
+
+
+class ImuTimingCheck:
+    """Accumulates increments and fixes; :meth:`estimate` gives the offset that fits best."""
+
+    def __init__(self):
+        self._imu = deque()                 # (t, accumulated vertical rotation, rad)
+        self._rotation = 0.0
+        self._specific_force = np.zeros(3)  # accumulated dv: its direction is the body's up
+        self._fixes = deque(maxlen=4)       # (t, east, north) in the first fix's frame
+        self._frame = None                  # (ECEF origin, C_en)
+        self._courses = deque(maxlen=3)     # (t, course rad)
+        self._pending = deque()             # (t0, t1, course change) waiting for the IMU
+        self._cost = np.zeros(len(OFFSETS))
+        self._rate_change_sq = np.zeros(len(OFFSETS))
+        self.pairs = 0
+
+    def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray) -> None:
+        """An IMU increment ending at t (s, the IMU's stamps)."""
+        self._specific_force += dv
+        norm = math.sqrt(float(self._specific_force @ self._specific_force))
+        if norm == 0.0:
+            return
+        self._rotation += float(dtheta @ self._specific_force) / norm
+        if self._imu and t - self._imu[-1][0] < SAMPLE_S:
+            return
+        self._imu.append((t, self._rotation))
+        while self._imu[0][0] < t - HISTORY_S:
+            self._imu.popleft()
+        while self._pending and self._pending[0][1] + OFFSETS[-1] + RATE_STEP_S <= t:
+            self._compare(*self._pending.popleft())
+
+    def fix(self, t: float, lat: float, lon: float, h: float) -> None:
+        """A GNSS fix at t (s, GNSS time), geodetic rad and m."""
+        r = geodetic_to_ecef(lat, lon, h)
+        if self._frame is None:
+            self._frame = (r, ecef_to_enu_matrix(lat, lon))
+        east, north, _ = self._frame[1] @ (r - self._frame[0])
+        if self._fixes and not self._regular(t):
+            self._fixes.clear()
+            self._courses.clear()
+        self._fixes.append((t, east, north))
+        if len(self._fixes) < 3:
+            return
+        (t0, e0, n0), (t1, _, _), (t2, e2, n2) = list(self._fixes)[-3:]
+        speed = math.hypot(e2 - e0, n2 - n0) / (t2 - t0)
+        if speed < MIN_SPEED:
+            self._courses.clear()
+            return
+        course = math.atan2(n2 - n0, e2 - e0)
+        self._courses.append((t1, course))
+        if len(self._courses) == 3:
+            (ta, ca), _, (tb, cb) = self._courses
+            turn = math.remainder(cb - ca, 2.0 * math.pi)
+            self._pending.append((ta, tb, turn))
+
+    def _regular(self, t: float) -> bool:
+        """The fix at t continues the equally spaced sequence."""
+        times = [f[0] for f in self._fixes]
+        spacing = t - times[-1]
+        if len(times) < 2:
+            return spacing > 0.0
+        last = times[-1] - times[-2]
+        return abs(spacing - last) <= SPACING_TOLERANCE * last
+
+    def _compare(self, t0: float, t1: float, turn: float) -> None:
+        """One course change against the IMU's rotation over [t0 - s, t1 - s] for every s."""
+        if not self._imu or self._imu[0][0] > t0 - OFFSETS[-1]:
+            return  # the IMU history does not reach back to the interval
+        t_imu, y_imu = np.array(self._imu).T
+        y0 = np.interp(t0 - OFFSETS, t_imu, y_imu)
+        y1 = np.interp(t1 - OFFSETS, t_imu, y_imu)
+        self._cost += (turn - (y1 - y0)) ** 2
+        # d(residual)/ds = w(t1 - s) - w(t0 - s), from the rotation's slope at each end
+        w0 = (np.interp(t0 - OFFSETS + RATE_STEP_S, t_imu, y_imu) - y0) / RATE_STEP_S
+        w1 = (np.interp(t1 - OFFSETS + RATE_STEP_S, t_imu, y_imu) - y1) / RATE_STEP_S
+        self._rate_change_sq += (w1 - w0) ** 2
+        self.pairs += 1
+
+    def estimate(self) -> tuple[float, float] | None:
+        """(offset s, sigma s): the IMU stamps plus the offset are GNSS time; None before any
+        turn was seen."""
+        if self.pairs < 3:
+            return None
+        k = int(np.argmin(self._cost))
+        if self._rate_change_sq[k] <= 0.0:
+            return None
+        # Adjacent course changes share a course, so this sigma is somewhat optimistic.
+        residual_var = self._cost[k] / max(self.pairs - 1, 1)
+        return float(OFFSETS[k]), math.sqrt(residual_var / self._rate_change_sq[k])
+
+    def summary(self) -> str:
+        """For /diagnostics."""
+        est = self.estimate()
+        if est is None or est[1] > REPORT_SIGMA:
+            return (f"needs turns above {MIN_SPEED:g} m/s: {self.pairs} course changes so far"
+                    + ("" if est is None else f", {1e3 * est[0]:+.0f} +- {1e3 * est[1]:.0f} ms"))
+        offset, sigma = est
+        verdict = "in step" if abs(offset) <= max(3.0 * sigma, 0.01) else \
+            "the IMU stamps are off GNSS time: add it to imu_preprocessor time_offset_s"
+        return (f"{1e3 * offset:+.0f} +- {1e3 * sigma:.0f} ms from {self.pairs} course changes "
+                f"(gyro turn vs course over ground): {verdict}")
