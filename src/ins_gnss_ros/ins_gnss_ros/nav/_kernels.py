@@ -673,12 +673,10 @@ def _rotate(q, x0, x1, x2):
             x2 + q[0] * t2 + (u0 * t1 - u1 * t0))
 
 
-@guvectorize(["void(float64[:], float64[:], float64[:], float64[:], float64, float64, "
-              "float64[:])"], "(n),(m),(n),(n),(),()->(n)", cache=True)
-def lever_arm_velocity(v, q, w, l, lat, omega, out):
-    """v + C (w × l) - w_ie × (C l); see lever_arm.lever_arm_velocity (a gufunc: numpy
-    broadcasts the leading dimensions, at a fraction of the cost of the chain of small array
-    operations for the single vectors of the filter epochs)."""
+@njit(cache=True)
+def point_velocity(v, q, w, l, lat, omega, out):
+    """v + C (w × l) - w_ie × (C l) of one point (3-vectors; lever_arm.point_velocity, at
+    every GNSS fix, where the gufunc's broadcasting costs more than the arithmetic)."""
     l0, l1, l2 = _rotate(q, l[0], l[1], l[2])
     a0, a1, a2 = _rotate(q, w[1] * l[2] - w[2] * l[1], w[2] * l[0] - w[0] * l[2],
                          w[0] * l[1] - w[1] * l[0])
@@ -688,6 +686,15 @@ def lever_arm_velocity(v, q, w, l, lat, omega, out):
     out[0] = v[0] + a0 - (e1 * l2 - e2 * l1)
     out[1] = v[1] + a1 - (e2 * l0 - 0.0 * l2)
     out[2] = v[2] + a2 - (0.0 * l1 - e1 * l0)
+
+
+@guvectorize(["void(float64[:], float64[:], float64[:], float64[:], float64, float64, "
+              "float64[:])"], "(n),(m),(n),(n),(),()->(n)", cache=True)
+def lever_arm_velocity(v, q, w, l, lat, omega, out):
+    """:func:`point_velocity` over the leading dimensions; see lever_arm.lever_arm_velocity
+    (a gufunc: numpy broadcasts them, at a fraction of the cost of a chain of array
+    operations)."""
+    point_velocity(v, q, w, l, lat, omega, out)
 
 
 @njit(cache=True)

@@ -39,7 +39,7 @@ from .gating import rejected
 from .imu_buffer import ImuBuffer
 from .imu_gaps import BridgedGaps
 from .integrity import Integrity, rejection_start
-from .lever_arm import lever_arm_velocity
+from .lever_arm import point_velocity
 from .measurement_types import GNSS_TYPES, GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, \
     SatelliteRanges, SpeedLog, StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
@@ -458,7 +458,7 @@ class Navigator:
         if self._held_for_alignment(m, epoch):
             return
         self._fix_common_var = m.common_var
-        v_ant = lever_arm_velocity(st.v_enu, st.q_nb, s.omega, self._lever, st.lat)
+        v_ant = point_velocity(st.v_enu, st.q_nb, s.omega, self._lever, st.lat)
         innov = meas.gnss_position(self._space, st, m.lat, m.lon, m.h, m.cov_enu, self._lever,
                                    dzdt=v_ant)
         if self._at_rest(epoch) and not s.heading_known:

@@ -21,7 +21,7 @@ def extrapolate(state, dt, a_enu):
     # several times the kernel's call.
     lat, lon, h = _kernels.extrapolate(float(state.lat), float(state.lon), float(state.h),
                                        state.v_enu, a_enu, float(dt), WGS84.a, WGS84.e2, v)
-    return NavState(lat, lon, h, v, state.q_nb, state.t + dt)
+    return NavState.taking(lat, lon, h, v, state.q_nb.copy(), state.t + dt)
 
 
 def propagate(s, rows, noise, cov_interval, gaps, space):
@@ -73,7 +73,7 @@ def propagate(s, rows, noise, cov_interval, gaps, space):
         WGS84.kernel_params, v, q, s.a_enu, s.omega, F, rebuild, ekf.space.layout.sensor_plan,
         MISALIGN_COLUMNS, np.ascontiguousarray(ekf.P, float), Q, int(ekf.order))
     ekf.predicted(F, phi, P)
-    s.nav = NavState(lat, lon, h, v, q, float(t[-1]))
+    s.nav = NavState.taking(lat, lon, h, v, q, float(t[-1]))
     s.omega_time = T
     if gaps.gaps:
         gaps.add_noise(s.ekf.P, space, start.t, s.nav.t, s.heading_known)
