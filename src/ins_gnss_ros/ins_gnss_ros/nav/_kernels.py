@@ -451,15 +451,75 @@ def covariance_step(F, refresh, lat, h, v, q, f_b, w_ib_b, ell_par, sensors, mis
 
 
 @njit(cache=True)
-def time_update(lat, lon, h, v, q, th, dv, cth, cdv, dts, T, gyro_bias, gyro_scale, accel_bias,
+def numpy_sum(a):
+    """ndarray.sum of a float64 array (n,), with its bits: numpy's pairwise summation, in its
+    order (blocks of up to 128 values by :func:`_block_sum`; a longer run is split into halves,
+    the first cut down to a multiple of 8, each summed so and the two sums added). The halving
+    is a stack of tasks here: numba's cache does not keep recursive functions safely."""
+    tasks = np.empty((192, 2), np.int64)  # (first, length), length -1: add the last two sums
+    sums = np.empty(64)
+    tasks[0, 0], tasks[0, 1] = 0, a.shape[0]
+    n_tasks, n_sums = 1, 0
+    while n_tasks:
+        n_tasks -= 1
+        lo, n = tasks[n_tasks, 0], tasks[n_tasks, 1]
+        if n < 0:
+            n_sums -= 1
+            sums[n_sums - 1] += sums[n_sums]
+        elif n <= 128:
+            sums[n_sums] = _block_sum(a, lo, n)
+            n_sums += 1
+        else:
+            half = n // 2
+            half -= half % 8
+            # Run in the reverse order of pushing: the first half, the second, their sum.
+            tasks[n_tasks, 0], tasks[n_tasks, 1] = 0, -1
+            tasks[n_tasks + 1, 0], tasks[n_tasks + 1, 1] = lo + half, n - half
+            tasks[n_tasks + 2, 0], tasks[n_tasks + 2, 1] = lo, half
+            n_tasks += 3
+    return sums[0]
+
+
+@njit(cache=True)
+def _block_sum(a, lo, n):
+    """numpy's sum of a[lo:lo + n], n <= 128: a plain loop under 8 values, else eight partial
+    sums over blocks of 8, added pairwise, then the rest one by one."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r = a[lo:lo + 8].copy()
+    i = 8
+    while i < n - n % 8:
+        for j in range(8):
+            r[j] += a[lo + i + j]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    for k in range(i, n):
+        res += a[lo + k]
+    return res
+
+
+@njit(cache=True)
+def time_update(lat, lon, h, v, q, t0, t, th, dv, cth, cdv, gyro_bias, gyro_scale, accel_bias,
                 accel_scale, ell_par, out_v, out_q, a_enu, omega, F, refresh, sensors,
                 misalign_index, P, Q, order):
-    """The navigator's time update of one segment (propagation.propagate): the solution (lat,
-    lon, h, v, q) mechanised over the samples by :func:`mech_segment` at their mean step T / N
-    into (returned lat, lon, h) out_v, out_q; the segment's mean acceleration (ENU) and
-    compensated rate into a_enu, omega; the covariance by :func:`covariance_step` with the
-    model at the segment's start and its mean specific force. Returns (lat, lon, h, phi, P).
+    """The navigator's time update of one segment (propagation.propagate): the samples' steps
+    from their end times t (N,) after the solution's time t0 (at least 1 us each) and their
+    sum T; the solution (lat, lon, h, v, q) mechanised over the samples by
+    :func:`mech_segment` at their mean step T / N into (returned lat, lon, h) out_v, out_q;
+    the segment's mean acceleration (ENU) and compensated rate into a_enu, omega; the
+    covariance by :func:`covariance_step` with the model at the segment's start and its mean
+    specific force. Returns (lat, lon, h, T, phi, P).
     """
+    dts = np.empty(t.shape[0])
+    prev = t0
+    for i in range(t.shape[0]):
+        d = t[i] - prev
+        dts[i] = 1e-6 if d < 1e-6 else d  # np.maximum's, a NaN kept
+        prev = t[i]
+    T = numpy_sum(dts)
     sums = np.empty((2, 3))
     out_v[:] = v
     out_q[:] = q
@@ -473,7 +533,7 @@ def time_update(lat, lon, h, v, q, th, dv, cth, cdv, dts, T, gyro_bias, gyro_sca
         f_b[j] = sums[1, j] / T
     phi, P = covariance_step(F, refresh, lat, h, v, q, f_b, omega, ell_par, sensors,
                              misalign_index, P, Q, T, order)
-    return lat1, lon1, h1, phi, P
+    return lat1, lon1, h1, T, phi, P
 
 
 @njit(cache=True)
