@@ -151,6 +151,14 @@ def correct(lat, lon, h, v, q, dpos, dv, phi, a, e2, out_v, out_q):
 
 
 @njit(cache=True)
+def correct_by_state(lat, lon, h, v, q, dx, pos, vel, att, a, e2, out_v, out_q):
+    """:func:`correct` by the position, velocity and attitude errors of an error state dx
+    (its blocks of 3 from `pos`, `vel`, `att`): the filter's feedback without slicing dx."""
+    return correct(lat, lon, h, v, q, dx[pos:pos + 3], dx[vel:vel + 3], dx[att:att + 3], a, e2,
+                   out_v, out_q)
+
+
+@njit(cache=True)
 def mech_run(lat, lon, h, v0, q0, dths, dvs, dt, ell_par, h_ref, k1, k2):
     """Run :func:`mech_step` over N increments; returns arrays with N + 1 rows."""
     n = dths.shape[0]

@@ -238,6 +238,19 @@ def apply_correction(state: NavState, dpos_enu_m, dv_enu, phi_enu,
     return NavState.taking(lat, lon, h, v, q, state.t)
 
 
+def apply_error_state(state: NavState, dx, pos: int, vel: int, att: int,
+                      ell: Ellipsoid = WGS84) -> NavState:
+    """:func:`apply_correction` with the errors of the error state dx (float array), whose
+    position, velocity and attitude blocks start at `pos`, `vel`, `att` (the filter's
+    feedback, twice a sample on a vessel with position and heading)."""
+    v = np.empty(3)
+    q = np.empty(4)
+    lat, lon, h = _kernels.correct_by_state(float(state.lat), float(state.lon), float(state.h),
+                                            state.v_enu, state.q_nb, dx, pos, vel, att, ell.a,
+                                            ell.e2, v, q)
+    return NavState.taking(lat, lon, h, v, q, state.t)
+
+
 def correction_to(state: NavState, target: NavState, ell: Ellipsoid = WGS84):
     """The errors (dpos_enu_m, dv_enu, phi_enu) whose removal by :func:`apply_correction` puts
     ``state`` on ``target`` exactly, however far apart they are.
