@@ -586,7 +586,7 @@ def _times_ht(A, H, cols):
 
 
 @njit(cache=True)
-def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance):
+def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance, nu, s_diag, x_new, P_new):
     """Gated update of ekf.ErrorStateEKF.update.
 
     nu = z - H x, S = H P H^T + R (symmetrised), NIS = |L^-1 nu|^2 with L the Cholesky factor
@@ -599,8 +599,10 @@ def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance):
     than in the arithmetic that matters. The Joseph form is formed as B = P - K (H P),
     B - (B H^T - K R) K^T: the same products regrouped.
 
-    Returns (nu, diag(S), nis, x, P): x and P the arguments themselves when the measurement is
-    not applied. Raises LinAlgError if S is not positive definite, as np.linalg.cholesky does.
+    The results go into the caller's arrays (returning new ones costs the call more than the
+    arithmetic): nu (m,), diag(S) into s_diag (m,), and, when the measurement is applied, x
+    into x_new (n,) and P into P_new (n, n). Returns (nis, applied). Raises LinAlgError if S is
+    not positive definite, as np.linalg.cholesky does.
     """
     n, m = P.shape[0], H.shape[0]
     cols = np.empty(n, np.int64)
@@ -615,9 +617,9 @@ def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance):
     PHt = _times_ht(P, H, cols)
     S = _times_ht(H, np.ascontiguousarray(PHt.T), cols) + R
     S = 0.5 * (S + S.T)
-    s_diag = np.diag(S).copy()
-    nu = z.copy()
     for j in range(m):
+        s_diag[j] = S[j, j]
+        nu[j] = z[j]
         for k in cols:
             nu[j] -= H[j, k] * x[k]
     L = np.linalg.cholesky(S)
@@ -626,11 +628,11 @@ def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance):
     for i in range(m):
         nis += w[i, 0] * w[i, 0]
     if not (nis <= gate or force):
-        return nu, s_diag, nis, x, P
+        return nis, False
     Kt = _solve_upper_t(L, _solve_lower(L, np.ascontiguousarray(PHt.T)))
     K = np.ascontiguousarray(Kt.T)
-    x_new = x.copy()
     for i in range(n):
+        x_new[i] = x[i]
         for j in range(m):
             x_new[i] += K[i, j] * nu[j]
     # B = (I - K H) P = P - K (H P), with H P by the rows of P that H touches.
@@ -640,7 +642,8 @@ def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance):
             a = H[i, k]
             for j in range(n):
                 HP[i, j] += a * P[k, j]
-    B = P.copy()
+    B = P_new
+    B[:, :] = P
     for i in range(n):
         for k in range(m):
             a = K[i, k]
@@ -664,7 +667,7 @@ def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance):
             B[i, j] = B[j, i] = 0.5 * (B[i, j] + B[j, i])
         if B[i, i] < min_variance:
             B[i, i] = min_variance
-    return nu, s_diag, nis, x_new, B
+    return nis, True
 
 
 @njit(cache=True)
