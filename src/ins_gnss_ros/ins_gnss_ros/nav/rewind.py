@@ -120,7 +120,7 @@ def _independent(value):
     if isinstance(value, ErrorStateEKF):
         # Its model and noise are replaced, never changed in place: only P and x are copied
         # (its attributes taken as they are: copy.copy costs three times more).
-        ekf = object.__new__(ErrorStateEKF)
+        ekf = object.__new__(type(value))
         ekf.__dict__.update(value.__dict__)
         ekf.P, ekf.x = value.P.copy(), value.x.copy()
         return ekf
