@@ -1,7 +1,8 @@
 """The navigator's time update of a segment (nav/propagation.py): its compiled loop
 (_kernels.mech_segment) against the two modules it stands for, SensorErrors.compensate and
-strapdown.run, and the whole compiled step (_kernels.time_update) against that loop and the
-filter's own prediction (ErrorStateEKF.predict)."""
+strapdown.run, the compiled sum of its steps against numpy's, and the whole compiled step
+(_kernels.time_update) against that loop and the filter's own prediction
+(ErrorStateEKF.predict)."""
 import numpy as np
 
 from ins_gnss_ros.nav import _kernels
@@ -45,6 +46,15 @@ def test_the_compiled_segment_equals_compensation_then_mechanisation():
     np.testing.assert_allclose(v, ref["v_enu"][-1], rtol=0, atol=1e-12)
     np.testing.assert_allclose(q, ref["q_nb"][-1], rtol=0, atol=1e-14)
     np.testing.assert_allclose(sums, [c_th.sum(axis=0), c_dv.sum(axis=0)], rtol=0, atol=1e-15)
+
+
+def test_the_compiled_sum_is_numpys_bit_for_bit():
+    # Every length up to past two of numpy's 128-value blocks, steps as the IMU's jitter them.
+    rng = np.random.default_rng(11)
+    for n in range(1, 300):
+        for _ in range(5):
+            a = 0.005 + 1e-4 * rng.standard_normal(n)
+            assert _kernels.numpy_sum(a) == a.sum()
 
 
 def test_the_compiled_time_update_is_the_segment_loop_then_the_filter_prediction():

@@ -151,6 +151,14 @@ def correct(lat, lon, h, v, q, dpos, dv, phi, a, e2, out_v, out_q):
 
 
 @njit(cache=True)
+def correct_by_state(lat, lon, h, v, q, dx, pos, vel, att, a, e2, out_v, out_q):
+    """:func:`correct` by the position, velocity and attitude errors of an error state dx
+    (its blocks of 3 from `pos`, `vel`, `att`): the filter's feedback without slicing dx."""
+    return correct(lat, lon, h, v, q, dx[pos:pos + 3], dx[vel:vel + 3], dx[att:att + 3], a, e2,
+                   out_v, out_q)
+
+
+@njit(cache=True)
 def mech_run(lat, lon, h, v0, q0, dths, dvs, dt, ell_par, h_ref, k1, k2):
     """Run :func:`mech_step` over N increments; returns arrays with N + 1 rows."""
     n = dths.shape[0]
@@ -451,15 +459,75 @@ def covariance_step(F, refresh, lat, h, v, q, f_b, w_ib_b, ell_par, sensors, mis
 
 
 @njit(cache=True)
-def time_update(lat, lon, h, v, q, th, dv, cth, cdv, dts, T, gyro_bias, gyro_scale, accel_bias,
+def numpy_sum(a):
+    """ndarray.sum of a float64 array (n,), with its bits: numpy's pairwise summation, in its
+    order (blocks of up to 128 values by :func:`_block_sum`; a longer run is split into halves,
+    the first cut down to a multiple of 8, each summed so and the two sums added). The halving
+    is a stack of tasks here: numba's cache does not keep recursive functions safely."""
+    tasks = np.empty((192, 2), np.int64)  # (first, length), length -1: add the last two sums
+    sums = np.empty(64)
+    tasks[0, 0], tasks[0, 1] = 0, a.shape[0]
+    n_tasks, n_sums = 1, 0
+    while n_tasks:
+        n_tasks -= 1
+        lo, n = tasks[n_tasks, 0], tasks[n_tasks, 1]
+        if n < 0:
+            n_sums -= 1
+            sums[n_sums - 1] += sums[n_sums]
+        elif n <= 128:
+            sums[n_sums] = _block_sum(a, lo, n)
+            n_sums += 1
+        else:
+            half = n // 2
+            half -= half % 8
+            # Run in the reverse order of pushing: the first half, the second, their sum.
+            tasks[n_tasks, 0], tasks[n_tasks, 1] = 0, -1
+            tasks[n_tasks + 1, 0], tasks[n_tasks + 1, 1] = lo + half, n - half
+            tasks[n_tasks + 2, 0], tasks[n_tasks + 2, 1] = lo, half
+            n_tasks += 3
+    return sums[0]
+
+
+@njit(cache=True)
+def _block_sum(a, lo, n):
+    """numpy's sum of a[lo:lo + n], n <= 128: a plain loop under 8 values, else eight partial
+    sums over blocks of 8, added pairwise, then the rest one by one."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r = a[lo:lo + 8].copy()
+    i = 8
+    while i < n - n % 8:
+        for j in range(8):
+            r[j] += a[lo + i + j]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    for k in range(i, n):
+        res += a[lo + k]
+    return res
+
+
+@njit(cache=True)
+def time_update(lat, lon, h, v, q, t0, t, th, dv, cth, cdv, gyro_bias, gyro_scale, accel_bias,
                 accel_scale, ell_par, out_v, out_q, a_enu, omega, F, refresh, sensors,
                 misalign_index, P, Q, order):
-    """The navigator's time update of one segment (propagation.propagate): the solution (lat,
-    lon, h, v, q) mechanised over the samples by :func:`mech_segment` at their mean step T / N
-    into (returned lat, lon, h) out_v, out_q; the segment's mean acceleration (ENU) and
-    compensated rate into a_enu, omega; the covariance by :func:`covariance_step` with the
-    model at the segment's start and its mean specific force. Returns (lat, lon, h, phi, P).
+    """The navigator's time update of one segment (propagation.propagate): the samples' steps
+    from their end times t (N,) after the solution's time t0 (at least 1 us each) and their
+    sum T; the solution (lat, lon, h, v, q) mechanised over the samples by
+    :func:`mech_segment` at their mean step T / N into (returned lat, lon, h) out_v, out_q;
+    the segment's mean acceleration (ENU) and compensated rate into a_enu, omega; the
+    covariance by :func:`covariance_step` with the model at the segment's start and its mean
+    specific force. Returns (lat, lon, h, T, phi, P).
     """
+    dts = np.empty(t.shape[0])
+    prev = t0
+    for i in range(t.shape[0]):
+        d = t[i] - prev
+        dts[i] = 1e-6 if d < 1e-6 else d  # np.maximum's, a NaN kept
+        prev = t[i]
+    T = numpy_sum(dts)
     sums = np.empty((2, 3))
     out_v[:] = v
     out_q[:] = q
@@ -473,7 +541,7 @@ def time_update(lat, lon, h, v, q, th, dv, cth, cdv, dts, T, gyro_bias, gyro_sca
         f_b[j] = sums[1, j] / T
     phi, P = covariance_step(F, refresh, lat, h, v, q, f_b, omega, ell_par, sensors,
                              misalign_index, P, Q, T, order)
-    return lat1, lon1, h1, phi, P
+    return lat1, lon1, h1, T, phi, P
 
 
 @njit(cache=True)
@@ -518,7 +586,7 @@ def _times_ht(A, H, cols):
 
 
 @njit(cache=True)
-def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance):
+def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance, nu, s_diag, x_new, P_new):
     """Gated update of ekf.ErrorStateEKF.update.
 
     nu = z - H x, S = H P H^T + R (symmetrised), NIS = |L^-1 nu|^2 with L the Cholesky factor
@@ -531,8 +599,10 @@ def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance):
     than in the arithmetic that matters. The Joseph form is formed as B = P - K (H P),
     B - (B H^T - K R) K^T: the same products regrouped.
 
-    Returns (nu, diag(S), nis, x, P): x and P the arguments themselves when the measurement is
-    not applied. Raises LinAlgError if S is not positive definite, as np.linalg.cholesky does.
+    The results go into the caller's arrays (returning new ones costs the call more than the
+    arithmetic): nu (m,), diag(S) into s_diag (m,), and, when the measurement is applied, x
+    into x_new (n,) and P into P_new (n, n). Returns (nis, applied). Raises LinAlgError if S is
+    not positive definite, as np.linalg.cholesky does.
     """
     n, m = P.shape[0], H.shape[0]
     cols = np.empty(n, np.int64)
@@ -547,9 +617,9 @@ def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance):
     PHt = _times_ht(P, H, cols)
     S = _times_ht(H, np.ascontiguousarray(PHt.T), cols) + R
     S = 0.5 * (S + S.T)
-    s_diag = np.diag(S).copy()
-    nu = z.copy()
     for j in range(m):
+        s_diag[j] = S[j, j]
+        nu[j] = z[j]
         for k in cols:
             nu[j] -= H[j, k] * x[k]
     L = np.linalg.cholesky(S)
@@ -558,11 +628,11 @@ def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance):
     for i in range(m):
         nis += w[i, 0] * w[i, 0]
     if not (nis <= gate or force):
-        return nu, s_diag, nis, x, P
+        return nis, False
     Kt = _solve_upper_t(L, _solve_lower(L, np.ascontiguousarray(PHt.T)))
     K = np.ascontiguousarray(Kt.T)
-    x_new = x.copy()
     for i in range(n):
+        x_new[i] = x[i]
         for j in range(m):
             x_new[i] += K[i, j] * nu[j]
     # B = (I - K H) P = P - K (H P), with H P by the rows of P that H touches.
@@ -572,7 +642,8 @@ def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance):
             a = H[i, k]
             for j in range(n):
                 HP[i, j] += a * P[k, j]
-    B = P.copy()
+    B = P_new
+    B[:, :] = P
     for i in range(n):
         for k in range(m):
             a = K[i, k]
@@ -596,7 +667,7 @@ def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance):
             B[i, j] = B[j, i] = 0.5 * (B[i, j] + B[j, i])
         if B[i, i] < min_variance:
             B[i, i] = min_variance
-    return nu, s_diag, nis, x_new, B
+    return nis, True
 
 
 @njit(cache=True)
@@ -673,12 +744,10 @@ def _rotate(q, x0, x1, x2):
             x2 + q[0] * t2 + (u0 * t1 - u1 * t0))
 
 
-@guvectorize(["void(float64[:], float64[:], float64[:], float64[:], float64, float64, "
-              "float64[:])"], "(n),(m),(n),(n),(),()->(n)", cache=True)
-def lever_arm_velocity(v, q, w, l, lat, omega, out):
-    """v + C (w × l) - w_ie × (C l); see lever_arm.lever_arm_velocity (a gufunc: numpy
-    broadcasts the leading dimensions, at a fraction of the cost of the chain of small array
-    operations for the single vectors of the filter epochs)."""
+@njit(cache=True)
+def point_velocity(v, q, w, l, lat, omega, out):
+    """v + C (w × l) - w_ie × (C l) of one point (3-vectors; lever_arm.point_velocity, at
+    every GNSS fix, where the gufunc's broadcasting costs more than the arithmetic)."""
     l0, l1, l2 = _rotate(q, l[0], l[1], l[2])
     a0, a1, a2 = _rotate(q, w[1] * l[2] - w[2] * l[1], w[2] * l[0] - w[0] * l[2],
                          w[0] * l[1] - w[1] * l[0])
@@ -688,6 +757,15 @@ def lever_arm_velocity(v, q, w, l, lat, omega, out):
     out[0] = v[0] + a0 - (e1 * l2 - e2 * l1)
     out[1] = v[1] + a1 - (e2 * l0 - 0.0 * l2)
     out[2] = v[2] + a2 - (0.0 * l1 - e1 * l0)
+
+
+@guvectorize(["void(float64[:], float64[:], float64[:], float64[:], float64, float64, "
+              "float64[:])"], "(n),(m),(n),(n),(),()->(n)", cache=True)
+def lever_arm_velocity(v, q, w, l, lat, omega, out):
+    """:func:`point_velocity` over the leading dimensions; see lever_arm.lever_arm_velocity
+    (a gufunc: numpy broadcasts them, at a fraction of the cost of a chain of array
+    operations)."""
+    point_velocity(v, q, w, l, lat, omega, out)
 
 
 @njit(cache=True)

@@ -290,14 +290,16 @@ class Aiding:
             self.report("gnss/fix without a fix ignored", log=False)
             return self._seen("gnss/fix", t, False)
         cov = np.asarray(cov, float)
+        # (the covariance's checks on Python floats: numpy's on a 3 x 3 cost several times more
+        # at every fix)
         if not (math.isfinite(lat_deg) and math.isfinite(lon_deg) and math.isfinite(h)
-                and np.isfinite(cov).all()):
+                and all(map(math.isfinite, cov.ravel().tolist()))):
             self.report("non-finite gnss/fix rejected")
             return self._seen("gnss/fix", t, False)
         if not HEIGHT_RANGE[0] <= h <= HEIGHT_RANGE[1]:
             self.report("implausible gnss/fix altitude rejected")
             return self._seen("gnss/fix", t, False)
-        assumed = not covariance_known or not (cov.diagonal() > 0.0).all()
+        assumed = not covariance_known or not all(v > 0.0 for v in cov.diagonal().tolist())
         if assumed:
             sigma = UNKNOWN_FIX_SIGMA[min(status, 2)]
             cov = np.diag([sigma ** 2, sigma ** 2, (2.0 * sigma) ** 2])

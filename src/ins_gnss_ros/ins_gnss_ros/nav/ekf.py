@@ -261,13 +261,17 @@ class ErrorStateEKF:
         UpdateResult
         """
         z, H, R = _kernel_array(z, 1), _kernel_array(H, 2), _kernel_array(R, 2)
-        gate = chi2_gate(len(z), gate_prob) if gate_prob is not None else np.inf
+        m, n = len(z), len(self.x)
+        gate = chi2_gate(m, gate_prob) if gate_prob is not None else np.inf
         # One compiled call for the whole update (innovation, S, NIS, gain, state, Joseph
         # form); the numpy version spent most of its time in the overhead of some twenty
         # small-array operations.
-        nu, s_diag, nis, self.x, self.P = _kernels.kalman_update(
+        nu, s_diag, x, P = np.empty(m), np.empty(m), np.empty(n), np.empty((n, n))
+        nis, applied = _kernels.kalman_update(
             np.ascontiguousarray(self.P, dtype=float), self.x, H, R, z, gate, force,
-            self.joseph, MIN_VARIANCE)
+            self.joseph, MIN_VARIANCE, nu, s_diag, x, P)
+        if applied:
+            self.x, self.P = x, P
         ok = nis <= gate
         return UpdateResult(name, float(t), nu, s_diag, nis, gate, ok or force,
                             "ok" if ok else ("forced" if force else "gated"))

@@ -67,6 +67,14 @@ def lever_arm_velocity(v_enu, q_nb, omega_ib_b, l_b, lat, ell: Ellipsoid = WGS84
     return _kernels.lever_arm_velocity(v_enu, q_nb, omega_ib_b, l_b, lat, ell.omega)
 
 
+def point_velocity(v_enu, q_nb, omega_ib_b, l_b, lat, ell: Ellipsoid = WGS84):
+    """:func:`lever_arm_velocity` of one point: v_enu, omega_ib_b, l_b float arrays (3,), q_nb
+    (4,), lat a float (the navigator's solution; at every fix, without the broadcasting)."""
+    out = np.empty(3)
+    _kernels.point_velocity(v_enu, q_nb, omega_ib_b, l_b, float(lat), ell.omega, out)
+    return out
+
+
 def lever_arm_velocity_jacobians(q_nb, omega_ib_b, l_b, lat, ell: Ellipsoid = WGS84):
     """Derivatives of :func:`lever_arm_velocity` for the error-state measurement models.
 

@@ -39,7 +39,7 @@ from .gating import rejected
 from .imu_buffer import ImuBuffer
 from .imu_gaps import BridgedGaps
 from .integrity import Integrity, rejection_start
-from .lever_arm import lever_arm_velocity
+from .lever_arm import point_velocity
 from .measurement_types import GNSS_TYPES, GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, \
     SatelliteRanges, SpeedLog, StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
@@ -48,7 +48,7 @@ from .recording import Recorder, published_covariance
 from .rest_noise import RestNoise
 from .rotations import quat_from_rotvec, quat_rotate
 from .rewind import Rewind, RunState
-from .strapdown import apply_correction
+from .strapdown import apply_error_state
 from .vehicle_constraint import LearnedConstraint
 
 #: A zero-velocity update tells the vehicle at rest for this long after its epoch, s (the
@@ -83,6 +83,7 @@ class Navigator:
         if "gs" in self._space or "ng" in self._space or "na" in self._space:
             raise ValueError("the navigator compensates bias and scale-factor blocks only")
         self._lever = np.asarray(config.lever_arm_b, float)
+        self._nav_blocks = tuple(self._space[name].start for name in ("pos", "vel", "att"))
         self._no_var = np.zeros(self._space.size)  # (_published_var: read, never written)
         self._no_var.flags.writeable = False
         # Corrections of the solution so far, pseudo-measurements (NHC, ZARU) included: what a
@@ -458,7 +459,7 @@ class Navigator:
         if self._held_for_alignment(m, epoch):
             return
         self._fix_common_var = m.common_var
-        v_ant = lever_arm_velocity(st.v_enu, st.q_nb, s.omega, self._lever, st.lat)
+        v_ant = point_velocity(st.v_enu, st.q_nb, s.omega, self._lever, st.lat)
         innov = meas.gnss_position(self._space, st, m.lat, m.lon, m.h, m.cov_enu, self._lever,
                                    dzdt=v_ant)
         if self._at_rest(epoch) and not s.heading_known:
@@ -631,7 +632,7 @@ class Navigator:
     def _feedback(self):
         s, S = self._state, self._space.slices
         dx = s.ekf.take_correction()
-        s.nav = apply_correction(s.nav, dx[S["pos"]], dx[S["vel"]], dx[S["att"]])
+        s.nav = apply_error_state(s.nav, dx, *self._nav_blocks)
         estimates = s.estimates
         for name, value in estimates.items():
             estimates[name] = value + dx[S[name]]

@@ -21,7 +21,7 @@ def extrapolate(state, dt, a_enu):
     # several times the kernel's call.
     lat, lon, h = _kernels.extrapolate(float(state.lat), float(state.lon), float(state.h),
                                        state.v_enu, a_enu, float(dt), WGS84.a, WGS84.e2, v)
-    return NavState(lat, lon, h, v, state.q_nb, state.t + dt)
+    return NavState.taking(lat, lon, h, v, state.q_nb.copy(), state.t + dt)
 
 
 def propagate(s, rows, noise, cov_interval, gaps, space):
@@ -48,13 +48,6 @@ def propagate(s, rows, noise, cov_interval, gaps, space):
         Transition matrix of the segment.
     """
     t, th, dv, cth, cdv = rows
-    # The state time is the end of the last processed sample (filled in place: np.diff
-    # with prepend and np.clip cost more than the arithmetic here).
-    dts = np.empty(len(t))
-    dts[0] = t[0] - s.nav.t
-    np.subtract(t[1:], t[:-1], out=dts[1:])
-    np.maximum(dts, 1e-6, out=dts)
-    T = float(dts.sum())
     start = s.nav
     ekf = s.ekf
     # F is rebuilt every cov_interval; shorter segments (cut by measurement epochs) reuse it.
@@ -62,18 +55,20 @@ def propagate(s, rows, noise, cov_interval, gaps, space):
     if refresh:
         s.t_model = start.t
     F, Q, rebuild = ekf.model(start, refresh)
-    # Compensation with the running estimates, coning terms, mechanisation, the model at the
-    # segment's start and its Picard step in one compiled call (a chain of numpy calls on
+    # The samples' steps (the state time is the end of the last processed sample) and their
+    # sum, compensation with the running estimates, coning terms, mechanisation, the model at
+    # the segment's start and its Picard step in one compiled call (a chain of numpy calls on
     # 20-sample arrays, and their glue, cost more than it).
     errors = SensorErrors.of_estimates(s.estimates)
     v, q, s.a_enu, s.omega = np.empty(3), np.empty(4), np.empty(3), np.empty(3)
-    lat, lon, h, phi, P = _kernels.time_update(
-        float(start.lat), float(start.lon), float(start.h), start.v_enu, start.q_nb, th, dv, cth,
-        cdv, dts, T, errors.gyro_bias, errors.gyro_scale, errors.accel_bias, errors.accel_scale,
-        WGS84.kernel_params, v, q, s.a_enu, s.omega, F, rebuild, ekf.space.layout.sensor_plan,
-        MISALIGN_COLUMNS, np.ascontiguousarray(ekf.P, float), Q, int(ekf.order))
+    lat, lon, h, T, phi, P = _kernels.time_update(
+        float(start.lat), float(start.lon), float(start.h), start.v_enu, start.q_nb,
+        float(start.t), t, th, dv, cth, cdv, errors.gyro_bias, errors.gyro_scale,
+        errors.accel_bias, errors.accel_scale, WGS84.kernel_params, v, q, s.a_enu, s.omega, F,
+        rebuild, ekf.space.layout.sensor_plan, MISALIGN_COLUMNS,
+        np.ascontiguousarray(ekf.P, float), Q, int(ekf.order))
     ekf.predicted(F, phi, P)
-    s.nav = NavState(lat, lon, h, v, q, float(t[-1]))
+    s.nav = NavState.taking(lat, lon, h, v, q, float(t[-1]))
     s.omega_time = T
     if gaps.gaps:
         gaps.add_noise(s.ekf.P, space, start.t, s.nav.t, s.heading_known)

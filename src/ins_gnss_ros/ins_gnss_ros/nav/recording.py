@@ -128,9 +128,9 @@ class _Columns:
         return self.data[name][:self.n] if self.data else np.empty(0)
 
     def last_values(self) -> dict:
-        """A copy of the current epoch's values."""
+        """A copy of the current epoch's values (an element of a column of scalars is one)."""
         k = self.n - 1
-        return {name: v[k].copy() if v.dtype != object else v[k] for name, v in self.data.items()}
+        return {name: v[k].copy() if v.ndim > 1 else v[k] for name, v in self.data.items()}
 
 
 class Recorder:

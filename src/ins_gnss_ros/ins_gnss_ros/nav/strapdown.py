@@ -94,6 +94,16 @@ class NavState:
         self.v_enu = np.array(self.v_enu, dtype=float)
         self.q_nb = np.array(self.q_nb, dtype=float)
 
+    @classmethod
+    def taking(cls, lat, lon, h, v_enu, q_nb, t):
+        """A state that takes the float arrays v_enu (3,) and q_nb (4,), which nothing else
+        holds, as they are: the filter makes several states a sample from arrays it has just
+        filled, where the constructor's copies and checks cost more than the rest."""
+        state = object.__new__(cls)
+        state.lat, state.lon, state.h, state.v_enu, state.q_nb, state.t = \
+            lat, lon, h, v_enu, q_nb, t
+        return state
+
 
 @dataclass(frozen=True)
 class VerticalDamping:
@@ -157,7 +167,7 @@ def strapdown_step(state: NavState, dtheta, dv, dt: float, ell: Ellipsoid = WGS8
         float(state.lat), float(state.lon), float(state.h), state.v_enu, state.q_nb,
         np.asarray(dtheta, float), np.asarray(dv, float), float(dt), ell.kernel_params,
         float(href), k1, k2, v, q)
-    return NavState(lat, lon, h, v, q, state.t + dt)
+    return NavState.taking(lat, lon, h, v, q, state.t + dt)
 
 
 def run(state0: NavState, dthetas, dvs, dt: float, ell: Ellipsoid = WGS84, h_ref=None,
@@ -225,7 +235,20 @@ def apply_correction(state: NavState, dpos_enu_m, dv_enu, phi_enu,
     lat, lon, h = _kernels.correct(
         float(state.lat), float(state.lon), float(state.h), state.v_enu, state.q_nb,
         _vector(dpos_enu_m), _vector(dv_enu), _vector(phi_enu), ell.a, ell.e2, v, q)
-    return NavState(lat, lon, h, v, q, state.t)
+    return NavState.taking(lat, lon, h, v, q, state.t)
+
+
+def apply_error_state(state: NavState, dx, pos: int, vel: int, att: int,
+                      ell: Ellipsoid = WGS84) -> NavState:
+    """:func:`apply_correction` with the errors of the error state dx (float array), whose
+    position, velocity and attitude blocks start at `pos`, `vel`, `att` (the filter's
+    feedback, twice a sample on a vessel with position and heading)."""
+    v = np.empty(3)
+    q = np.empty(4)
+    lat, lon, h = _kernels.correct_by_state(float(state.lat), float(state.lon), float(state.h),
+                                            state.v_enu, state.q_nb, dx, pos, vel, att, ell.a,
+                                            ell.e2, v, q)
+    return NavState.taking(lat, lon, h, v, q, state.t)
 
 
 def correction_to(state: NavState, target: NavState, ell: Ellipsoid = WGS84):

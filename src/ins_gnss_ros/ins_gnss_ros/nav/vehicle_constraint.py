@@ -28,6 +28,8 @@ confidence (a simulated car: heading 2.2 deg off, attitude NEES 162; with the st
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .rotations import quat_to_dcm
@@ -94,7 +96,7 @@ class LearnedConstraint:
         if t <= self.last_t:
             return
         # the first one stands for no time: nothing was learned before it
-        dt = min(t - self.last_t, MAX_STEP_S) if np.isfinite(self.last_t) else 0.0
+        dt = min(t - self.last_t, MAX_STEP_S) if math.isfinite(self.last_t) else 0.0
         self.last_t = t
         if np.hypot(v_enu[0], v_enu[1]) < MIN_SPEED:
             return
