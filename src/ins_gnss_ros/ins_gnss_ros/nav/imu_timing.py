@@ -32,7 +32,7 @@ from collections import deque
 
 import numpy as np
 
-from .earth import ecef_to_enu_matrix, geodetic_to_ecef
+from .earth import radii
 
 #: Candidate offsets, s: the IMU stamps plus the offset are GNSS time.
 OFFSETS = np.round(np.arange(-0.5, 0.5 + 1e-9, 0.005), 3)
@@ -58,9 +58,9 @@ class ImuTimingCheck:
     def __init__(self):
         self._imu = deque()                 # (t, accumulated vertical rotation, rad)
         self._rotation = 0.0
-        self._specific_force = np.zeros(3)  # accumulated dv: its direction is the body's up
-        self._fixes = deque(maxlen=4)       # (t, east, north) in the first fix's frame
-        self._frame = None                  # (ECEF origin, C_en)
+        self._specific_force = [0.0, 0.0, 0.0]  # summed dv: its direction is the body's up
+        self._fixes = deque(maxlen=4)       # (t, east, north) about the first fix
+        self._frame = None                  # (lat0, lon0, m per rad of latitude, of longitude)
         self._courses = deque(maxlen=3)     # (t, course rad)
         self._pending = deque()             # (t0, t1, course change) waiting for the IMU
         self._cost = np.zeros(len(OFFSETS))
@@ -69,11 +69,18 @@ class ImuTimingCheck:
 
     def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray) -> None:
         """An IMU increment ending at t (s, the IMU's stamps)."""
-        self._specific_force += dv
-        norm = math.sqrt(float(self._specific_force @ self._specific_force))
+        # Plain floats: this runs for every increment, where numpy's per-call cost on
+        # 3-vectors would be most of the check's.
+        f = self._specific_force
+        dvx, dvy, dvz = dv.tolist()
+        f[0] += dvx
+        f[1] += dvy
+        f[2] += dvz
+        norm = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
         if norm == 0.0:
             return
-        self._rotation += float(dtheta @ self._specific_force) / norm
+        wx, wy, wz = dtheta.tolist()
+        self._rotation += (wx * f[0] + wy * f[1] + wz * f[2]) / norm
         if self._imu and t - self._imu[-1][0] < SAMPLE_S:
             return
         self._imu.append((t, self._rotation))
@@ -84,10 +91,13 @@ class ImuTimingCheck:
 
     def fix(self, t: float, lat: float, lon: float, h: float) -> None:
         """A GNSS fix at t (s, GNSS time), geodetic rad and m."""
-        r = geodetic_to_ecef(lat, lon, h)
         if self._frame is None:
-            self._frame = (r, ecef_to_enu_matrix(lat, lon))
-        east, north, _ = self._frame[1] @ (r - self._frame[0])
+            rm, rn = radii(lat)
+            self._frame = (lat, lon, float(rm) + h, (float(rn) + h) * math.cos(lat))
+        lat0, lon0, per_lat, per_lon = self._frame
+        # A plane about the first fix: over tens of km its scale errors are parts in 1e3 of
+        # a chord, and the turn of a course between two chords keeps nothing of them.
+        east, north = (lon - lon0) * per_lon, (lat - lat0) * per_lat
         if self._fixes and not self._regular(t):
             self._fixes.clear()
             self._courses.clear()
