@@ -136,6 +136,60 @@ def test_on_the_bus_a_queued_subscription_is_handled_as_it_comes(ros_context):
     node.destroy_node()
 
 
+def test_a_paced_subscription_handles_what_came_while_it_rested(executor, probe, ros_context):
+    import time
+
+    from sensor_msgs.msg import Imu
+
+    from ins_gnss_ros.io import ns_to_stamp, stamp_to_ns
+    from ins_gnss_ros.nodes.base import DRIVER_QOS, Paced
+
+    node = _Counting(context=ros_context)
+    executor.add_node(node)
+    handled = []  # (stamp, when)
+
+    def on_imu(msg):
+        handled.append((stamp_to_ns(msg.header.stamp), time.monotonic_ns()))
+        # The next message needed at once is far off: those before it may wait.
+        paced.due(stamp_to_ns(msg.header.stamp) + 10**9)
+    paced = node.subscribe_paced(Imu, "base_test/imu_raw", on_imu, DRIVER_QOS)
+    pub = probe.create_publisher(Imu, "base_test/imu_raw", DRIVER_QOS)
+    spin_until(executor, lambda: pub.get_subscription_count() > 0, what="the subscription")
+    def sample(stamp_ns):
+        msg = Imu()
+        msg.header.stamp = ns_to_stamp(stamp_ns)
+        return msg
+    t0 = time.time_ns()
+    pub.publish(sample(t0))
+    spin_until(executor, lambda: handled, what="the first sample")  # the forecast learns
+    for k in range(1, 4):
+        pub.publish(sample(t0 + k))
+    spin_until(executor, lambda: len(handled) == 4, what="three more samples")
+    assert [stamp - t0 for stamp, _ in handled] == [0, 1, 2, 3]
+    # The second sample's callback rested (at most MAX_REST_NS) and then took the other two.
+    assert handled[2][1] - handled[1][1] >= 0.9 * Paced.MAX_REST_NS
+    assert handled[3][1] - handled[2][1] < Paced.MAX_REST_NS
+    assert node.diag.traffic["received /base_test/imu_raw"] == 4
+
+
+def test_on_the_bus_a_paced_subscription_is_handled_as_it_comes(ros_context):
+    from sensor_msgs.msg import Imu
+
+    from ins_gnss_ros.nodes.base import DRIVER_QOS, InProcessBus
+
+    bus = InProcessBus()
+    node = _Counting(context=ros_context, bus=bus)
+    handled = []
+    paced = node.subscribe_paced(Imu, "imu_raw", handled.append, DRIVER_QOS)
+    paced.due(10**18)  # nothing to wait for on the bus
+    msgs = [Imu() for _ in range(3)]
+    for msg in msgs:
+        bus.publish("imu_raw", msg)
+    bus.drain()
+    assert [id(m) for m in handled] == [id(m) for m in msgs]
+    node.destroy_node()
+
+
 @pytest.mark.parametrize("kind", EXECUTORS)
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_node_process_shuts_down_cleanly_on_signal(sig, kind, probe, executor, monkeypatch):

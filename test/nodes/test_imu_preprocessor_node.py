@@ -441,6 +441,40 @@ def test_publishes_over_ros(executor, ros_context, probe):
     assert deltas[-1].dt == pytest.approx(0.01)
 
 
+def test_over_ros_at_1_khz_the_increments_are_the_bus_ones(executor, ros_context, probe, graph):
+    """On DDS the raw samples are read from their payloads and, with nobody reading imu/data,
+    those before an increment's last are handled together (nodes.base.Paced): the same
+    increments as on the bus, bit for bit."""
+    from ins_gnss_msgs.msg import ImuDelta
+    from sensor_msgs.msg import Imu
+
+    from ins_gnss_ros.nodes.base import SENSOR_QOS
+    from ins_gnss_ros.nodes.imu_preprocessor_node import ImuPreprocessorNode
+    from rosutil import spin_until
+
+    params = _params(rate_hz=1000.0, max_identical_samples=0)
+    node = ImuPreprocessorNode(context=ros_context, parameter_overrides=params)
+    executor.add_node(node)
+    deltas = []
+    probe.create_subscription(ImuDelta, "imu/delta", deltas.append, SENSOR_QOS)
+    pub = probe.create_publisher(Imu, "imu/data_raw", SENSOR_QOS)
+    spin_until(executor, lambda: pub.get_subscription_count() > 0, what="imu/data_raw subscriber")
+    g = graph(*params)
+    rng = np.random.default_rng(3)
+    for k in range(1, 41):
+        msg = _imu_msg(T0_NS + k * 1_000_000, rng.normal(0.0, 0.1, 3),
+                       G_UP + rng.normal(0.0, 0.1, 3))
+        pub.publish(msg)
+        g.send("imu/data_raw", msg)
+    spin_until(executor, lambda: len(deltas) == 4, what="4 imu/delta")
+    assert node.diag.traffic["received /imu/data_raw"] == 40
+    for got, want in zip(deltas, g.out["/imu/delta"], strict=True):
+        assert got.header.stamp == want.header.stamp and got.dt == want.dt
+        for field in ("delta_angle", "delta_velocity"):
+            a, b = getattr(got, field), getattr(want, field)
+            assert (a.x, a.y, a.z) == (b.x, b.y, b.z)
+
+
 def test_time_offset_moves_every_output_stamp(graph):
     from ins_gnss_ros.io import stamp_to_ns
 

@@ -67,10 +67,15 @@ class OrientationHeadings:
         self._next_ns = None
         self.without_yaw = 0  # orientations looked at whose covariance vouches for no yaw
 
+    def due(self, t_ns: int) -> bool:
+        """Whether :meth:`add` would look at a sample at t_ns: its orientation need not be
+        read otherwise."""
+        return self._next_ns is None or t_ns >= self._next_ns
+
     def add(self, t_ns: int, q_ns, covariance):
         """The heading of a sample at t_ns (as :func:`orientation_heading`) when one is due and
         valid, else None."""
-        if self._next_ns is not None and t_ns < self._next_ns:
+        if not self.due(t_ns):
             return None
         # Looked at once a period, valid or not: the many drivers without an orientation
         # cost nothing per sample at 1 kHz.

@@ -275,6 +275,14 @@ class ImuPreprocessor:
         self.sensor_errors = (self.sensor_errors or SensorErrors()) + increment
         return True
 
+    def completing_stamp(self, stamp_ns: int) -> int | None:
+        """The driver's stamp of the sample expected to complete the next increment, after the
+        sample stamped ``stamp_ns`` (the last one added), at the sample rate; None while the
+        rate is being measured."""
+        if self._pending is not None:
+            return None
+        return stamp_ns + round(self.integrator.remaining * NS / self.rate_hz)
+
     def add(self, stamp_ns: int, arrival_ns: int, gyro, accel, tag=None) -> tuple:
         """Process one raw sample.
 

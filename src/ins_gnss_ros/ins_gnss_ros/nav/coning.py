@@ -165,6 +165,11 @@ class Integrator:
         self._prev_th = np.zeros((1, 3))
         self._prev_v = np.zeros((1, 3))
 
+    @property
+    def remaining(self) -> int:
+        """Samples still to add, the next one included, until an increment completes."""
+        return self.n_sub - self._count
+
     def add(self, dtheta, dv, dt: float):
         """Add one sample of increments (rad, m/s over dt seconds)."""
         self._th[0, self._count] = dtheta
