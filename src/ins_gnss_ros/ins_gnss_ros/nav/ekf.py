@@ -62,9 +62,9 @@ class ExtraState:
 #: Extra blocks the measurement models know: "td" IMU-to-measurement time offset (s, a measurement
 #: stamped t refers to the navigation epoch t - td), "mag" magnetic-heading bias (rad), "nhc"
 #: pitch and yaw of the vehicle axes relative to the IMU axes (or to the learned ones,
-#: vehicle_constraint.py) for the non-holonomic constraint (2, rad), "log" water current E, N (m/s) and speed-log scale error (3), "wheel"
-#: wheel-odometry scale error (1, -), "vd" latency of the GNSS velocity alone (s, measurements.py
-#: gnss_velocity).
+#: vehicle_constraint.py) for the non-holonomic constraint (2, rad), "log" water current E, N
+#: (m/s) and speed-log scale error (3), "wheel" wheel-odometry scale error (1, -), "vd" latency
+#: of the GNSS velocity alone (s, measurements.py gnss_velocity).
 KNOWN_EXTRAS = ("td", "mag", "ahrs", "nhc", "log", "wheel", "vd")
 
 

@@ -32,7 +32,7 @@ from collections import deque
 
 import numpy as np
 
-from .earth import radii
+from .local_frame import to_map
 
 #: Candidate offsets, s: the IMU stamps plus the offset are GNSS time.
 OFFSETS = np.round(np.arange(-0.5, 0.5 + 1e-9, 0.005), 3)
@@ -59,8 +59,8 @@ class ImuTimingCheck:
         self._imu = deque()                 # (t, accumulated vertical rotation, rad)
         self._rotation = 0.0
         self._specific_force = [0.0, 0.0, 0.0]  # summed dv: its direction is the body's up
-        self._fixes = deque(maxlen=4)       # (t, east, north) about the first fix
-        self._frame = None                  # (lat0, lon0, m per rad of latitude, of longitude)
+        self._fixes = deque(maxlen=3)       # (t, east, north), m
+        self._datum = None                  # the first fix: the map frame of the courses
         self._courses = deque(maxlen=3)     # (t, course rad)
         self._pending = deque()             # (t0, t1, course change) waiting for the IMU
         self._cost = np.zeros(len(OFFSETS))
@@ -91,20 +91,16 @@ class ImuTimingCheck:
 
     def fix(self, t: float, lat: float, lon: float, h: float) -> None:
         """A GNSS fix at t (s, GNSS time), geodetic rad and m."""
-        if self._frame is None:
-            rm, rn = radii(lat)
-            self._frame = (lat, lon, float(rm) + h, (float(rn) + h) * math.cos(lat))
-        lat0, lon0, per_lat, per_lon = self._frame
-        # A plane about the first fix: over tens of km its scale errors are parts in 1e3 of
-        # a chord, and the turn of a course between two chords keeps nothing of them.
-        east, north = (lon - lon0) * per_lon, (lat - lat0) * per_lat
+        if self._datum is None:
+            self._datum = (lat, lon, h)
+        east, north, _ = to_map(self._datum, lat, lon, h).tolist()
         if self._fixes and not self._regular(t):
             self._fixes.clear()
             self._courses.clear()
         self._fixes.append((t, east, north))
         if len(self._fixes) < 3:
             return
-        (t0, e0, n0), (t1, _, _), (t2, e2, n2) = list(self._fixes)[-3:]
+        (t0, e0, n0), (t1, _, _), (t2, e2, n2) = self._fixes
         speed = math.hypot(e2 - e0, n2 - n0) / (t2 - t0)
         if speed < MIN_SPEED:
             self._courses.clear()
