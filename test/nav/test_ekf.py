@@ -132,6 +132,56 @@ def test_update_matches_textbook_joseph_form():
     np.testing.assert_array_equal(ekf.P, ekf.P.T)
 
 
+def test_consider_block_is_never_estimated_and_keeps_its_schmidt_covariance():
+    # Schmidt-Kalman (Simon, "Optimal State Estimation", section 7.5): the consider states' gain
+    # rows are zero, the rest of the gain is the optimal one, and the covariance is the Joseph
+    # form with that gain.
+    rng = np.random.default_rng(11)
+    space = StateSpace(make_layout("15", NOISE), {"lever_y": ExtraState(1, 1.0, consider=True),
+                                                  "lever_z": ExtraState(1, 1.0, consider=True)})
+    n, c = space.size, slice(space["lever_y"].start, space["lever_z"].stop)
+    np.testing.assert_array_equal(space.consider, np.arange(n)[c])
+    A = rng.standard_normal((n, n))
+    P = A @ A.T + np.eye(n)
+    H = np.zeros((3, n))
+    H[:, 0:3] = np.eye(3)
+    H[:, c] = -rng.standard_normal((3, 2))
+    R, z = 0.1 * np.eye(3), rng.standard_normal(3)
+    ekf = ErrorStateEKF(space, NOISE, P)
+    assert ekf.update("m", 0.0, z, H, R, gate_prob=None).accepted
+    K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+    K[c] = 0.0
+    I_KH = np.eye(n) - K @ H
+    np.testing.assert_array_equal(ekf.x[c], 0.0)
+    np.testing.assert_allclose(ekf.x, K @ z, rtol=1e-11, atol=1e-14)
+    np.testing.assert_allclose(ekf.P, I_KH @ P @ I_KH.T + K @ R @ K.T, rtol=1e-11, atol=1e-13)
+    np.testing.assert_allclose(ekf.P[c, c], P[c, c], rtol=1e-12)  # nothing learned about it
+    with pytest.raises(ValueError, match="Joseph"):
+        ErrorStateEKF(space, NOISE, P, joseph=False)
+
+
+def test_consider_block_keeps_a_constant_offset_inside_the_covariance():
+    # A position measured through an unknown constant offset (sigma 1 m): the consider filter's
+    # variance of the position stays near the offset's (the optimal filter's would be 0.99:
+    # 100 - 100^2 / 101), where an ordinary filter that ignores the offset grows sure of a
+    # position up to 1 m off (0.01 / 50).
+    layout = make_layout("9")
+    for consider, floor in ((True, 1.0), (False, 0.0)):
+        extras = {name: ExtraState(1, 1.0, consider=True)
+                  for name in ("lever_x", "lever_y", "lever_z")} if consider else {}
+        space = StateSpace(layout, extras)
+        P0 = 100.0 * np.eye(space.size)
+        P0[9:, 9:] = np.eye(space.size - 9)  # the offset's own sigma
+        ekf = ErrorStateEKF(space, NOISE, P0)
+        H = np.zeros((3, space.size))
+        H[:, 0:3] = np.eye(3)
+        if consider:
+            H[:, 9:] = -np.eye(3)
+        for _ in range(50):
+            ekf.update("pos", 0.0, np.zeros(3), H, 0.01 * np.eye(3), gate_prob=None)
+        assert np.diag(ekf.P)[0:3] == pytest.approx(np.full(3, floor), abs=0.01)
+
+
 def test_update_refuses_an_indefinite_innovation_covariance():
     ekf, space = scalar_filter(1.0)
     H = np.zeros((1, space.size))

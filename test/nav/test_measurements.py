@@ -83,6 +83,37 @@ def test_gnss_velocity_with_lever_arm_and_gyro_bias():
     check(model, z_of, 1e-6)
 
 
+LEVER_SPACE = StateSpace(make_layout("15", NOISE), {
+    name: ExtraState(1, 1.0, consider=True) for name in ("lever_x", "lever_y", "lever_z")})
+
+
+@pytest.mark.parametrize("kind", ["position", "velocity"])
+def test_lever_arm_columns(kind):
+    # The "lever_*" blocks are the true lever arm minus the configured one: the measurement is made
+    # at the true antenna, the model predicts it at the configured one.
+    S = LEVER_SPACE
+
+    def model(dx):
+        state = apply_correction(TRUE, -dx[S["pos"]], -dx[S["vel"]], -dx[S["att"]])
+        lever_true = LEVER + dx[S["lever_x"].start:S["lever_z"].stop]
+        if kind == "position":
+            meas = lever_arm_position(TRUE.lat, TRUE.lon, TRUE.h, TRUE.q_nb, lever_true)
+            return M.gnss_position(S, state, *meas, np.eye(3), LEVER)
+        meas = lever_arm_velocity(TRUE.v_enu, TRUE.q_nb, OMEGA, lever_true, TRUE.lat)
+        return M.gnss_velocity(S, state, meas, np.eye(3), OMEGA, LEVER)
+
+    H_num = np.zeros((3, S.size))
+    for i in range(S.size):
+        e = np.zeros(S.size)
+        e[i] = 1e-2 if i in range(S.size)[S["pos"]] else 1e-4
+        H_num[:, i] = (model(e).z - model(-e).z) / (2 * e[i])
+    cols = np.r_[S["pos"].start:S["att"].stop, S["lever_x"].start:S["lever_z"].stop]
+    # (the gyro columns: test_gnss_velocity_with_lever_arm_and_gyro_bias)
+    # (the position's lever columns to 1e-5: lever_arm_position resolves a metre-long arm on
+    # the ellipsoid, the model as a straight vector)
+    np.testing.assert_allclose(model(np.zeros(S.size)).H[:, cols], H_num[:, cols], atol=1e-5)
+
+
 @pytest.mark.parametrize("axis_yaw", [0.0, 0.7])
 def test_heading(axis_yaw):
     x = np.cos(axis_yaw), np.sin(axis_yaw), 0.0

@@ -421,3 +421,18 @@ def test_diagnostics_say_what_the_filter_waits_for_and_nav_fix_is_valid_only_nav
     assert fixes[-1].status.status == NavSatStatus.STATUS_FIX
     strapdown.destroy_node()
     ekf.destroy_node()
+
+
+def test_diagnostics_say_when_the_antenna_lever_arm_is_assumed(ros_context):
+    from ins_gnss_ros.nodes.ekf_node import EkfNode
+
+    assumed = EkfNode(context=ros_context, bus=InProcessBus(), parameter_overrides=[
+        Parameter("lever_arm_sigma_m", value=[0.2, 0.2, 1.0])])
+    measured = EkfNode(context=ros_context, bus=InProcessBus(), parameter_overrides=_ekf_params())
+    assert assumed.diag._values["GNSS antenna lever arm"] == (
+        "[0.0, 0.0, 0.0] m FLU, not measured: within +-[0.2, 0.2, 1.0] m assumed (lever_arm, "
+        "lever_arm_sigma_m)")
+    assert {"lever_x", "lever_y", "lever_z"} <= set(assumed.navigator.config.extras)
+    assert "GNSS antenna lever arm" not in measured.diag._values
+    assumed.destroy_node()
+    measured.destroy_node()

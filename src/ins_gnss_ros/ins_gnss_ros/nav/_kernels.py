@@ -586,13 +586,16 @@ def _times_ht(A, H, cols):
 
 
 @njit(cache=True)
-def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance, nu, s_diag, x_new, P_new):
+def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance, consider, nu, s_diag, x_new,
+                  P_new):
     """Gated update of ekf.ErrorStateEKF.update.
 
     nu = z - H x, S = H P H^T + R (symmetrised), NIS = |L^-1 nu|^2 with L the Cholesky factor
     of S (gating.normalised_innovation). If NIS <= gate or `force`: K = P H^T S^-1 (through
     L), x + K nu and the Joseph form (I - K H) P (I - K H)^T + K R K^T (or P - K H P),
-    symmetrised, with the diagonal floored at min_variance.
+    symmetrised, with the diagonal floored at min_variance. The gain rows of the states
+    `consider` (int64 indices) are zero (Schmidt-Kalman: ekf.ExtraState.consider); the Joseph
+    form holds for any gain, P - K H P only for the optimal one.
 
     Written out in loops over the columns H touches (a handful of the state's): the dense BLAS
     and LAPACK calls it replaces cost more in their set-up and in the zeros of H and I - K H
@@ -630,6 +633,8 @@ def kalman_update(P, x, H, R, z, gate, force, joseph, min_variance, nu, s_diag, 
     if not (nis <= gate or force):
         return nis, False
     Kt = _solve_upper_t(L, _solve_lower(L, np.ascontiguousarray(PHt.T)))
+    for i in consider:
+        Kt[:, i] = 0.0
     K = np.ascontiguousarray(Kt.T)
     for i in range(n):
         x_new[i] = x[i]

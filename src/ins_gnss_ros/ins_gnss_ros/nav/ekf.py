@@ -51,12 +51,20 @@ class ExtraState:
         Driving white-noise spectral density (unit^2 / s); 0 for a random constant.
     tau : float
         Gauss-Markov correlation time, s; inf for a random constant / walk.
+    consider : bool
+        A "consider" block (Schmidt-Kalman filter; Simon, "Optimal State Estimation", 2006,
+        section 7.5): its uncertainty and its correlations enter every gain of the other
+        states, but it is never estimated (its gain rows are zero, so its estimate stays at its
+        configured value and its covariance is that of the configured value's error). For a
+        parameter that is not known and should not be fitted, such as an antenna lever arm
+        nobody measured, which a fit would trade against the time offset or the heading.
     """
 
     size: int = 1
     sigma0: float = 0.0
     psd: float = 0.0
     tau: float = np.inf
+    consider: bool = False
 
 
 #: Extra blocks the measurement models know: "td" IMU-to-measurement time offset (s, a measurement
@@ -64,8 +72,11 @@ class ExtraState:
 #: pitch and yaw of the vehicle axes relative to the IMU axes (or to the learned ones,
 #: vehicle_constraint.py) for the non-holonomic constraint (2, rad), "log" water current E, N
 #: (m/s) and speed-log scale error (3), "wheel" wheel-odometry scale error (1, -), "vd" latency
-#: of the GNSS velocity alone (s, measurements.py gnss_velocity).
-KNOWN_EXTRAS = ("td", "mag", "ahrs", "nhc", "log", "wheel", "vd")
+#: of the GNSS velocity alone (s, measurements.py gnss_velocity), "lever_x", "lever_y",
+#: "lever_z" error of the configured antenna lever arm along each FLU axis (m; consider blocks,
+#: one per axis so that an exact axis has none: a zero variance would make P singular).
+LEVER_ARM_EXTRAS = ("lever_x", "lever_y", "lever_z")
+KNOWN_EXTRAS = ("td", "mag", "ahrs", "nhc", "log", "wheel", "vd") + LEVER_ARM_EXTRAS
 
 
 @dataclass(frozen=True)
@@ -95,6 +106,9 @@ class StateSpace:
             n += block.size
         object.__setattr__(self, "_slices", slices)
         object.__setattr__(self, "_size", n)
+        consider = [i for name, block in self.extras.items() if block.consider
+                    for i in range(n)[slices[name]]]
+        object.__setattr__(self, "_consider", np.array(consider, np.int64))
 
     @property
     def slices(self):
@@ -110,6 +124,11 @@ class StateSpace:
     def blocks(self):
         """Block names in state order."""
         return tuple(self.layout.blocks) + tuple(self.extras)
+
+    @property
+    def consider(self):
+        """Indices of the states of consider blocks (never estimated: ExtraState.consider)."""
+        return self._consider
 
     def __getitem__(self, name):
         return self._slices[name]
@@ -154,6 +173,9 @@ class ErrorStateEKF:
         self.noise = noise
         self.clock_psd = clock_psd
         self.order = order
+        if len(space.consider) and not joseph:
+            raise ValueError("consider blocks need the Joseph form: (I - K H) P holds only for "
+                             "the optimal gain")
         self.joseph = joseph
         self.P = np.array(P0, dtype=float)
         self.x = np.zeros(space.size)
@@ -269,7 +291,7 @@ class ErrorStateEKF:
         nu, s_diag, x, P = np.empty(m), np.empty(m), np.empty(n), np.empty((n, n))
         nis, applied = _kernels.kalman_update(
             np.ascontiguousarray(self.P, dtype=float), self.x, H, R, z, gate, force,
-            self.joseph, MIN_VARIANCE, nu, s_diag, x, P)
+            self.joseph, MIN_VARIANCE, self.space.consider, nu, s_diag, x, P)
         if applied:
             self.x, self.P = x, P
         ok = nis <= gate

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Param
-from .ekf import ExtraState
+from .ekf import LEVER_ARM_EXTRAS, ExtraState
 from .error_model import LAYOUTS
 from .navigator_config import NavigatorConfig
 from .sensor_errors import GRADES, BlockNoise, FilterNoise, filter_noise
@@ -39,6 +39,9 @@ PARAMS = (
           "grade's)", 0.0, 10.0),
     Param("lever_arm", [0.0, 0.0, 0.0], "GNSS antenna position in base_link (FLU), m",
           -100.0, 100.0, length=3),
+    Param("lever_arm_sigma_m", [0.0, 0.0, 0.0],
+          "uncertainty of lever_arm per axis (FLU), m, carried in the covariance and never "
+          "estimated (a consider state; all 0: the lever arm is exact)", 0.0, 100.0, length=3),
     Param("gate_probability", 0.9999, "chi-square gate probability of every update", 0.5, 1.0),
     Param("covariance_interval_s", 0.1, "covariance propagation interval, s", 0.005, 1.0),
     Param("gnss.position_sigma_floor_m", 0.02, "floor of the GNSS position sigma per axis, m",
@@ -197,6 +200,9 @@ def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
     neither.
     """
     extras = {}
+    for name, sigma in zip(LEVER_ARM_EXTRAS, p["lever_arm_sigma_m"]):
+        if sigma > 0.0:
+            extras[name] = ExtraState(1, sigma, consider=True)
     if p["time_offset_sigma_s"] > 0.0:
         extras["td"] = ExtraState(1, p["time_offset_sigma_s"])
     if p["gnss.velocity_latency_sigma_s"] > 0.0:

@@ -20,6 +20,7 @@ import numpy as np
 from . import _kernels
 from .conventions import azimuth_from_yaw, wrap_pi
 from .earth import WGS84, earth_rate_enu, ecef_to_enu_matrix, geodetic_to_ecef
+from .ekf import LEVER_ARM_EXTRAS
 from .lever_arm import lever_arm_position, lever_arm_velocity, lever_arm_velocity_jacobians
 from .rotations import cross, quat_to_dcm, skew
 from .vehicle_constraint import turned
@@ -56,6 +57,14 @@ def _add_time_offset(space, H, dzdt):
     prediction made at t - td_estimate has the residual error dz/dt (td - td_estimate)."""
     if dzdt is not None and "td" in space:
         H[:, space["td"].start] = dzdt
+
+
+def _add_lever_arm(space, H, dzdl):
+    """Columns of the "lever_*" consider blocks: each is the true lever arm minus the
+    configured one along its axis ("true minus estimate", ekf.py), so z moves by -dz/dl."""
+    for axis, name in enumerate(LEVER_ARM_EXTRAS):
+        if name in space:
+            H[:, space[name].start] = -dzdl[:, axis]
 
 
 def _gyro_columns(space, H, block):
@@ -95,7 +104,7 @@ def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=
     Returns
     -------
     Innovation
-        z in ENU metres; H = [I, 0, [(C l) x]] (+ time offset).
+        z in ENU metres; H = [I, 0, [(C l) x]] (+ time offset, - C for the "lever_*" blocks).
     """
     # Antenna minus measured = (IMU minus measured) + C l, resolved in the ENU frame of the
     # measured point; the curvature neglected is |l|^2 / R ~ 1e-7 m for a metre-long arm.
@@ -106,6 +115,8 @@ def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=
                            np.ascontiguousarray(lever_b, dtype=float), lat, lon, h, WGS84.a,
                            WGS84.e2, z, H, space["pos"].start, space["att"].start)
     _add_time_offset(space, H, dzdt)
+    if any(name in space for name in LEVER_ARM_EXTRAS):
+        _add_lever_arm(space, H, quat_to_dcm(state.q_nb))
     return Innovation("gnss_pos", z, H, np.asarray(cov_enu, float))
 
 
@@ -154,6 +165,9 @@ def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3),
     H[:, space["att"]] = d_att
     _gyro_columns(space, H, d_gyro)
     _add_time_offset(space, H, dzdt)
+    if any(name in space for name in LEVER_ARM_EXTRAS):  # d v_a/d l = C [w x] - [w_ie x] C
+        C = quat_to_dcm(state.q_nb)
+        _add_lever_arm(space, H, C @ skew(omega_ib_b) - skew(earth_rate_enu(state.lat)) @ C)
     if dzdt is not None and "vd" in space:
         pred = pred - np.asarray(dzdt, float) * latency
         H[:, space["vd"].start] = dzdt

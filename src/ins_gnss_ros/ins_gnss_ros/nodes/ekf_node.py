@@ -94,6 +94,10 @@ class EkfNode(EkfServices, NavNode):
         self.navigator = Navigator(self.config)
         self.aiding = Aiding(self.navigator, AidingPolicy.from_params(p), self.diag.count)
         self.inputs = EkfInputs(self.aiding, p, self.diag.count)
+        if any(p["lever_arm_sigma_m"]):  # what is missing from the installation, said once
+            self.diag.set_value("GNSS antenna lever arm", (
+                f"{list(p['lever_arm'])} m FLU, not measured: within +-"
+                f"{list(p['lever_arm_sigma_m'])} m assumed (lever_arm, lever_arm_sigma_m)"))
         if not p["datum.from_first_fix"]:
             self.aiding.datum = (np.radians(p["datum.latitude_deg"]),
                                  np.radians(p["datum.longitude_deg"]), p["datum.altitude_m"])
