@@ -106,6 +106,12 @@ def test_a_profile_section_configures_the_filter_the_node_would():
     assert config.layout == "21" and config.nhc_sigma == (0.1, 0.05) and config.record
     assert np.array_equal(config.nhc_lever_b, [-1.2, 0.0, -0.8]) and config.nhc_rate_arm == 0.5
     assert np.array_equal(config.lever_arm_b, [0.5, 0.0, 1.0])
+    assert not any(name.startswith("lever") for name in config.extras)  # given exactly
+    # an uncertain lever arm: a consider state per uncertain axis only (a zero variance would
+    # make the covariance singular)
+    assumed = navigator_config(resolve(PARAMS, {"lever_arm_sigma_m": [0.0, 0.3, 1.0]}))
+    assert {name: (e.sigma0, e.consider) for name, e in assumed.extras.items()
+            if name.startswith("lever")} == {"lever_y": (0.3, True), "lever_z": (1.0, True)}
     with pytest.raises(ParameterError, match="unknown parameter"):
         resolve(PARAMS, {"lever_arms": [0.0, 0.0, 0.0]})
     with pytest.raises(ParameterError, match="gate_probability"):
