@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from ins_gnss_ros.nav.aiding import Aiding, AidingPolicy, WheelPolicy
+from ins_gnss_ros.nav.earth import earth_rate_enu, normal_gravity
 from ins_gnss_ros.nav.filter_config import PARAMS, navigator_config
 from ins_gnss_ros.nav import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, WheelOdometry, \
     ZeroVelocity
@@ -250,6 +251,54 @@ def test_a_still_imu_starts_the_filter_at_once_and_the_fixes_rest_confirms_its_v
     out = nav.output()
     assert np.all(out.published_var[-1, :2] > 0.0)
     np.testing.assert_allclose(published_covariance(out.P[-1], out.published_var[-1])[:2, :2], P)
+
+
+def test_the_rate_update_at_rest_averages_all_of_the_rest_to_the_white_noise_limit():
+    """A GGA-only receiver's static start (fixes of 0.5 m at 1 Hz, no velocity) on a level,
+    standing ADIS16405-grade IMU with the Earth rate, a turn-on gyro bias and the grade's white
+    noise, through the product's front end and config/default.yaml's filter. The z gyro bias
+    after 30 s is what the heading of a receiver without velocity drifts with until the vehicle
+    turns. The best estimate the data allow is the true bias plus the gyro noise's mean over
+    the rest the fixes confirmed: the filter's is that, with that mean's sigma (the ZARU took
+    the last covariance interval of every still block alone: twice the sigma)."""
+    lat0, lon0, rate, seconds, block = 59.9, 30.3, 100.0, 30.0, 0.25
+    dt = 1.0 / rate
+    f = np.array([0.0, 0.0, normal_gravity(np.radians(lat0), 10.0)])
+    earth = earth_rate_enu(np.radians(lat0))  # body axes = ENU: levelled with yaw 0
+    normalised = []
+    for draw in range(8):
+        nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_adis16405_datasheet"}),
+                                         record=True))
+        front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
+        noise = nav.config.noise
+        rng = np.random.default_rng(100 + draw)
+        bias = np.radians(0.05) * rng.standard_normal(3)  # deg/s after factory calibration
+        gyro_noise = np.sqrt(noise.gyro_psd / dt) * rng.standard_normal((round(seconds * rate), 3))
+        for k, eta in enumerate(gyro_noise, start=1):
+            a = f + np.sqrt(noise.accel_psd / dt) * rng.standard_normal(3)
+            front.increment(k * dt, (earth + bias + eta) * dt, a * dt, dt)
+            if k % round(rate) == 0:
+                e, n = 0.5 * rng.standard_normal(2)
+                front.fix(k * dt, lat0 + n / M_PER_DEG,
+                          lon0 + e / (M_PER_DEG * np.cos(np.radians(lat0))), 10.0,
+                          np.diag([0.25, 0.25, 1.0]), 0, covariance_known=True)
+        nav.flush()
+        # the rest the fixes confirmed: the still blocks of the zero-velocity updates
+        cues = [u.t for u in nav.output().updates if u.name == "zupt" and u.accepted]
+        t = np.arange(1, len(gyro_noise) + 1) * dt
+        k = np.searchsorted(cues, t - 1e-9)  # the first cue at or after each sample
+        confirmed = (k < len(cues)) & (np.take(cues, np.minimum(k, len(cues) - 1)) - t < block)
+        rest = gyro_noise[confirmed, 2]
+        best, best_sigma = bias[2] + rest.mean(), np.sqrt(noise.gyro_psd / (len(rest) * dt))
+        bg = nav.space["bg"]
+        sigma = np.sqrt(nav.covariance()[bg, bg][2, 2])
+        assert 0.95 < sigma / best_sigma < 1.05
+        # (the levelling's first second and the bias walk the filter allows weigh in too)
+        assert abs(nav.estimates["bg"][2] - best) < 0.4 * sigma
+        normalised.append((nav.estimates["bg"][2] - bias[2]) / sigma)
+    # against the true bias: a chi-square of 8 degrees of freedom, within 0.2 ... 3 of its mean
+    # (99.8 %)
+    assert 0.2 < np.mean(np.square(normalised)) < 3.0, normalised
 
 
 def test_diagnostics_say_the_first_fixes_wait_for_the_imu():

@@ -63,6 +63,9 @@ class RunState:
         Mean compensated angular rate of the last segment, body FLU, rad/s.
     omega_time : float
         Length of that segment.
+    rest_dtheta, rest_time : (3,) ndarray, float
+        The gyros' angle increments (as measured, before the running estimates' compensation)
+        summed over the segments at rest since the last ZARU, rad, and their length, s.
     rest_pos : tuple of 3 float or None
         (lat, lon, h) of the IMU at the last fix at rest while the heading was unknown.
     last_fix : tuple of 3 float or None
@@ -92,6 +95,8 @@ class RunState:
     a_enu: np.ndarray = field(default_factory=lambda: np.zeros(3))
     omega: np.ndarray = field(default_factory=lambda: np.zeros(3))
     omega_time: float = 1.0
+    rest_dtheta: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    rest_time: float = 0.0
     rest_pos: tuple | None = None
     last_fix: tuple | None = None
     t_fix_accepted: float = -np.inf
