@@ -31,7 +31,7 @@ CASES = bench_faults.cases(DURATION)
 #: None where nothing is wrong with any single message: the mode or the bound is the check).
 REPRESENTATIVE = {
     "drop": (2, "imu gap longer than max_bridge_samples: integration restarted"),
-    "delay": (1, "GnssFix rejected: too old"),
+    "delay": (1, "gnss/fix refused: stamp beyond history_s behind the IMU's"),
     "duplicate": (0, "imu sample rejected: duplicate_stamp"),
     "reorder": (0, "imu sample rejected: backwards_stamp"),
     "freeze": (1, "gnss_pos rejected: frozen"),

@@ -10,8 +10,8 @@ import pytest
 from ins_gnss_ros.nav.aiding import Aiding, AidingPolicy, WheelPolicy
 from ins_gnss_ros.nav.earth import earth_rate_enu, normal_gravity
 from ins_gnss_ros.nav.filter_config import PARAMS, navigator_config
-from ins_gnss_ros.nav import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, WheelOdometry, \
-    ZeroVelocity
+from ins_gnss_ros.nav import ALIGNING, GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, \
+    WheelOdometry, ZeroVelocity
 from ins_gnss_ros.nav.navigator import Navigator
 from ins_gnss_ros.nav.recording import published_covariance
 from ins_gnss_ros.params import ParameterError, resolve
@@ -96,6 +96,40 @@ def test_wheel_odometry_variances_delay_and_zero_speed():
     assert isinstance(nav.measurements[-1], WheelOdometry)
     assert events == ["wheel/odom without a finite forward speed rejected"]
     assert front.inputs["wheel/odom"].received == 8 and front.inputs["wheel/odom"].refused == 1
+
+
+def test_readings_whose_stamps_do_not_fit_the_imu_clock_are_refused_and_explained():
+    # A receiver stamping GPS time (18 s ahead of UTC) beside an IMU stamped by the host, and
+    # a host clock 18 s behind: every reading is refused, and /diagnostics says why.
+    for offset, why in ((18.0, "ahead"), (-18.0, "behind")):
+        nav = Navigator(navigator_config(resolve(PARAMS, {}), record=False))
+        events = []
+        front = Aiding(nav, AidingPolicy(), lambda text, log=True: events.append(text))
+        dt, f = 0.01, np.array([0.0, 0.0, 9.81])
+        for k in range(1, 301):
+            front.increment(k * dt, np.zeros(3), f * dt, dt)
+            if k % 25 == 0:
+                assert not front.fix(k * dt + offset, 59.9, 30.3, 10.0, np.eye(3), 0, True)
+                assert not front.velocity(k * dt + offset, np.zeros(3), np.eye(3))
+        assert nav.mode == ALIGNING and not nav.started
+        assert front.explain(3.0, imu_running=True) == (
+            f"aligning: gnss/fix stamped {offset:+.1f} s from the newest imu/delta: its clock "
+            "and the IMU's disagree " + ("(GPS time 18 s ahead of UTC?), or the IMU stopped"
+                                         if offset > 0 else
+                                         "(a host clock?), or it comes later than history_s"))
+        assert front.inputs["gnss/vel"].summary(3.0).endswith(
+            f"stamped {offset:+.2f} s from imu/delta, 12 received, 12 refused")
+        limit = "max_imu_gap_s ahead of" if why == "ahead" else "history_s behind"
+        assert set(events) == {f"gnss/{k} refused: stamp beyond {limit} the IMU's"
+                               for k in ("fix", "vel")}
+    # Within the window: a receiver's latency (behind), a fix ahead of an IMU that paused
+    # for a gap the filter bridges, and a reading before the first increment (not judged).
+    front, nav, events = aiding()
+    assert front.fix(5.0, 59.9, 30.3, 10.0, np.eye(3), 0, True)
+    front.last_increment_t = 10.0
+    assert front.fix(7.5, 59.9, 30.3, 10.0, np.eye(3), 0, True)
+    assert front.fix(12.4, 59.9, 30.3, 10.0, np.eye(3), 0, True)
+    assert not front.fix(12.6, 59.9, 30.3, 10.0, np.eye(3), 0, True)
 
 
 def test_a_profile_section_configures_the_filter_the_node_would():

@@ -100,6 +100,9 @@ class AidingPolicy:
     max_imu_gap : float
         Longest gap in the increments bridged by holding the rates of the increment after it; a
         longer one loses the IMU and the filter aligns again, s.
+    max_delay : float
+        Latest a reading may come after the increment of its stamp and still be used (the
+        navigator's ``history``), s.
     wheel : WheelPolicy
     phase_differences : bool
         The fixed phase double differences aid the attitude: ``gnss/heading`` only aligns the
@@ -112,6 +115,7 @@ class AidingPolicy:
     coupling: str = "loose"
     min_satellites: int = 5
     max_imu_gap: float = 2.5
+    max_delay: float = 3.0
     wheel: WheelPolicy = WheelPolicy()
     phase_differences: bool = False
 
@@ -120,7 +124,7 @@ class AidingPolicy:
         """The policy of the ``ekf`` node's parameters."""
         return cls(p["gnss.position_sigma_floor_m"], p["gnss.velocity_sigma_floor_mps"],
                    p["gnss.velocity_delay_s"], p["coupling"], p["auto.min_satellites"],
-                   p["max_imu_gap_s"], wheel=WheelPolicy.from_params(p),
+                   p["max_imu_gap_s"], p["history_s"], wheel=WheelPolicy.from_params(p),
                    phase_differences=p["use_phase_dd"])
 
 
@@ -146,6 +150,8 @@ class InputStats:
     refused: int = 0
     first_t: float = math.nan
     last_t: float = math.nan
+    lead: float = math.nan  # the last stamp minus the newest increment's at its arrival, s
+    clock_problem: str | None = None  # why the last reading's stamp was refused
 
     def rate(self) -> float:
         """Mean rate of the readings, Hz (nan before two)."""
@@ -154,7 +160,8 @@ class InputStats:
 
     def summary(self, t: float) -> str:
         """One line for diagnostics at time t (s)."""
-        return (f"{self.rate():.2f} Hz, last {t - self.last_t:.1f} s ago, "
+        lead = f", stamped {self.lead:+.2f} s from imu/delta" if math.isfinite(self.lead) else ""
+        return (f"{self.rate():.2f} Hz, last {t - self.last_t:.1f} s ago{lead}, "
                 f"{self.received} received, {self.refused} refused")
 
 
@@ -204,13 +211,41 @@ class Aiding:
         self.wheel_still_since = math.inf  # stamp of the first of the zero wheel speeds, s
 
     def _seen(self, name: str, t: float, used: bool) -> bool:
-        stats = self.inputs.get(name)
-        if stats is None:
-            stats = self.inputs[name] = InputStats(first_t=t)
+        stats = self._stats(name, t)
         stats.received += 1
         stats.refused += not used
         stats.last_t = t
         return used
+
+    def _stats(self, name: str, t: float) -> InputStats:
+        stats = self.inputs.get(name)
+        if stats is None:
+            stats = self.inputs[name] = InputStats(first_t=t)
+        return stats
+
+    def _clock_refuses(self, name: str, t: float) -> bool:
+        """Whether a reading stamped t (s) is refused because its stamp does not fit the IMU's
+        clock: increments come in real time (a replay keeps their order), so a reading stamped
+        further ahead of the newest increment than the longest IMU gap the filter bridges, or
+        further behind it than the navigator's history, comes from a clock that disagrees with
+        the IMU's (a receiver stamping GPS time, 18 s ahead of UTC; a host clock not
+        synchronised) or from a stopped IMU, and would be placed in the wrong part of the
+        trajectory (the car drive with its fixes stamped 18 s ahead: 144 m RMS while NAVIGATING,
+        NEES 4e5). Readings before the first increment are not judged."""
+        stats = self._stats(name, t)
+        if not math.isfinite(self.last_increment_t):
+            return False
+        stats.lead = lead = t - self.last_increment_t
+        if -self.policy.max_delay <= lead <= self.policy.max_imu_gap:
+            stats.clock_problem = None
+            return False
+        stats.clock_problem = (
+            f"stamped {lead:+.1f} s from the newest imu/delta: its clock and the IMU's disagree "
+            + ("(GPS time 18 s ahead of UTC?), or the IMU stopped" if lead > 0.0
+               else "(a host clock?), or it comes later than history_s"))
+        self.report(f"{name} refused: stamp beyond " + (
+            "max_imu_gap_s ahead of the IMU's" if lead > 0.0 else "history_s behind the IMU's"))
+        return True
 
     def note_updates(self, updates) -> None:
         """The navigator's update records since the last call (for :meth:`explain`)."""
@@ -232,6 +267,8 @@ class Aiding:
             fix = self.inputs.get("gnss/fix")
             if fix is None:
                 return "aligning: no gnss/fix received yet"
+            if fix.clock_problem:
+                return f"aligning: gnss/fix {fix.clock_problem}"
             if fix.received == fix.refused:
                 return f"aligning: every gnss/fix refused ({fix.refused})"
             if not nav.started and not math.isnan(self._first_held_t):
@@ -240,6 +277,10 @@ class Aiding:
         if self.forced:
             return ("dead reckoning (degraded): forced in, their noise floors not yet decayed: "
                     + ", ".join(sorted(self.forced)))
+        clock = next(((name, stats.clock_problem) for name, stats in self.inputs.items()
+                      if stats.clock_problem), None)
+        if clock:
+            return f"dead reckoning: {clock[0]} {clock[1]}"
         return f"dead reckoning: no aiding accepted for {t - self.last_accepted_t:.1f} s"
 
     def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray, dt: float) -> str | None:
@@ -284,7 +325,7 @@ class Aiding:
         """A GNSS position fix at t (s): geodetic degrees, ellipsoidal height (m), its ENU
         covariance (m^2; ``covariance_known`` False when the receiver gave none) and its
         sensor_msgs/NavSatStatus status (-1 no fix ... 2 ground-based augmentation)."""
-        if self.use_ranges:
+        if self.use_ranges or self._clock_refuses("gnss/fix", t):
             return self._seen("gnss/fix", t, False)
         if status < 0:
             self.report("gnss/fix without a fix ignored", log=False)
@@ -366,7 +407,7 @@ class Aiding:
 
     def velocity(self, t: float, v_enu: np.ndarray, cov: np.ndarray) -> bool:
         """A GNSS velocity (m/s, ENU) stamped t (s) with its covariance (m^2/s^2)."""
-        if self.use_ranges:
+        if self.use_ranges or self._clock_refuses("gnss/vel", t):
             return self._seen("gnss/vel", t, False)
         if not (np.isfinite(v_enu).all() and np.isfinite(cov).all()):
             self.report("non-finite gnss/vel rejected")
@@ -385,6 +426,8 @@ class Aiding:
         (rad^2) from ``source`` (a key of :data:`HEADING_SOURCES`: which bias state it has).
         ``declination`` (rad) refers an azimuth from magnetic north to true north (None:
         already true)."""
+        if self._clock_refuses(source, t):
+            return self._seen(source, t, False)
         if declination is not None and not math.isfinite(declination):
             declination = self._declination(t)
         if declination is not None:
@@ -405,6 +448,8 @@ class Aiding:
         """Fixed carrier-phase double differences at t (s): per row the antenna baseline
         (body FLU, m), the line-of-sight difference (ENU), the value (m); their covariance
         (m^2, symmetric positive definite)."""
+        if self._clock_refuses("gnss/phase_dd", t):
+            return self._seen("gnss/phase_dd", t, False)
         n = len(value)
         ok = n > 0 and np.shape(baseline_b) == (n, 3) and np.shape(geometry) == (n, 3) and \
             np.shape(cov) == (n, n) and np.isfinite(baseline_b).all() and \
@@ -435,6 +480,8 @@ class Aiding:
 
     def speed_log(self, t: float, speed: float, variance: float) -> bool:
         """A water speed along body x (m/s) at t (s) with its variance (m^2/s^2)."""
+        if self._clock_refuses("log/speed", t):
+            return self._seen("log/speed", t, False)
         if not (np.isfinite(speed) and np.isfinite(variance) and variance > 0.0):
             self.report("log/speed without a finite speed and variance rejected")
             return self._seen("log/speed", t, False)
@@ -450,6 +497,8 @@ class Aiding:
         are left to the navigator's gate (the wheels then disagree with the INS)."""
         policy = self.policy.wheel
         velocity_b = np.asarray(velocity_b, float)
+        if self._clock_refuses("wheel/odom", t):
+            return self._seen("wheel/odom", t, False)
         if not np.isfinite(velocity_b[0]):
             self.report("wheel/odom without a finite forward speed rejected")
             return self._seen("wheel/odom", t, False)
