@@ -39,6 +39,7 @@ import numpy as np
 from ..nav.coning import METHODS, Integrator
 from ..nav.increments import SensorErrors
 from .calibration import ImuCalibration
+from .gravity_check import SpecificForceCheck
 from .sample_checks import ClockJumps, SampleChecker
 from .sensor_clock import SensorClock, estimate_rate
 
@@ -109,8 +110,10 @@ class Processed(NamedTuple):
 #: :attr:`Processed.events`: a jump of the sensor clock taken out of the stamps by the arrival
 #: clock; the sample rate measured (this is the first sample processed); the sensor-clock fit
 #: restarted (a step of the driver's clock or an ambiguous gap); two_sample coning impossible
-#: with the measured rate, one_sample used.
-EVENTS = ("clock_jump", "rate_measured", "sensor_clock_restart", "coning_fallback")
+#: with the measured rate, one_sample used; a stretch of the specific force judged
+#: (:attr:`ImuPreprocessor.gravity`).
+EVENTS = ("clock_jump", "rate_measured", "sensor_clock_restart", "coning_fallback",
+          "specific_force_judged")
 
 #: Samples and span of the stamps that measure the sample rate (rate_hz 0): a median over 40
 #: intervals shrugs off a few lost samples, and half a second of span makes the rate good to
@@ -197,6 +200,8 @@ class ImuPreprocessor:
         The filter's running sensor-error estimates removed from every sample (None: none yet).
     synthesised : int
         Samples made so far to bridge gaps.
+    gravity : SpecificForceCheck
+        Whether the increments' specific force is in m/s^2 with gravity in it.
     """
 
     def __init__(self, calibration: ImuCalibration, rate_hz: float, nav_rate_hz: float,
@@ -222,6 +227,7 @@ class ImuPreprocessor:
         # costs work on every sample.
         self.sensor_errors: SensorErrors | None = None
         self.synthesised = 0
+        self.gravity = SpecificForceCheck()
         self._instant = bool(instant)
         self._origin_ns: int | None = None   # stamps go to the checker relative to the first one
         self._last_ns: int | None = None     # end of the last integrated sample
@@ -351,6 +357,9 @@ class ImuPreprocessor:
                             *correct(g, a, self.temperature, self.sensor_errors), increments)
         w_b, f_b = correct(gyro, accel, self.temperature, self.sensor_errors)
         self._integrate(t_ns, w_b, f_b, increments)
+        for inc in increments:
+            if self.gravity.add(inc.dv, inc.dt):
+                events += ("specific_force_judged",)
         return Processed(t_ns, result.reason, (w_b, f_b), increments, events, tag)
 
     def _integrate(self, t_ns: int, w_b: tuple, f_b: tuple, out: list) -> None:

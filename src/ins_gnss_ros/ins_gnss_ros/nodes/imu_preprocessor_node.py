@@ -20,6 +20,7 @@ from __future__ import annotations
 import sys
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
 from ins_gnss_msgs.msg import Heading, ImuDelta, InsCorrection
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 from tf2_msgs.msg import TFMessage
@@ -159,6 +160,11 @@ class ImuPreprocessorNode(NavNode):
         for event in events:
             if event == "rate_measured":
                 self._report_rates()
+                continue
+            if event == "specific_force_judged":
+                problem = self.preprocessor.gravity.problem()
+                self.diag.set_state(DiagnosticStatus.WARN if problem else DiagnosticStatus.OK,
+                                    problem or "ok")
                 continue
             self.diag.count(_EVENTS[event])
             if event == "clock_jump":
