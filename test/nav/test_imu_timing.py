@@ -10,10 +10,10 @@ from ins_gnss_ros.nav.imu_timing import ImuTimingCheck
 LAT0, LON0, R_EARTH = math.radians(48.0), math.radians(11.0), 6.371e6
 
 
-def _drive(offset, mounting_deg=(0.0, 0.0, 0.0), duration=240.0, seed=0):
+def _drive(offset, mounting_deg=(0.0, 0.0, 0.0), duration=240.0, seed=0, gyro_unit=1.0):
     """A car at 8 m/s weaving and turning (yaw rate up to 0.3 rad/s), IMU at 100 Hz in any
     mounting stamped ``offset`` s early (stamps + offset = GNSS time), 5 Hz fixes with 2 cm
-    noise. Returns the check after the drive."""
+    noise; the gyro increments in ``gyro_unit`` per rad. Returns the check after the drive."""
     rng = np.random.default_rng(seed)
     dt_imu = 0.01
     t = np.arange(0.0, duration, dt_imu)
@@ -28,7 +28,7 @@ def _drive(offset, mounting_deg=(0.0, 0.0, 0.0), duration=240.0, seed=0):
     fix_every = 20
     for k in range(1, len(t)):
         # the sensor's increment: body z rotation and the specific force of gravity
-        dtheta = c_sb @ np.array([0.0, 0.0, yaw[k] - yaw[k - 1]])
+        dtheta = gyro_unit * c_sb @ np.array([0.0, 0.0, yaw[k] - yaw[k - 1]])
         dv = c_sb @ np.array([0.0, 0.0, 9.81 * dt_imu]) + rng.normal(0.0, 1e-4, 3)
         check.increment(t[k] - offset, dtheta, dv)
         if k % fix_every == 0:
@@ -48,6 +48,14 @@ def test_the_offset_of_the_imu_stamps_is_found_whatever_the_mounting(offset, mou
     assert sigma < 0.02  # reported (REPORT_SIGMA); the fixes' noise on 3.2 m chords dominates
     verdict = check.summary()
     assert ("in step" in verdict) == (offset == 0.0), verdict
+
+
+def test_gyro_rates_in_degrees_per_second_are_reported_instead_of_an_offset():
+    assert _drive(0.0).scale() == pytest.approx(1.0, abs=0.02)
+    check = _drive(0.0, (0.0, -7.0, 175.0), gyro_unit=math.degrees(1.0))
+    assert check.scale() == pytest.approx(57.3, rel=0.02)
+    assert check.summary().startswith("the gyros turn 5")
+    assert "angular_velocity in deg/s (57.3 x)" in check.summary()
 
 
 def test_a_straight_or_slow_drive_says_what_it_needs():

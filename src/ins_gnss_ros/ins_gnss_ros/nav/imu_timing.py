@@ -19,6 +19,12 @@ a grid of candidate offsets, the one that fits; its sigma follows from the resid
 the yaw-rate changes that carry the information (linearised least squares:
 sigma^2 = residual variance / sum((w(t_(j+1)) - w(t_(j-1)))^2)).
 
+The same pairs give the gyros' scale, 1 for rates in rad/s and 57.3 for a driver publishing deg/s:
+at the fitted offset, the IMU turns' sum of squares over their products with the course turns
+(the inverse of the slope of the course turns on the IMU's, so that the fixes' noise, which is in
+the course turns, does not bias it; on a ship in waves it outweighs the few real turns many
+times). Beyond SCALE_RANGE the summary says so instead of an offset (which assumes the scale).
+
 A check, not a correction: the course is that of the antenna, and a wheeled vehicle's antenna
 ahead of its rear axle slips sideways in proportion to the turn rate, which leads the course by
 about (distance to the axle) / speed; on the car drive the fitted offset was the same within 20
@@ -50,6 +56,11 @@ HISTORY_S = 4.0
 SAMPLE_S = 0.005
 #: Interval over which the turn rate at either end of a course change is taken, s.
 RATE_STEP_S = 0.01
+#: Gyro scale (IMU turn over course turn) beyond which the rates' units are reported as wrong: a
+#: wheeled vehicle's side slip and a ship's drift change the course's turns by far less.
+SCALE_RANGE = (0.8, 1.25)
+#: IMU turns over the course changes (sum of squares, rad^2) a scale verdict needs.
+MIN_TURN_SQ = 1.0
 
 
 class ImuTimingCheck:
@@ -65,6 +76,8 @@ class ImuTimingCheck:
         self._pending = deque()             # (t0, t1, course change) waiting for the IMU
         self._cost = np.zeros(len(OFFSETS))
         self._rate_change_sq = np.zeros(len(OFFSETS))
+        self._turn_products = np.zeros(len(OFFSETS))  # sum of course turn x IMU turn, rad^2
+        self._imu_turn_sq = np.zeros(len(OFFSETS))    # sum of IMU turn^2, rad^2
         self.pairs = 0
 
     def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray) -> None:
@@ -129,6 +142,8 @@ class ImuTimingCheck:
         y0 = np.interp(t0 - OFFSETS, t_imu, y_imu)
         y1 = np.interp(t1 - OFFSETS, t_imu, y_imu)
         self._cost += (turn - (y1 - y0)) ** 2
+        self._turn_products += turn * (y1 - y0)
+        self._imu_turn_sq += (y1 - y0) ** 2
         # d(residual)/ds = w(t1 - s) - w(t0 - s), from the rotation's slope at each end
         w0 = (np.interp(t0 - OFFSETS + RATE_STEP_S, t_imu, y_imu) - y0) / RATE_STEP_S
         w1 = (np.interp(t1 - OFFSETS + RATE_STEP_S, t_imu, y_imu) - y1) / RATE_STEP_S
@@ -147,8 +162,21 @@ class ImuTimingCheck:
         residual_var = self._cost[k] / max(self.pairs - 1, 1)
         return float(OFFSETS[k]), math.sqrt(residual_var / self._rate_change_sq[k])
 
+    def scale(self) -> float | None:
+        """The gyros' turn over the course's at the best-fitting offset (module doc); None
+        before the IMU turned by MIN_TURN_SQ over the course changes."""
+        k = int(np.argmin(self._cost))
+        if self._imu_turn_sq[k] < MIN_TURN_SQ or self._turn_products[k] <= 0.0:
+            return None
+        return float(self._imu_turn_sq[k] / self._turn_products[k])
+
     def summary(self) -> str:
         """For /diagnostics."""
+        scale = self.scale()
+        if scale is not None and not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1]:
+            return (f"the gyros turn {scale:.2f} x the course over ground ({self.pairs} course "
+                    "changes): angular_velocity in deg/s (57.3 x), or its scale or mounting "
+                    "wrong; the time offset is not judged")
         est = self.estimate()
         if est is None or est[1] > REPORT_SIGMA:
             return (f"needs turns above {MIN_SPEED:g} m/s: {self.pairs} course changes so far"
