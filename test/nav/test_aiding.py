@@ -132,6 +132,23 @@ def test_readings_whose_stamps_do_not_fit_the_imu_clock_are_refused_and_explaine
     assert not front.fix(12.6, 59.9, 30.3, 10.0, np.eye(3), 0, True)
 
 
+def test_a_velocity_published_in_ned_is_refused_once_the_fixes_show_it():
+    front, nav, events = aiding()
+    lat0, lon0 = 40.0, -105.0
+    taken = []
+    m_per_deg_lon = M_PER_DEG * np.cos(np.radians(lat0))
+    for k in range(0, 101):  # 20 s at 5 Hz, driving east-south-east at 12 m/s
+        t = 0.2 * k
+        v_enu = np.array([11.0, -4.8, 0.0])
+        east, north = v_enu[:2] * t
+        front.fix(t, lat0 + north / M_PER_DEG, lon0 + east / m_per_deg_lon, 1600.0,
+                  np.diag([1.0, 1.0, 4.0]), 0, True)
+        taken.append(front.velocity(t, v_enu[[1, 0, 2]] * [1, 1, -1], 0.01 * np.eye(3)))
+    assert all(taken[:75]) and not any(taken[-5:])  # refused from the third window on
+    assert "gnss/vel refused: it disagrees with the fixes' displacement" in events
+    assert "published in NED?" in front.inputs["gnss/vel"].problem
+
+
 def test_a_profile_section_configures_the_filter_the_node_would():
     p = resolve(PARAMS, {"layout": "21", "lever_arm": [0.5, 0.0, 1.0],
                          "nonholonomic_sigma_mps": [0.1, 0.05],

@@ -24,11 +24,13 @@ from ..magnetic.wmm import decimal_year, field_elements
 from .course import CourseFromFixes
 from .imu_timing import ImuTimingCheck
 from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
+from .local_frame import to_map
 from .measurement_types import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, SpeedLog, \
     StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .navigator import Navigator
 from .rest_detector import RestDetector
+from .velocity_check import VelocityAgreement
 
 __all__ = ["Aiding", "AidingPolicy", "InputStats", "WheelPolicy"]
 
@@ -151,7 +153,7 @@ class InputStats:
     first_t: float = math.nan
     last_t: float = math.nan
     lead: float = math.nan  # the last stamp minus the newest increment's at its arrival, s
-    clock_problem: str | None = None  # why the last reading's stamp was refused
+    problem: str | None = None  # why the last reading was refused, for a lasting cause
 
     def rate(self) -> float:
         """Mean rate of the readings, Hz (nan before two)."""
@@ -202,6 +204,7 @@ class Aiding:
         self.forced: set[str] = set()  # kinds forced in since the filter last NAVIGATED
         self._course = CourseFromFixes()
         self.timing = ImuTimingCheck()  # the IMU's clock against the fixes' (for diagnostics)
+        self._velocity_check = VelocityAgreement()
         noise = navigator.config.noise
         self._rest = RestDetector(noise.accel_psd, noise.gyro_psd)
         self._wmm_declination = None  # at the datum, once a magnetic heading needs it
@@ -237,9 +240,9 @@ class Aiding:
             return False
         stats.lead = lead = t - self.last_increment_t
         if -self.policy.max_delay <= lead <= self.policy.max_imu_gap:
-            stats.clock_problem = None
+            stats.problem = None
             return False
-        stats.clock_problem = (
+        stats.problem = (
             f"stamped {lead:+.1f} s from the newest imu/delta: its clock and the IMU's disagree "
             + ("(GPS time 18 s ahead of UTC?), or the IMU stopped" if lead > 0.0
                else "(a host clock?), or it comes later than history_s"))
@@ -267,21 +270,31 @@ class Aiding:
             fix = self.inputs.get("gnss/fix")
             if fix is None:
                 return "aligning: no gnss/fix received yet"
-            if fix.clock_problem:
-                return f"aligning: gnss/fix {fix.clock_problem}"
+            problem = self._problem()
+            if problem:
+                return f"aligning: {problem}"
             if fix.received == fix.refused:
                 return f"aligning: every gnss/fix refused ({fix.refused})"
             if not nav.started and not math.isnan(self._first_held_t):
                 return "aligning: gnss/fix held until the IMU tells rest from motion (levelling)"
             return "aligning: " + (NO_HEADING if not nav.heading_known else "levelling")
+        problem = self._problem()
+        if problem:
+            return f"dead reckoning: {problem}"
         if self.forced:
             return ("dead reckoning (degraded): forced in, their noise floors not yet decayed: "
                     + ", ".join(sorted(self.forced)))
-        clock = next(((name, stats.clock_problem) for name, stats in self.inputs.items()
-                      if stats.clock_problem), None)
-        if clock:
-            return f"dead reckoning: {clock[0]} {clock[1]}"
         return f"dead reckoning: no aiding accepted for {t - self.last_accepted_t:.1f} s"
+
+    def _problem(self) -> str | None:
+        """The lasting cause an input's last reading was refused for (the first input's)."""
+        return next((f"{name} {stats.problem}" for name, stats in self.inputs.items()
+                     if stats.problem), None)
+
+    def _has_velocity(self) -> bool:
+        """The receiver gives a velocity that agrees with its fixes (refused ones do not count:
+        the fixes then stand in for it as for a receiver without one)."""
+        return "gnss/vel" in self.inputs and not self._velocity_check.disagrees
 
     def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray, dt: float) -> str | None:
         """An IMU increment over dt (s) ending at t (s), already judged plausible
@@ -312,7 +325,7 @@ class Aiding:
         # second of data), which the start could not wait for; they end as the vehicle moves.
         # Rest stands in for the receiver's speed: once gnss/vel has come, nothing asks the
         # detector again (here or in fix), so it is no longer fed.
-        if "gnss/vel" not in self.inputs:
+        if not self._has_velocity():
             if self._rest.increment(t, dtheta, dv, dt) and \
                     (not self.navigator.heading_known or self._start_rest):
                 self.navigator.add_measurement(ZeroVelocity(t))
@@ -352,6 +365,8 @@ class Aiding:
             self.datum = (lat, lon, h)
         self._course.observe(t, lat, lon, h)
         self.timing.fix(t, lat, lon, h)
+        east, north, _ = to_map(self.datum, lat, lon, h).tolist()
+        self._velocity_check.fix(t, east, north, math.sqrt(0.5 * (cov[0, 0] + cov[1, 1])))
         common_var = 0.0
         if assumed:
             # The assumed sigma is the receiver's unknown absolute accuracy, mostly an error
@@ -362,7 +377,7 @@ class Aiding:
             common_var = max(0.5 * float(cov[0, 0] + cov[1, 1] - white[0, 0] - white[1, 1]),
                              0.0)
             cov = white
-        at_rest = "gnss/vel" not in self.inputs and \
+        at_rest = not self._has_velocity() and \
             self._rest.fix(t, lat, lon, h, self._course.fix_to_fix(cov))
         if self._without_velocity_before_start():
             if at_rest:
@@ -392,13 +407,13 @@ class Aiding:
         stationary mean (the navigator's levelling) as with a receiver that gives its speed
         (also with a heading source: a turn-on bias of degrees per second left to the filter
         tilts the levelled INS faster than fixes at rest correct it)."""
-        return "gnss/vel" not in self.inputs and not self.navigator.started
+        return not self._has_velocity() and not self.navigator.started
 
     def _course_velocity(self, t: float, lat: float, lon: float, h: float,
                          cov: np.ndarray) -> None:
         """Without any gnss/vel and before the heading is known, successive fixes give the
         velocity that aligns the heading (nav/course.py)."""
-        if "gnss/vel" in self.inputs or self.navigator.heading_known:
+        if self._has_velocity() or self.navigator.heading_known:
             self._course.clear()
             return
         velocity = self._course.add(t, lat, lon, h, cov)
@@ -414,6 +429,12 @@ class Aiding:
             return self._seen("gnss/vel", t, False)
         if np.linalg.norm(v_enu) > MAX_SPEED:
             self.report("implausible gnss/vel rejected")
+            return self._seen("gnss/vel", t, False)
+        check = self._velocity_check
+        check.velocity(t, float(v_enu[0]), float(v_enu[1]))
+        self._stats("gnss/vel", t).problem = check.problem()
+        if check.disagrees:
+            self.report("gnss/vel refused: it disagrees with the fixes' displacement")
             return self._seen("gnss/vel", t, False)
         cov = _floored(cov, self.policy.velocity_sigma_floor)
         self.navigator.add_measurement(
