@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from ins_gnss_ros.nav import measurements as M
-from ins_gnss_ros.nav.earth import ecef_to_enu_matrix, geodetic_to_ecef
+from ins_gnss_ros.nav.earth import earth_rate_enu, ecef_to_enu_matrix, geodetic_to_ecef
 from ins_gnss_ros.nav.ekf import ExtraState, StateSpace
 from ins_gnss_ros.nav.error_model import make_layout
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
 from ins_gnss_ros.nav.rotations import quat_conj, quat_from_euler, quat_from_rotvec, quat_mul, \
-    quat_to_dcm
+    quat_to_dcm, skew
 from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405, filter_noise
 from ins_gnss_ros.nav.strapdown import NavState, apply_correction
 
@@ -332,3 +332,17 @@ def test_phase_double_differences_jacobian():
     z = M.phase_differences(SPACE, computed, DD_BASELINES, DD_GEOMETRY, value, cov).z
     np.testing.assert_allclose(z, model.H[:, SPACE["att"]] @ phi, rtol=1e-3, atol=1e-12)
     assert np.all(model.H[:, np.r_[0:SPACE["att"].start, SPACE["att"].stop:SPACE.size]] == 0.0)
+
+
+def test_the_lever_arm_columns_take_the_rate_they_are_given():
+    # A smoothed rate for the consider columns (navigator.LEVER_RATE_TAU): with a zero one only
+    # the Earth-rate term is left; the prediction and the other columns keep the measured rate.
+    S = LEVER_SPACE
+    meas = lever_arm_velocity(TRUE.v_enu, TRUE.q_nb, OMEGA, LEVER, TRUE.lat)
+    given = M.gnss_velocity(S, TRUE, meas, np.eye(3), OMEGA, LEVER, lever_rate=np.zeros(3))
+    measured = M.gnss_velocity(S, TRUE, meas, np.eye(3), OMEGA, LEVER)
+    C = quat_to_dcm(TRUE.q_nb)
+    cols = slice(S["lever_x"].start, S["lever_z"].stop)
+    np.testing.assert_allclose(given.H[:, cols], skew(earth_rate_enu(TRUE.lat)) @ C, atol=1e-15)
+    np.testing.assert_array_equal(given.z, measured.z)
+    np.testing.assert_array_equal(given.H[:, :cols.start], measured.H[:, :cols.start])

@@ -126,7 +126,7 @@ VELOCITY_LATENCY_RANGE = (0.0, 0.5)
 
 
 def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3), dzdt=None,
-                  latency=0.0):
+                  latency=0.0, lever_rate=None):
     """GNSS antenna velocity (loose coupling).
 
     Predicted v_a = v + C (omega_ib x l) - omega_ie x (C l) (Groves eq. 2.167). Its error:
@@ -153,6 +153,10 @@ def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3),
         Antenna acceleration ENU (m/s^2), for the time-offset and velocity-latency states.
     latency : float
         The running estimate of the velocity's latency ("vd" state), s.
+    lever_rate : array_like, shape (3,), optional
+        The angular rate of the "lever_*" columns (default ``omega_ib_b``): the true rotation
+        is their coefficient, and a measured rate's noise would pass for rotation that tells
+        the lever arm (a vehicle at rest), so the caller may give a smoothed one.
 
     Returns
     -------
@@ -167,7 +171,8 @@ def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3),
     _add_time_offset(space, H, dzdt)
     if any(name in space for name in LEVER_ARM_EXTRAS):  # d v_a/d l = C [w x] - [w_ie x] C
         C = quat_to_dcm(state.q_nb)
-        _add_lever_arm(space, H, C @ skew(omega_ib_b) - skew(earth_rate_enu(state.lat)) @ C)
+        rate = omega_ib_b if lever_rate is None else lever_rate
+        _add_lever_arm(space, H, C @ skew(rate) - skew(earth_rate_enu(state.lat)) @ C)
     if dzdt is not None and "vd" in space:
         pred = pred - np.asarray(dzdt, float) * latency
         H[:, space["vd"].start] = dzdt

@@ -33,7 +33,7 @@ from .alignment import Levelling, course_error_gain, fixes_with_course, initial_
     levelled_state, restart_velocity, rotate_yaw, take_static_gyro_bias, without_cross_track, \
     yaw_error_from_course, yaw_error_from_heading, yaw_error_from_motion
 from .earth import WGS84
-from .ekf import ErrorStateEKF, StateSpace
+from .ekf import LEVER_ARM_EXTRAS, ErrorStateEKF, StateSpace
 from .error_model import make_layout
 from .gating import rejected
 from .imu_buffer import ImuBuffer
@@ -69,6 +69,12 @@ def _view(part, name, doc):
         return getattr(getattr(self, part), name)
     return property(get, doc=doc)
 
+
+#: Time constant of the rate in the GNSS velocity's lever-arm consider columns, s: the
+#: segments' gyro noise averaged down (at rest it would pass for rotation that tells the lever
+#: arm: a simulated car grew sure of its IMU's height, 0.2 m sigma for a 1.6 m error), a ship's
+#: roll of several seconds kept.
+LEVER_RATE_TAU = 0.5
 
 class Navigator:
     """Strapdown + closed-loop EKF over time-ordered IMU data and measurements.
@@ -113,6 +119,8 @@ class Navigator:
             if cfg.nhc_learn and cfg.nhc_sigma is None else None
         self._recorder = Recorder(self._space, cfg.record, cfg.store_covariance)
         self._gaps = BridgedGaps(cfg.gap_accel_sigma, cfg.gap_rate_sigma)
+        # the GNSS velocity's lever-arm consider columns take a smoothed rate (measurements.py)
+        self._lever_columns = any(name in self._space for name in LEVER_ARM_EXTRAS)
         # The fixes' common error (GnssFix.common_var) of the latest fix used, m^2: a property
         # of the receiver, not of the run state, so a rewind keeps it.
         self._fix_common_var = 0.0
@@ -389,6 +397,9 @@ class Navigator:
             s.rest_dtheta, s.rest_time = np.zeros(3), 0.0
         s.ekf.set_noise(self._rest_noise.noise)
         phi = propagate(s, rows, s.ekf.noise, cfg.cov_interval, self._gaps, self._space)
+        if self._lever_columns:
+            s.omega_smooth = s.omega_smooth - np.expm1(-s.omega_time / LEVER_RATE_TAU) * (
+                s.omega - s.omega_smooth)
         if at_rest:
             # The ZARU averages the gyros over all of the rest since the last one (_zero_rate),
             # as measured: the estimates may move before it.
@@ -514,7 +525,8 @@ class Navigator:
         if self._held_for_alignment(m, epoch):
             return
         innov = meas.gnss_velocity(self._space, st, m.v_enu, m.cov_enu, s.omega, self._lever,
-                                   dzdt=s.a_enu, latency=s.estimates.get("vd", (0.0,))[0])
+                                   dzdt=s.a_enu, latency=s.estimates.get("vd", (0.0,))[0],
+                                   lever_rate=s.omega_smooth)
         if aligned_by is not None:
             innov = without_cross_track(innov, m.v_enu)
         if self._at_rest(epoch):
