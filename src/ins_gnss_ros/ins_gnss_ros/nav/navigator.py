@@ -76,6 +76,7 @@ def _view(part, name, doc):
 #: roll of several seconds kept.
 LEVER_RATE_TAU = 0.5
 
+
 class Navigator:
     """Strapdown + closed-loop EKF over time-ordered IMU data and measurements.
 
