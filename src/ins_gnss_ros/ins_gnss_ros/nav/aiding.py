@@ -364,8 +364,8 @@ class Aiding:
         if self.datum is None:
             self.datum = (lat, lon, h)
         self._course.observe(t, lat, lon, h)
-        self.timing.fix(t, lat, lon, h)
         east, north, _ = to_map(self.datum, lat, lon, h).tolist()
+        self.timing.fix(t, east, north)
         self._velocity_check.fix(t, east, north, math.sqrt(0.5 * (cov[0, 0] + cov[1, 1])))
         common_var = 0.0
         if assumed:

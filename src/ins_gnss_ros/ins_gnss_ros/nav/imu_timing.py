@@ -38,8 +38,6 @@ from collections import deque
 
 import numpy as np
 
-from .local_frame import to_map
-
 #: Candidate offsets, s: the IMU stamps plus the offset are GNSS time.
 OFFSETS = np.round(np.arange(-0.5, 0.5 + 1e-9, 0.005), 3)
 #: Least speed over the three fixes of a course, m/s.
@@ -71,7 +69,6 @@ class ImuTimingCheck:
         self._rotation = 0.0
         self._specific_force = [0.0, 0.0, 0.0]  # summed dv: its direction is the body's up
         self._fixes = deque(maxlen=3)       # (t, east, north), m
-        self._datum = None                  # the first fix: the map frame of the courses
         self._courses = deque(maxlen=3)     # (t, course rad)
         self._pending = deque()             # (t0, t1, course change) waiting for the IMU
         self._cost = np.zeros(len(OFFSETS))
@@ -102,11 +99,9 @@ class ImuTimingCheck:
         while self._pending and self._pending[0][1] + OFFSETS[-1] + RATE_STEP_S <= t:
             self._compare(*self._pending.popleft())
 
-    def fix(self, t: float, lat: float, lon: float, h: float) -> None:
-        """A GNSS fix at t (s, GNSS time), geodetic rad and m."""
-        if self._datum is None:
-            self._datum = (lat, lon, h)
-        east, north, _ = to_map(self._datum, lat, lon, h).tolist()
+    def fix(self, t: float, east: float, north: float) -> None:
+        """A GNSS fix at t (s, GNSS time) in the map frame (m, ``local_frame.to_map``: the
+        caller's conversion, shared with its other checks)."""
         if self._fixes and not self._regular(t):
             self._fixes.clear()
             self._courses.clear()

@@ -98,6 +98,9 @@ class EkfNode(EkfServices, NavNode):
             self.diag.set_value("GNSS antenna lever arm", (
                 f"{list(p['lever_arm'])} m FLU, not measured: within +-"
                 f"{list(p['lever_arm_sigma_m'])} m assumed (lever_arm, lever_arm_sigma_m)"))
+        # the turn check's fit over its candidate offsets, once per /diagnostics publication
+        self.diag.before_publish.append(lambda: self.diag.set_value(
+            "IMU time offset from turns", self.aiding.timing.summary()))
         if not p["datum.from_first_fix"]:
             self.aiding.datum = (np.radians(p["datum.latitude_deg"]),
                                  np.radians(p["datum.longitude_deg"]), p["datum.altitude_m"])
@@ -261,7 +264,6 @@ class EkfNode(EkfServices, NavNode):
             self.diag.set_value("IMU noise at rest", nav.imu_noise_at_rest)
         if nav.learned_constraint is not None:
             self.diag.set_value("non-holonomic constraint", nav.learned_constraint)
-        self.diag.set_value("IMU time offset from turns", self.aiding.timing.summary())
         latency = nav.velocity_latency()
         if latency is not None:
             self.diag.set_value("gnss/vel latency estimate",
