@@ -46,6 +46,7 @@ def test_the_offset_of_the_imu_stamps_is_found_whatever_the_mounting(offset, mou
     assert sigma < 0.02  # reported (REPORT_SIGMA); the fixes' noise on 3.2 m chords dominates
     verdict = check.summary()
     assert ("in step" in verdict) == (offset == 0.0), verdict
+    assert check.problem() == (None if offset == 0.0 else verdict)
 
 
 def test_gyro_rates_in_degrees_per_second_are_reported_instead_of_an_offset():
@@ -54,6 +55,7 @@ def test_gyro_rates_in_degrees_per_second_are_reported_instead_of_an_offset():
     assert check.scale() == pytest.approx(57.3, rel=0.02)
     assert check.summary().startswith("the gyros turn 5")
     assert "angular_velocity in deg/s (57.3 x)" in check.summary()
+    assert check.problem() == check.summary()
 
 
 def test_a_straight_or_slow_drive_says_what_it_needs():
@@ -64,3 +66,4 @@ def test_a_straight_or_slow_drive_says_what_it_needs():
             check.fix(0.01 * k, 0.0, 0.0)
     assert check.estimate() is None
     assert check.summary().startswith("needs turns above 3 m/s: 0 course changes")
+    assert check.problem() is None

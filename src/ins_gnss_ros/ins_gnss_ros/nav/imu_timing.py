@@ -54,6 +54,9 @@ HISTORY_S = 4.0
 SAMPLE_S = 0.005
 #: Interval over which the turn rate at either end of a course change is taken, s.
 RATE_STEP_S = 0.01
+#: An offset within this (or 3 sigma) is "in step", s: a 10 ms error moves a car in a sharp turn
+#: by centimetres.
+IN_STEP_S = 0.01
 #: Gyro scale (IMU turn over course turn) beyond which the rates' units are reported as wrong: a
 #: wheeled vehicle's side slip and a ship's drift change the course's turns by far less.
 SCALE_RANGE = (0.8, 1.25)
@@ -167,17 +170,29 @@ class ImuTimingCheck:
 
     def summary(self) -> str:
         """For /diagnostics."""
+        return self._verdict()[0]
+
+    def problem(self) -> str | None:
+        """The summary when the turns show the IMU's rates in other units or its stamps off
+        GNSS time (the ekf's /diagnostics is then WARN, not OK), else None."""
+        text, wrong = self._verdict()
+        return text if wrong else None
+
+    def _verdict(self) -> tuple[str, bool]:
+        """(summary, whether it finds the IMU's rates or stamps wrong)."""
         scale = self.scale()
         if scale is not None and not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1]:
             return (f"the gyros turn {scale:.2f} x the course over ground ({self.pairs} course "
                     "changes): angular_velocity in deg/s (57.3 x), or its scale or mounting "
-                    "wrong; the time offset is not judged")
+                    "wrong; the time offset is not judged"), True
         est = self.estimate()
         if est is None or est[1] > REPORT_SIGMA:
             return (f"needs turns above {MIN_SPEED:g} m/s: {self.pairs} course changes so far"
-                    + ("" if est is None else f", {1e3 * est[0]:+.0f} +- {1e3 * est[1]:.0f} ms"))
+                    + ("" if est is None else f", {1e3 * est[0]:+.0f} +- {1e3 * est[1]:.0f} ms")
+                    ), False
         offset, sigma = est
-        verdict = "in step" if abs(offset) <= max(3.0 * sigma, 0.01) else \
-            "the IMU stamps are off GNSS time: add it to imu_preprocessor time_offset_s"
+        off = abs(offset) > max(3.0 * sigma, IN_STEP_S)
+        verdict = "the IMU stamps are off GNSS time: add it to imu_preprocessor time_offset_s" \
+            if off else "in step"
         return (f"{1e3 * offset:+.0f} +- {1e3 * sigma:.0f} ms from {self.pairs} course changes "
-                f"(gyro turn vs course over ground): {verdict}")
+                f"(gyro turn vs course over ground): {verdict}"), off
