@@ -8,7 +8,8 @@ from scipy.spatial.transform import Rotation
 from ins_gnss_ros.nav.imu_timing import ImuTimingCheck
 
 
-def _drive(offset, mounting_deg=(0.0, 0.0, 0.0), duration=240.0, seed=0, gyro_unit=1.0):
+def _drive(offset, mounting_deg=(0.0, 0.0, 0.0), duration=240.0, seed=0, gyro_unit=1.0,
+           check=None):
     """A car at 8 m/s weaving and turning (yaw rate up to 0.3 rad/s), IMU at 100 Hz in any
     mounting stamped ``offset`` s early (stamps + offset = GNSS time), 5 Hz fixes with 2 cm
     noise; the gyro increments in ``gyro_unit`` per rad. Returns the check after the drive."""
@@ -22,7 +23,7 @@ def _drive(offset, mounting_deg=(0.0, 0.0, 0.0), duration=240.0, seed=0, gyro_un
     north = np.concatenate([[0.0], np.cumsum(8.0 * np.sin(yaw[:-1] + 0.5 * np.diff(yaw))
                                              * dt_imu)])
     c_sb = Rotation.from_euler("xyz", mounting_deg, degrees=True).as_matrix()  # body -> sensor
-    check = ImuTimingCheck()
+    check = check or ImuTimingCheck()
     fix_every = 20
     for k in range(1, len(t)):
         # the sensor's increment: body z rotation and the specific force of gravity
@@ -47,6 +48,16 @@ def test_the_offset_of_the_imu_stamps_is_found_whatever_the_mounting(offset, mou
     verdict = check.summary()
     assert ("in step" in verdict) == (offset == 0.0), verdict
     assert check.problem() == (None if offset == 0.0 else verdict)
+
+
+def test_fixes_stamped_late_are_no_problem_where_the_filter_estimates_their_latency():
+    late = _drive(0.12, check=ImuTimingCheck(gnss_latency_state=True))
+    assert late.problem() is None
+    assert "the filter's time-offset state takes it" in late.summary()
+    assert "set the ekf's time_offset_sigma_s" in _drive(0.12).problem()
+    # the IMU's stamps late (fixes early): the state would leave the solution on the late clock
+    early = _drive(-0.12, check=ImuTimingCheck(gnss_latency_state=True))
+    assert "add it to imu_preprocessor time_offset_s" in early.problem()
 
 
 def test_gyro_rates_in_degrees_per_second_are_reported_instead_of_an_offset():

@@ -203,7 +203,8 @@ class Aiding:
         self.last_accepted_t = -math.inf  # newest accepted update, s
         self.forced: set[str] = set()  # kinds forced in since the filter last NAVIGATED
         self._course = CourseFromFixes()
-        self.timing = ImuTimingCheck()  # the IMU's clock against the fixes' (for diagnostics)
+        # the IMU's clock against the fixes' (for diagnostics)
+        self.timing = ImuTimingCheck(gnss_latency_state="td" in navigator.config.extras)
         self._velocity_check = VelocityAgreement()
         noise = navigator.config.noise
         self._rest = RestDetector(noise.accel_psd, noise.gyro_psd)

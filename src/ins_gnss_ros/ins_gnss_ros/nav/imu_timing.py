@@ -67,7 +67,10 @@ MIN_TURN_SQ = 1.0
 class ImuTimingCheck:
     """Accumulates increments and fixes; :meth:`estimate` gives the offset that fits best."""
 
-    def __init__(self):
+    def __init__(self, gnss_latency_state: bool = False):
+        # The filter estimates a GNSS latency (its "td" state): fixes stamped after the IMU's
+        # clock are taken there, not a defect of the IMU's stamps.
+        self.gnss_latency_state = gnss_latency_state
         self._imu = deque()                 # (t, accumulated vertical rotation, rad)
         self._rotation = 0.0
         self._specific_force = [0.0, 0.0, 0.0]  # summed dv: its direction is the body's up
@@ -192,7 +195,17 @@ class ImuTimingCheck:
                     ), False
         offset, sigma = est
         off = abs(offset) > max(3.0 * sigma, IN_STEP_S)
-        verdict = "the IMU stamps are off GNSS time: add it to imu_preprocessor time_offset_s" \
-            if off else "in step"
+        if not off:
+            verdict = "in step"
+        elif offset > 0.0 and self.gnss_latency_state:
+            verdict, off = ("the fixes are stamped after the IMU's clock (on arrival?): the "
+                            "filter's time-offset state takes it"), False
+        elif offset > 0.0:
+            # A stamp taken on arrival comes after its epoch: the IMU's clock is the likelier
+            # to be right, and the filter's state keeps the solution on it.
+            verdict = ("the fixes are stamped after the IMU's clock (on arrival?): set the "
+                       "ekf's time_offset_sigma_s (0.1-0.2), or imu_preprocessor time_offset_s")
+        else:
+            verdict = "the IMU stamps are off GNSS time: add it to imu_preprocessor time_offset_s"
         return (f"{1e3 * offset:+.0f} +- {1e3 * sigma:.0f} ms from {self.pairs} course changes "
                 f"(gyro turn vs course over ground): {verdict}"), off
