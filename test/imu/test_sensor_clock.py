@@ -3,7 +3,7 @@ lost samples against the true sampling instants."""
 import numpy as np
 import pytest
 
-from ins_gnss_ros.imu.sensor_clock import SensorClock, estimate_rate
+from ins_gnss_ros.imu.sensor_clock import SensorClock, fit_stamps
 
 NS = 1_000_000_000
 T0 = 1_780_000_000 * NS
@@ -24,14 +24,14 @@ def _stream(rate, duration, jitter, lost, seed=1, drift=250e-6):
 def test_rate_from_the_first_stamps_despite_jitter_and_a_lost_sample(rate):
     truth, stamps = _stream(rate, 1.0 + 41 / rate, 2e-3, lost=[5])
     n = max(41, int(0.5 * rate))
-    assert estimate_rate(stamps[:n]) == pytest.approx(rate * (1 + 250e-6), rel=5e-3)
+    assert fit_stamps(stamps[:n]).rate_hz == pytest.approx(rate * (1 + 250e-6), rel=5e-3)
 
 
 @pytest.mark.parametrize("rate", [100.0, 200.0])
 def test_two_ms_jitter_gives_stamps_within_0_1_ms_and_lost_samples_stay_lost(rate):
     lost = [500, 900, 901, 1500]
     truth, stamps = _stream(rate, 30.0, 2e-3, lost)
-    clock = SensorClock(estimate_rate(stamps[:41]))
+    clock = SensorClock(fit_stamps(stamps[:41]).rate_hz)
     clean = np.array([clock.stamp(int(s)) for s in stamps])
     err = (clean - truth) / NS
     late = truth - T0 > 5 * NS
@@ -64,3 +64,26 @@ def test_a_step_of_the_driver_clock_restarts_the_fit():
     clean = [clock.stamp(s) for s in stamps]
     assert clock.resets == 2
     assert clean[110:] == stamps[110:] and clean[:100] == stamps[:100]
+
+
+def test_samples_stamped_per_usb_frame_are_measured_and_put_back_one_period_apart():
+    """A 100 Hz IMU whose driver stamps each 20 ms USB frame's samples together when the frame
+    arrives (1-3 ms after it ends): the first 2 s give the rate to 0.1 % and the stamps' scatter
+    (5.2 ms RMS), and the fit with that scatter puts the samples 10 +- 0.2 ms apart at a constant
+    latency (the frame's mean delay, not observable from the stamps), where the stamps jump by
+    0 or 20 ms."""
+    rng = np.random.default_rng(1)
+    rate, drift, frame = 100.0, 250e-6, 20_000_000
+    truth = T0 + np.arange(3000) * (NS / rate / (1 + drift))
+    stamps = (truth.astype(np.int64) // frame + 1) * frame \
+        + rng.uniform(1e6, 3e6, len(truth)).astype(np.int64)
+    fit = fit_stamps(stamps[:200])
+    assert fit.rate_hz == pytest.approx(rate * (1 + drift), rel=1e-3) and fit.rate_sigma < 1e-3
+    assert 0.004 < fit.scatter_s < 0.007
+    clock = SensorClock(fit.rate_hz, fit.scatter_s)
+    clean = np.array([clock.stamp(int(s)) for s in stamps])
+    late = truth - T0 > 10 * NS
+    err = (clean - truth)[late] / NS
+    assert np.ptp(err) < 5e-3 and clock.resets == 1
+    steps = np.diff(clean[late]) / NS
+    assert np.all(np.abs(steps - 1.0 / rate) < 2e-4)

@@ -8,8 +8,8 @@ Per raw sample (sensor frame, any mounting, stamps in integer ns on the driver's
    the stamps (a stamp step unlike the step of the arrival times while the samples arrive at
    their regular period), and :class:`~ins_gnss_ros.imu.sensor_clock.SensorClock` gives each
    sample its sampling instant on the sensor's own clock in place of the driver's jittered
-   stamp; the sample rate is given or measured from the first stamps
-   (:func:`~ins_gnss_ros.imu.sensor_clock.estimate_rate`), and the navigation interval is the
+   stamp; the sample rate is given or measured from the first stamps, with their scatter
+   (:func:`~ins_gnss_ros.imu.sensor_clock.fit_stamps`), and the navigation interval is the
    whole number of samples nearest to the wanted one (:func:`navigation_interval`);
 1. :class:`~ins_gnss_ros.imu.sample_checks.SampleChecker` rejects NaN/inf, saturated readings,
    duplicated or backwards stamps and a frozen sensor, bridges gaps of up to ``max_bridge``
@@ -41,7 +41,7 @@ from ..nav.increments import SensorErrors
 from .calibration import ImuCalibration
 from .gravity_check import SpecificForceCheck
 from .sample_checks import ClockJumps, SampleChecker
-from .sensor_clock import SensorClock, estimate_rate
+from .sensor_clock import SensorClock, fit_stamps
 
 __all__ = ["EVENTS", "ImuPreprocessor", "Increment", "Processed", "SettingError",
            "navigation_interval"]
@@ -119,6 +119,11 @@ EVENTS = ("clock_jump", "rate_measured", "sensor_clock_restart", "coning_fallbac
 #: intervals shrugs off a few lost samples, and half a second of span makes the rate good to
 #: a fraction of a percent with millisecond jitter (the sensor-clock fit then refines it).
 RATE_WINDOW_SAMPLES, RATE_WINDOW_S = 41, 0.5
+#: Relative sigma of the measured rate the sensor-clock fit starts from (half its prior): stamps
+#: scattered more widely (samples stamped per USB frame) are taken over a longer span first.
+RATE_SIGMA = 1e-3
+#: Samples held at most while the rate is measured.
+PENDING_MAX = 100 * RATE_WINDOW_SAMPLES
 
 
 def navigation_interval(rate_hz: float, nav_rate_hz: float, coning_method: str) -> tuple[int, str]:
@@ -184,7 +189,8 @@ class ImuPreprocessor:
         (min, max) stamp jump taken out by the arrival clock, s; None: no correction.
     sensor_clock : (float, float) or None
         (jitter_s, time_constant_s) of the :class:`~ins_gnss_ros.imu.sensor_clock.SensorClock`
-        that gives every sample its sampling instant; None: the stamps as they come.
+        that gives every sample its sampling instant (with the stamps' measured scatter where
+        it is larger and the rate is measured); None: the stamps as they come.
     time_offset_ns : int
         Added to every stamp (IMU clock to GNSS time), ns.
 
@@ -192,6 +198,8 @@ class ImuPreprocessor:
     ----------
     rate_hz, nav_rate_hz : float or None
         Sample rate (given or measured) and effective increment rate, Hz; None until measured.
+    stamp_scatter_s : float
+        RMS scatter of the stamps that measured the rate about its line, s (0 when given).
     coning_method : str or None
         The method in use.
     temperature : float or None
@@ -216,6 +224,7 @@ class ImuPreprocessor:
                               max_identical_samples=max_identical_samples,
                               clock_jump=clock_jump, sensor_clock=sensor_clock)
         self.rate_hz = self.nav_rate_hz = self.coning_method = None
+        self.stamp_scatter_s = 0.0   # of the stamps that measured the rate (rate_hz 0), s
         self._pending: list | None = []   # samples held while the rate is measured
         if rate_hz > 0:
             self._start(rate_hz, strict=True)
@@ -262,8 +271,11 @@ class ImuPreprocessor:
                 raise SettingError("clock_jump", str(err)) from None
         self.sensor_clock = None
         if s["sensor_clock"] is not None:
+            jitter_s, time_constant_s = s["sensor_clock"]
             try:
-                self.sensor_clock = SensorClock(rate_hz, *s["sensor_clock"])
+                # the stamps' measured scatter where it exceeds the configured jitter
+                self.sensor_clock = SensorClock(rate_hz, max(jitter_s, self.stamp_scatter_s),
+                                                time_constant_s)
             except ValueError as err:
                 raise SettingError("sensor_clock", str(err)) from None
         self.rate_hz, self.nav_rate_hz, self.coning_method = rate_hz, rate_hz / n_sub, method
@@ -313,17 +325,20 @@ class ImuPreprocessor:
             return (self._process(stamp_ns, arrival_ns, gyro, accel, tag, ()),)
         pending = self._pending
         pending.append((stamp_ns, arrival_ns, gyro, accel, tag))
-        if len(pending) > 100 * RATE_WINDOW_SAMPLES:   # stamps that do not advance: bounded
+        if len(pending) > PENDING_MAX:   # stamps that do not advance: bounded
             del pending[0]
         span_ns = pending[-1][0] - pending[0][0]
         if len(pending) < RATE_WINDOW_SAMPLES or span_ns < RATE_WINDOW_S * NS:
             return ()
         try:
-            rate_hz = estimate_rate([p[0] for p in pending])
+            fit = fit_stamps([p[0] for p in pending])
         except ValueError:   # stamps that never increase: wait for better ones
             del pending[0]
             return ()
-        events = ("rate_measured",) + self._start(rate_hz, strict=False)
+        if fit.rate_sigma > RATE_SIGMA and len(pending) < PENDING_MAX:
+            return ()
+        self.stamp_scatter_s = fit.scatter_s
+        events = ("rate_measured",) + self._start(fit.rate_hz, strict=False)
         out = tuple(self._process(*p, events if k == 0 else ()) for k, p in enumerate(pending))
         return out
 

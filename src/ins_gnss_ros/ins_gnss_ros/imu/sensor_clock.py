@@ -7,9 +7,11 @@ car drive's logger: ±1.5 ms in 1 ms steps, 0.54 ms RMS around a line over the s
 off by the difference of two jitters (up to 30 % at 100 Hz), and a late stamp looks like a lost
 sample to the gap check.
 
-* :func:`estimate_rate`: the sample rate from the first stamps, robust to jitter and to a few
-  lost samples: the median interval counts the samples of every interval (1, or 2 after a lost
-  sample), and the rate is the samples counted over the span.
+* :func:`fit_stamps`: the sample rate from the first stamps, robust to jitter and to a few
+  lost samples (the median interval counts the samples of every interval: 1, or 2 after a lost
+  sample; with jitter as wide as the period the order of arrival counts them), fitted as a line
+  over the count, and the stamps' scatter about it: a driver that stamps a USB frame's samples
+  together scatters them by a fraction of the frame (20 ms frames of a 100 Hz IMU: 5.8 ms RMS).
 * :class:`SensorClock`: a Kalman filter on the line stamp = t0 + k period over the sample count
   k (a second-order phase-locked loop: phase and period, the period a slow random walk for the
   crystal's drift). Each sample's count follows from its stamp, the last one and the period, so
@@ -21,20 +23,30 @@ sample to the gap check.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["SensorClock", "estimate_rate"]
+__all__ = ["SensorClock", "StampFit", "fit_stamps"]
 
 
-def estimate_rate(stamps_ns) -> float:
-    """Sample rate of a stream from its first stamps, Hz.
+class StampFit(NamedTuple):
+    """:func:`fit_stamps`' line: rate (Hz), the stamps' RMS scatter about it (s) and the rate's
+    standard deviation relative to it."""
+    rate_hz: float
+    scatter_s: float
+    rate_sigma: float
+
+
+def fit_stamps(stamps_ns) -> StampFit:
+    """Sample rate and stamp scatter of a stream from its first stamps: a least-squares line of
+    the stamps over the samples' count.
 
     Parameters
     ----------
     stamps_ns : sequence of int
         Stamps of consecutive received samples, ns (jittered, some samples possibly lost:
-        counted by the median step, and non-increasing steps ignored; with jitter as wide as
+        counted by the median step, and non-increasing steps count none; with jitter as wide as
         the period every received sample counts one period).
 
     Raises
@@ -42,16 +54,24 @@ def estimate_rate(stamps_ns) -> float:
     ValueError
         Fewer than two increasing steps.
     """
-    d = np.diff(np.asarray(stamps_ns, np.int64)).astype(float)
+    stamps = np.asarray(stamps_ns, np.int64)
+    d = np.diff(stamps).astype(float)
     if np.sum(d > 0) < 2:
         raise ValueError("fewer than two increasing stamp steps")
     median = np.median(d[d > 0])
     if np.median(np.abs(d - median)) > 0.25 * median:
         # Jitter as wide as the period: the steps cannot count lost samples, the arrivals do.
-        return float(len(d) / d.sum() * 1e9)
-    d = d[d > 0]
-    counts = np.maximum(np.round(d / median), 1.0)
-    return float(counts.sum() / d.sum() * 1e9)
+        steps = np.ones_like(d)
+    else:
+        steps = np.where(d > 0, np.maximum(np.round(d / median), 1.0), 0.0)
+    count = np.concatenate([[0.0], np.cumsum(steps)])
+    count -= count.mean()
+    y = (stamps - stamps[0]).astype(float)
+    spread = float(count @ count)
+    period = float(count @ (y - y.mean())) / spread
+    residual = y - y.mean() - period * count
+    scatter = float(np.sqrt(residual @ residual / max(len(y) - 2, 1)))
+    return StampFit(1e9 / period, scatter * 1e-9, scatter / np.sqrt(spread) / period)
 
 
 class SensorClock:
