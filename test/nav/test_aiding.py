@@ -20,7 +20,7 @@ from ins_gnss_ros.params import ParameterError, resolve
 class Recorder:
     """A navigator that keeps what it is given (levelled and aligned)."""
 
-    config = SimpleNamespace(noise=SimpleNamespace(accel_psd=1e-6, gyro_psd=1e-8))
+    config = SimpleNamespace(noise=SimpleNamespace(accel_psd=1e-6, gyro_psd=1e-8), extras={})
     started = True
 
     def __init__(self):
@@ -64,6 +64,9 @@ def test_velocity_delay_heading_declination_and_range_choice():
     assert front.velocity(2.0, np.array([1.0, 0.0, 0.0]), np.zeros((3, 3)))
     vel = nav.measurements[-1]
     assert isinstance(vel, GnssVelocity) and vel.t == pytest.approx(1.9)
+    # no covariance (all zero): the conservative end of receivers' velocities, not the floor
+    assert np.allclose(np.diag(vel.cov_enu), [0.04, 0.04, 0.16])
+    assert events == ["gnss/vel without covariance: 0.2 m/s assumed"]
     assert not front.velocity(2.0, np.array([2000.0, 0.0, 0.0]), np.eye(3))
     assert front.heading(3.0, 0.5, 1e-4, declination=0.1, source="mag/heading")
     heading = nav.measurements[-1]

@@ -198,8 +198,8 @@ class ImuPreprocessor:
     ----------
     rate_hz, nav_rate_hz : float or None
         Sample rate (given or measured) and effective increment rate, Hz; None until measured.
-    stamp_scatter_s : float
-        RMS scatter of the stamps that measured the rate about its line, s (0 when given).
+    stamp_scatter_s : float or None
+        RMS scatter of the stamps that measured the rate about its line, s (None: rate given).
     coning_method : str or None
         The method in use.
     temperature : float or None
@@ -224,7 +224,7 @@ class ImuPreprocessor:
                               max_identical_samples=max_identical_samples,
                               clock_jump=clock_jump, sensor_clock=sensor_clock)
         self.rate_hz = self.nav_rate_hz = self.coning_method = None
-        self.stamp_scatter_s = 0.0   # of the stamps that measured the rate (rate_hz 0), s
+        self.stamp_scatter_s: float | None = None   # of the stamps that measured the rate, s
         self._pending: list | None = []   # samples held while the rate is measured
         if rate_hz > 0:
             self._start(rate_hz, strict=True)
@@ -272,10 +272,10 @@ class ImuPreprocessor:
         self.sensor_clock = None
         if s["sensor_clock"] is not None:
             jitter_s, time_constant_s = s["sensor_clock"]
+            # the stamps' measured scatter where it exceeds the configured jitter
+            jitter_s = max(jitter_s, self.stamp_scatter_s or 0.0)
             try:
-                # the stamps' measured scatter where it exceeds the configured jitter
-                self.sensor_clock = SensorClock(rate_hz, max(jitter_s, self.stamp_scatter_s),
-                                                time_constant_s)
+                self.sensor_clock = SensorClock(rate_hz, jitter_s, time_constant_s)
             except ValueError as err:
                 raise SettingError("sensor_clock", str(err)) from None
         self.rate_hz, self.nav_rate_hz, self.coning_method = rate_hz, rate_hz / n_sub, method

@@ -40,6 +40,13 @@ __all__ = ["Aiding", "AidingPolicy", "InputStats", "WheelPolicy"]
 #: conservative end, since NavSatStatus does not tell RTK fixed from float or code DGNSS). The
 #: vertical sigma is taken twice the horizontal (the geometry of a ground receiver).
 UNKNOWN_FIX_SIGMA = {0: 5.0, 1: 2.0, 2: 1.0}
+#: Sigma of a GNSS velocity without covariance (an all-zero one: a driver that fills none, or a
+#: geometry_msgs/TwistStamped converted), m/s horizontal; twice that vertically. The conservative
+#: end of receivers' Doppler velocities (0.05-0.2 m/s; an NMEA course and speed, 0.1-0.2): a
+#: floor-level sigma (velocity_sigma_floor_mps) would let a noisier receiver's velocity tilt the
+#: heading and pull the position beyond its covariance (a simulated car with 0.05 m/s velocities
+#: so published: position NEES 8 -> 33).
+UNKNOWN_VELOCITY_SIGMA = 0.2
 #: Heights this filter navigates at, m (a fix outside is corrupt; the integrity logic would
 #: otherwise force it in after a while).
 HEIGHT_RANGE = (-1000.0, 1e5)
@@ -437,6 +444,10 @@ class Aiding:
         if check.disagrees:
             self.report("gnss/vel refused: it disagrees with the fixes' displacement")
             return self._seen("gnss/vel", t, False)
+        if not all(v > 0.0 for v in np.diagonal(cov).tolist()):
+            sigma = UNKNOWN_VELOCITY_SIGMA
+            cov = np.diag([sigma ** 2, sigma ** 2, (2.0 * sigma) ** 2])
+            self.report(f"gnss/vel without covariance: {sigma:g} m/s assumed", log=False)
         cov = _floored(cov, self.policy.velocity_sigma_floor)
         self.navigator.add_measurement(
             GnssVelocity(t - self.policy.velocity_delay, v_enu, cov))

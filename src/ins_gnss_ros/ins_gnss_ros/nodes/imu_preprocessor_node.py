@@ -175,7 +175,7 @@ class ImuPreprocessorNode(NavNode):
         pre = self.preprocessor
         rates = (f"imu {pre.rate_hz:.4f} Hz, imu/delta {pre.nav_rate_hz:.4f} Hz "
                  f"({pre.coning_method})")
-        if pre.stamp_scatter_s > 0.0:   # measured with the rate
+        if pre.stamp_scatter_s is not None:   # measured with the rate
             rates += f", stamps scattered {1e3 * pre.stamp_scatter_s:.1f} ms RMS"
         self.diag.set_value("rates", rates)
         self.get_logger().info(rates)
