@@ -131,16 +131,22 @@ def test_faults_rejected(sim):
     for i in glitches:
         m = faulty[i]
         faulty[i] = replace(m, v_enu=m.v_enu + 5.0 * np.array([0.6, -0.8, 0.0]))
-    # A frozen receiver repeats one fix for 2 s while the car drives.
+    # A frozen receiver repeats one fix and one velocity for 2 s while the car drives.
     frozen = [i for i in fix_idx if 85.0 < faulty[i].t <= 87.0]
     for i in frozen[1:]:
         faulty[i] = replace(faulty[frozen[0]], t=faulty[i].t)
+    frozen_vel = [i for i in vel_idx if 85.0 < faulty[i].t <= 87.0]
+    for i in frozen_vel[1:]:
+        faulty[i] = replace(faulty[frozen_vel[0]], t=faulty[i].t)
     out = run(imu, faulty, config())
     bad_t = {faulty[i].t for i in jumps + frozen[1:]}
     pos = [u for u in out.updates if u.name == "gnss_pos" and u.t in bad_t]
     assert len(pos) == len(bad_t) and not any(u.accepted for u in pos)
     vel = [u for u in out.updates if u.name == "gnss_vel" and u.t in {faulty[i].t for i in glitches}]
     assert len(vel) == len(glitches) and not any(u.accepted for u in vel)
+    repeated = {faulty[i].t for i in frozen_vel[1:]}
+    vel = [u for u in out.updates if u.name == "gnss_vel" and u.t in repeated]
+    assert len(vel) == len(repeated) and all(u.reason == "frozen" for u in vel)
     # The solution does not move by more than 3 sigma at the faults.
     S = out.space
     for t in sorted(bad_t):

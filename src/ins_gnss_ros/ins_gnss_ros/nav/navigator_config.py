@@ -78,7 +78,8 @@ class NavigatorConfig:
         Zero-angular-rate update at every GNSS velocity epoch at rest: noise added to the
         averaged gyro white noise, rad/s (vibration, body sway); None disables it.
     frozen_speed : float
-        A fix identical to the previous one is rejected as frozen above this INS speed, m/s.
+        A fix identical to the previous one is rejected as frozen above this INS speed, and a
+        velocity identical to the previous one above this speed of its own, m/s.
     history : float
         How far back a delayed measurement can still be applied at its epoch, s.
     checkpoint_interval : float

@@ -72,6 +72,8 @@ class RunState:
         (lat, lon, h) of the IMU at the last fix at rest while the heading was unknown.
     last_fix : tuple of 3 float or None
         (lat, lon, h) of the last GNSS fix (a frozen receiver repeats it).
+    last_velocity : tuple of 3 float or None
+        ENU of the last GNSS velocity (a driver republishing a solution repeats it).
     t_fix_accepted : float
         GNSS time of the last fix the filter took.
     t_fixes_aligned : float
@@ -102,6 +104,7 @@ class RunState:
     rest_time: float = 0.0
     rest_pos: tuple | None = None
     last_fix: tuple | None = None
+    last_velocity: tuple | None = None
     t_fix_accepted: float = -np.inf
     t_fixes_aligned: float = -np.inf
 
