@@ -9,10 +9,11 @@ from ins_gnss_ros.nav.imu_timing import ImuTimingCheck
 
 
 def _drive(offset, mounting_deg=(0.0, 0.0, 0.0), duration=240.0, seed=0, gyro_unit=1.0,
-           check=None):
+           check=None, accel_sign=1.0):
     """A car at 8 m/s weaving and turning (yaw rate up to 0.3 rad/s), IMU at 100 Hz in any
     mounting stamped ``offset`` s early (stamps + offset = GNSS time), 5 Hz fixes with 2 cm
-    noise; the gyro increments in ``gyro_unit`` per rad. Returns the check after the drive."""
+    noise; the gyro increments in ``gyro_unit`` per rad, the accelerometer's times
+    ``accel_sign``. Returns the check after the drive."""
     rng = np.random.default_rng(seed)
     dt_imu = 0.01
     t = np.arange(0.0, duration, dt_imu)
@@ -28,7 +29,7 @@ def _drive(offset, mounting_deg=(0.0, 0.0, 0.0), duration=240.0, seed=0, gyro_un
     for k in range(1, len(t)):
         # the sensor's increment: body z rotation and the specific force of gravity
         dtheta = gyro_unit * c_sb @ np.array([0.0, 0.0, yaw[k] - yaw[k - 1]])
-        dv = c_sb @ np.array([0.0, 0.0, 9.81 * dt_imu]) + rng.normal(0.0, 1e-4, 3)
+        dv = accel_sign * c_sb @ np.array([0.0, 0.0, 9.81 * dt_imu]) + rng.normal(0.0, 1e-4, 3)
         check.increment(t[k] - offset, dtheta, dv)
         if k % fix_every == 0:
             e = east[k] + rng.normal(0.0, 0.02)
@@ -78,3 +79,12 @@ def test_a_straight_or_slow_drive_says_what_it_needs():
     assert check.estimate() is None
     assert check.summary().startswith("needs turns above 3 m/s: 0 course changes")
     assert check.problem() is None
+
+
+def test_an_accelerometer_with_gravity_down_is_reported():
+    """Acceleration published instead of specific force: the mean "up" points down, and the
+    gyros' turn about it runs against the course."""
+    check = _drive(0.0, (0.0, -7.0, 175.0), accel_sign=-1.0)
+    # (about -1: the offset it is taken at fits turns of the wrong sign; the car drive: -1.08)
+    assert check.scale() == pytest.approx(-1.0, abs=0.1)
+    assert "linear_acceleration with gravity down" in check.problem()

@@ -24,6 +24,9 @@ at the fitted offset, the IMU turns' sum of squares over their products with the
 (the inverse of the slope of the course turns on the IMU's, so that the fixes' noise, which is in
 the course turns, does not bias it; on a ship in waves it outweighs the few real turns many
 times). Beyond SCALE_RANGE the summary says so instead of an offset (which assumes the scale).
+A negative scale, the IMU turning against the course, is an "up" that points down: an
+accelerometer publishing acceleration (gravity down) instead of specific force, or axes that
+are not right-handed.
 
 A check, not a correction: the course is that of the antenna, and a wheeled vehicle's antenna
 ahead of its rear axle slips sideways in proportion to the turn rate, which leads the course by
@@ -167,7 +170,7 @@ class ImuTimingCheck:
         """The gyros' turn over the course's at the best-fitting offset (module doc); None
         before the IMU turned by MIN_TURN_SQ over the course changes."""
         k = int(np.argmin(self._cost))
-        if self._imu_turn_sq[k] < MIN_TURN_SQ or self._turn_products[k] <= 0.0:
+        if self._imu_turn_sq[k] < MIN_TURN_SQ or self._turn_products[k] == 0.0:
             return None
         return float(self._imu_turn_sq[k] / self._turn_products[k])
 
@@ -184,6 +187,11 @@ class ImuTimingCheck:
     def _verdict(self) -> tuple[str, bool]:
         """(summary, whether it finds the IMU's rates or stamps wrong)."""
         scale = self.scale()
+        if scale is not None and scale < 0.0:
+            return (f"the gyros turn against the course over ground ({scale:.2f} x, {self.pairs} "
+                    "course changes): linear_acceleration with gravity down (an acceleration, "
+                    "not the specific force), or axes not right-handed; the time offset is not "
+                    "judged"), True
         if scale is not None and not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1]:
             return (f"the gyros turn {scale:.2f} x the course over ground ({self.pairs} course "
                     "changes): angular_velocity in deg/s (57.3 x), or its scale or mounting "
