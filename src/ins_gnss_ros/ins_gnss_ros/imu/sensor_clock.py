@@ -11,7 +11,7 @@ sample to the gap check.
   lost samples (the median interval counts the samples of every interval: 1, or 2 after a lost
   sample; with jitter as wide as the period the order of arrival counts them), fitted as a line
   over the count, and the stamps' scatter about it: a driver that stamps a USB frame's samples
-  together scatters them by a fraction of the frame (20 ms frames of a 100 Hz IMU: 5.8 ms RMS).
+  together scatters them by a fraction of the frame (20 ms frames of a 100 Hz IMU: 5 ms RMS).
 * :class:`SensorClock`: a Kalman filter on the line stamp = t0 + k period over the sample count
   k (a second-order phase-locked loop: phase and period, the period a slow random walk for the
   crystal's drift). Each sample's count follows from its stamp, the last one and the period, so

@@ -179,8 +179,8 @@ class ImuTimingCheck:
         return self._verdict()[0]
 
     def problem(self) -> str | None:
-        """The summary when the turns show the IMU's rates in other units or its stamps off
-        GNSS time (the ekf's /diagnostics is then WARN, not OK), else None."""
+        """The summary when the turns show the IMU's rates in other units or of the wrong sign,
+        or its stamps off GNSS time (the ekf's /diagnostics is then WARN, not OK), else None."""
         text, wrong = self._verdict()
         return text if wrong else None
 
