@@ -6,7 +6,8 @@ import pytest
 
 from ins_gnss_ros import io as bagio
 from ins_gnss_ros.trial import contract_messages as msgs
-from ins_gnss_ros.trial.inputs import (InputTopicsError, check_inputs, iter_topic, read_inputs)
+from ins_gnss_ros.trial.inputs import (InputTopicsError, check_inputs, iter_topic, parse_remap,
+                                        read_inputs)
 
 T0 = 1_767_225_600 * 10**9
 
@@ -44,3 +45,23 @@ def test_a_bag_matching_no_input_is_one_line_naming_both(bags):
     assert "\n" not in text and isinstance(info.value, ValueError)
     for name in ("imu/delta", "gnss/fix", "truth/state", "/imu/data_raw", "/ins/correction"):
         assert name in text
+
+
+def test_a_bag_under_other_names_reads_with_a_remapping(tmp_path):
+    """A driver's names (``/fix``; relative ``imu``) read as the graph's with ``--remap``;
+    without it the bag is refused, the message naming the remedy."""
+    with bagio.BagWriter(tmp_path / "other") as writer:
+        for k in range(1, 4):
+            writer.write("imu", msgs.delta_msg(T0 + k * 10**8, [0, 0, 0], [0, 0, 0.981], 0.1))
+        writer.write("/fix", msgs.fix_msg(T0 + 2 * 10**8, 0.1, 0.2, 3.0, [1, 1, 1]))
+    bag, inputs = tmp_path / "other", {"/imu/delta", "/gnss/fix"}
+    with pytest.raises(InputTopicsError, match="--remap FROM:=TO"):
+        check_inputs(bag, inputs)
+    remap = parse_remap(["/fix:=gnss/fix", "imu:=/imu/delta"])
+    assert remap == {"/fix": "/gnss/fix", "/imu": "/imu/delta"}
+    check_inputs(bag, inputs, remap)
+    assert [m.topic for m in read_inputs(bag, remap)] == ["/imu/delta", "/imu/delta", "/gnss/fix",
+                                                          "/imu/delta"]
+    for rule in ("/fix", "/fix:=", ":=/gnss/fix"):
+        with pytest.raises(ValueError, match="expected FROM:=TO"):
+            parse_remap([rule])

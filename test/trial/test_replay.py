@@ -214,6 +214,23 @@ def test_relative_topic_names_replay_like_absolute_ones(first_run, car_bag, prof
                for x, y in zip(a, b))
 
 
+def test_a_bag_under_other_names_replays_with_remap(first_run, car_bag, profile, tmp_path):
+    """The trial with its increments recorded as a driver's ``/imu_driver/delta``: `trial
+    replay --remap` gives the outputs of the original bag."""
+    bag = tmp_path / "renamed"
+    with bagio.BagWriter(bag) as writer:
+        for m in bagio.read_bag(car_bag):
+            writer.write("/imu_driver/delta" if m.topic == "/imu/delta" else m.topic, m.msg,
+                         m.t_ns)
+    assert main(["replay", str(bag), "--config", str(profile), "--out", str(tmp_path / "r"),
+                 "--init-from-truth", "--remap", "/imu_driver/delta:=/imu/delta"]) == 0
+    out, _ = first_run
+    a, b = bagio.read_bag(out / "bag"), bagio.read_bag(tmp_path / "r" / "bag")
+    assert len(a) == len(b) > 0
+    assert all(x.topic == y.topic and x.t_ns == y.t_ns and messages_equal(x.msg, y.msg)
+               for x, y in zip(a, b))
+
+
 @pytest.fixture
 def magnetometer_bag(tmp_path):
     """A bag whose only topic (imu/mag) neither the strapdown nor the offline filter reads."""

@@ -123,8 +123,15 @@ def _import_args(p):
     p.add_argument("--out", required=True, help="new bag folder")
 
 
+def _remap_arg(p):
+    p.add_argument("--remap", action="append", default=[], metavar="FROM:=TO",
+                   help="read the bag's topic FROM as TO (repeatable; e.g. /fix:=/gnss/fix, "
+                        "/imu/data:=/imu/data_raw), as ros2 bag play --remap")
+
+
 def _replay_args(p):
     _replay_options(p)
+    _remap_arg(p)
     p.add_argument("bag")
     p.add_argument("--out", required=True, help="new output folder")
     p.add_argument("--rate", type=float, default=None,
@@ -144,6 +151,7 @@ def _replay_args(p):
 
 
 def _smooth_args(p):
+    _remap_arg(p)
     p.add_argument("bag")
     p.add_argument("--config", required=True, help="params file (config/PROFILE.yaml)")
     p.add_argument("--out", required=True, help="new output folder")
@@ -288,6 +296,7 @@ def cmd_import(args) -> int:
 
 
 def cmd_replay(args) -> int:
+    from ins_gnss_ros.trial.inputs import parse_remap
     from ins_gnss_ros.trial.run_folder import counts_table
 
     if args.processes and args.rate is None:
@@ -306,7 +315,7 @@ def cmd_replay(args) -> int:
         from ins_gnss_ros.trial.offline import replay_offline
 
         summary = replay_offline(args.bag, args.config, args.out, outages=args.outages,
-                                progress=_progress(args))
+                                progress=_progress(args), remap=parse_remap(args.remap))
     else:
         if args.processes:
             from ins_gnss_ros.trial.processes import replay_processes as run
@@ -315,7 +324,8 @@ def cmd_replay(args) -> int:
         kwargs = {"rate": args.rate} if args.processes else {"faults": args.faults,
                                                              "satellites": args.satellites}
         summary = run(args.bag, args.config, args.out, outages=args.outages,
-                      progress=_progress(args), init_from_truth=args.init_from_truth, **kwargs)
+                      progress=_progress(args), init_from_truth=args.init_from_truth,
+                      remap=parse_remap(args.remap), **kwargs)
     print(f"replayed {args.bag} ({summary['mode']}, {', '.join(summary['graph'])}):")
     print("\n".join("  " + line for line in counts_table(summary["messages"])))
     print(f"recorded {', '.join(summary['topics'])} into {args.out}")
@@ -323,6 +333,7 @@ def cmd_replay(args) -> int:
 
 
 def cmd_smooth(args) -> int:
+    from ins_gnss_ros.trial.inputs import parse_remap
     from ins_gnss_ros.trial.run_folder import counts_table
     from ins_gnss_ros.trial.smooth import smooth
 
@@ -335,7 +346,8 @@ def cmd_smooth(args) -> int:
         if len(point) != 3:
             raise ValueError(f"--point takes X,Y,Z in metres, got {args.point!r}")
     summary = smooth(args.bag, args.config, args.out, outages=args.outages, point=point,
-                     exports=args.export, progress=_progress(args))
+                     exports=args.export, progress=_progress(args),
+                     remap=parse_remap(args.remap))
     print(f"smoothed {args.bag} ({', '.join(summary['graph'])}):")
     print("\n".join("  " + line for line in counts_table(summary["messages"])))
     print("  " + ", ".join(f"{k} {v:.1f} s" for k, v in summary["timing_s"].items()))

@@ -5,6 +5,10 @@ other tools relative ones, as the contract's names are); the nodes subscribe to 
 Every topic read here is resolved (:func:`ins_gnss_ros.io.resolve`), so a bag recorded as
 ``imu/data_raw`` replays like ``/imu/data_raw``, and what the replays record is always fully
 qualified. Truth (``truth/*``) never reaches the nodes; it is not even decoded.
+
+A bag recorded under other names (a driver's ``/fix``, ``/imu/data``) replays with a remapping,
+``{bag topic: graph topic}`` (``trial replay --remap /fix:=/gnss/fix``, as ``ros2 bag play
+--remap`` does), applied to the absolute names.
 """
 from __future__ import annotations
 
@@ -20,7 +24,30 @@ class InputTopicsError(ValueError):
     """A bag none of whose topics is an input of the graph (nothing would reach the nodes)."""
 
 
-def bag_rows(bag_path, keep: Callable[[str], bool]) -> Iterator:
+def parse_remap(rules) -> dict[str, str]:
+    """``FROM:=TO`` rules (``ros2 bag play --remap``'s form) as {absolute FROM: absolute TO}.
+
+    Raises
+    ------
+    ValueError
+        A rule without ``:=`` or with an empty side.
+    """
+    remap = {}
+    for rule in rules or ():
+        source, sep, target = rule.partition(":=")
+        if not (sep and source.strip() and target.strip()):
+            raise ValueError(f"--remap {rule!r}: expected FROM:=TO, e.g. /fix:=/gnss/fix")
+        remap[bagio.resolve(source.strip())] = bagio.resolve(target.strip())
+    return remap
+
+
+def _names(bag_path, remap) -> dict[str, str]:
+    """The bag's topics -> the absolute names the graph sees them under."""
+    remap = remap or {}
+    return {t: remap.get(bagio.resolve(t), bagio.resolve(t)) for t in bagio.bag_topics(bag_path)}
+
+
+def bag_rows(bag_path, keep: Callable[[str], bool], remap=None) -> Iterator:
     """The undecoded messages of the topics of a bag whose absolute name passes ``keep``.
 
     Parameters
@@ -28,40 +55,47 @@ def bag_rows(bag_path, keep: Callable[[str], bool]) -> Iterator:
     bag_path : path
         Bag folder.
     keep : callable
-        ``keep(topic)`` with the absolute topic name.
+        ``keep(topic)`` with the absolute topic name (after ``remap``).
+    remap : dict, optional
+        {absolute bag topic: absolute name} (:func:`parse_remap`).
 
     Returns
     -------
     iterator of RawMessage
         Streamed in stamp order (ties in writing order), each under its absolute topic name.
     """
-    listed = [t for t in bagio.bag_topics(bag_path) if keep(bagio.resolve(t))]
+    names = _names(bag_path, remap)
+    listed = [t for t, name in names.items() if keep(name)]
     if not listed:
         return iter(())
     if all(t.startswith("/") for t in listed):
-        return bagio.iter_raw(bag_path, listed)
-    # The reader selects topics by absolute name only: read every row and pick them here.
-    names = set(listed)
-    return (row._replace(topic=bagio.resolve(row.topic)) for row in bagio.iter_raw(bag_path)
-            if row.topic in names)
+        rows = bagio.iter_raw(bag_path, listed)
+    else:
+        # The reader selects topics by absolute name only: read every row and pick them here.
+        selected = set(listed)
+        rows = (row for row in bagio.iter_raw(bag_path) if row.topic in selected)
+    if all(t == names[t] for t in listed):
+        return rows
+    return (row._replace(topic=names[row.topic]) for row in rows)
 
 
-def input_rows(bag_path) -> Iterator:
+def input_rows(bag_path, remap=None) -> Iterator:
     """The undecoded messages a graph may see (:func:`bag_rows` of all but ``truth/*``)."""
-    return bag_rows(bag_path, lambda topic: not topic.startswith(TRUTH_PREFIX))
+    return bag_rows(bag_path, lambda topic: not topic.startswith(TRUTH_PREFIX), remap)
 
 
-def input_count(bag_path) -> int:
+def input_count(bag_path, remap=None) -> int:
     """How many messages :func:`input_rows` gives at most (metadata.yaml's counts: a progress
     bar's total)."""
+    names = _names(bag_path, remap)
     return sum(n for topic, n in bagio.bag_message_counts(bag_path).items()
-               if not bagio.resolve(topic).startswith(TRUTH_PREFIX))
+               if not names[topic].startswith(TRUTH_PREFIX))
 
 
-def read_inputs(bag_path) -> list:
+def read_inputs(bag_path, remap=None) -> list:
     """The messages a graph may see, decoded: :class:`~ins_gnss_ros.io.BagMessage` list in
-    stamp order, absolute topic names."""
-    return list(_decoded(bag_path, input_rows(bag_path)))
+    stamp order, absolute topic names (after ``remap``)."""
+    return list(_decoded(bag_path, input_rows(bag_path, remap)))
 
 
 def iter_topic(bag_path, topic: str) -> Iterator:
@@ -76,16 +110,19 @@ def _decoded(bag_path, rows) -> Iterator:
         yield bagio.BagMessage(row.topic, row.t_ns, bagio.decode_message(row, bag_path))
 
 
-def check_inputs(bag_path, inputs) -> None:
-    """Refuse a bag none of whose topics is among ``inputs`` (absolute names).
+def check_inputs(bag_path, inputs, remap=None) -> None:
+    """Refuse a bag none of whose topics (after ``remap``) is among ``inputs`` (absolute names).
 
     Raises
     ------
     InputTopicsError
         One line listing the bag's topics and the inputs.
     """
-    topics = list(bagio.bag_topics(bag_path))
-    if not {bagio.resolve(t) for t in topics} & set(inputs):
+    names = _names(bag_path, remap)
+    if not set(names.values()) & set(inputs):
+        shown = [t if t == name or bagio.resolve(t) == name else f"{t} (as {name})"
+                 for t, name in names.items()]
         raise InputTopicsError(
-            f"{bag_path}: none of the bag's topics ({', '.join(topics) or 'none'}) is an input "
-            f"of the graph, whose nodes subscribe to {', '.join(sorted(inputs)) or 'nothing'}")
+            f"{bag_path}: none of the bag's topics ({', '.join(shown) or 'none'}) is an input "
+            f"of the graph, whose nodes subscribe to {', '.join(sorted(inputs)) or 'nothing'} "
+            "(a bag recorded under other names: --remap FROM:=TO)")

@@ -66,13 +66,14 @@ def offline_parameters(profile) -> tuple[dict, dict]:
     return tuple(out)
 
 
-def replay_offline(bag_path, profile_path, out, outages=None, progress=False) -> dict:
+def replay_offline(bag_path, profile_path, out, outages=None, progress=False,
+                   remap=None) -> dict:
     """Run the filter of a profile over a bag without ROS; record its outputs.
 
     Parameters as :func:`ins_gnss_ros.trial.replay.replay` (``gnss/*`` withheld in the outage
-    windows). Returns the summary written to ``OUT/replay.json``.
+    windows, ``remap`` the bag's topics). Returns the summary written to ``OUT/replay.json``.
     """
-    run = forward_pass(bag_path, profile_path, outages, progress, out=out)
+    run = forward_pass(bag_path, profile_path, outages, progress, out=out, remap=remap)
     out = Path(out)
     with bagio.BagWriter(out / "bag", ordered=True) as writer:
         run.counts.recorded.update(write_ordered(writer, output_messages(
@@ -128,7 +129,7 @@ class ForwardPass:
 
 
 def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
-                 navigator_type=None) -> ForwardPass:
+                 navigator_type=None, remap=None) -> ForwardPass:
     """The profile's imu_preprocessor and ekf cores over a bag, recorded (``record=True``: the
     per-epoch solution, covariance, transition and corrections the smoother needs).
 
@@ -136,6 +137,7 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
     are checked, before the work.
     ``navigator_type`` (default :class:`~ins_gnss_ros.nav.navigator.Navigator`) lets a caller
     observe the filter's input, e.g. keep the increments (trial/smooth.py).
+    ``remap``: {bag topic: graph topic} (:func:`~ins_gnss_ros.trial.inputs.parse_remap`).
     """
     from tqdm import tqdm
 
@@ -146,10 +148,10 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
 
     profile = load_profile(profile_path)
     pre_p, ekf_p = offline_parameters(profile)
-    check_inputs(bag_path, OFFLINE_TOPICS)
+    check_inputs(bag_path, OFFLINE_TOPICS, remap)
     # The GNSS span (outage windows) first, from the GNSS topics alone: the rest is streamed.
-    windows = gnss_windows(bag_rows(bag_path, lambda topic: topic.startswith(GNSS_PREFIX))
-                           if outages else (), outages)
+    windows = gnss_windows(bag_rows(bag_path, lambda topic: topic.startswith(GNSS_PREFIX),
+                                    remap) if outages else (), outages)
     if out is not None:
         new_run_folder(out)
     navigator = (navigator_type or Navigator)(navigator_config(ekf_p, record=True))
@@ -165,8 +167,8 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
         raise ProfileError(f"{profile.path}: imu_preprocessor: {err}") from None
     feed = _Feeder(aiding, preprocessor, pre_p, ekf_p, events)
     counts = MessageCounts()
-    for row in tqdm(input_rows(bag_path), disable=not progress, unit="msg", desc="forward",
-                    total=input_count(bag_path)):
+    for row in tqdm(input_rows(bag_path, remap), disable=not progress, unit="msg",
+                    desc="forward", total=input_count(bag_path, remap)):
         if row.topic.startswith(GNSS_PREFIX) and in_outage(row.t_ns, windows):
             counts.withheld[row.topic] += 1
             continue

@@ -29,8 +29,9 @@ from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_s
 
 
 def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progress=False,
-                     init_from_truth=False, timeout=30.0) -> dict:
-    """Run the graph as node processes on DDS, playing the bag at ``rate`` times real time.
+                     init_from_truth=False, timeout=30.0, remap=None) -> dict:
+    """Run the graph as node processes on DDS, playing the bag at ``rate`` times real time
+    (``remap`` as :func:`~ins_gnss_ros.trial.replay.replay`'s).
 
     The nodes run with ``use_sim_time`` on the ``/clock`` the player publishes. Outputs are
     recorded from every topic the graph's nodes publish (found by graph queries). Not
@@ -46,7 +47,7 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
     if not rate > 0.0:
         raise ValueError(f"--rate must be > 0, got {rate}")
     profile = load_profile(profile_path)
-    messages = read_inputs(bag_path)
+    messages = read_inputs(bag_path, remap)
     windows = gnss_windows(messages, outages)
     out = new_run_folder(out)
     if init_from_truth:
@@ -101,7 +102,7 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
                 for topic, msgtype in sorted(outputs.items())]
         node_inputs = _subscribed_topics(node, profile.replay_graph)
         # /clock comes from the player, the default topics from rclpy: not the bag's to feed.
-        check_inputs(bag_path, node_inputs - {"/clock", *_DEFAULT_TOPICS})
+        check_inputs(bag_path, node_inputs - {"/clock", *_DEFAULT_TOPICS}, remap)
         _spin_until(executor, procs, lambda: all(
             p.get_subscription_count() > 0 for t, p in pubs.items() if t in node_inputs)
             and all(s.get_publisher_count() > 0 for s in subs), timeout, "matched endpoints")

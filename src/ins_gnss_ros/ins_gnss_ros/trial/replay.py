@@ -41,7 +41,7 @@ DIAGNOSTICS_PERIOD_NS = 1_000_000_000
 
 
 def replay(bag_path, profile_path, out, outages=None, progress=False,
-           init_from_truth=False, faults=None, satellites=None) -> dict:
+           init_from_truth=False, faults=None, satellites=None, remap=None) -> dict:
     """Run the profile's graph in-process over a bag as fast as possible (see module doc).
 
     Parameters
@@ -67,6 +67,8 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
         ``N:LEN:PERIOD[:FIRST]``: in those windows only the N highest satellites stay in
         ``gnss/observations`` and ``gnss/fix`` / ``gnss/vel`` are withheld
         (:func:`~ins_gnss_ros.trial.outages.reduce_constellation`).
+    remap : dict, optional
+        {bag topic: graph topic}, absolute names (:func:`~ins_gnss_ros.trial.inputs.parse_remap`).
 
     Returns
     -------
@@ -94,7 +96,7 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
         from ins_gnss_ros.faults import FaultInjector, load_fault_spec
 
         injector = FaultInjector(load_fault_spec(faults))
-    messages = read_inputs(bag_path)
+    messages = read_inputs(bag_path, remap)
     windows = gnss_windows(messages, outages)
     counts = MessageCounts(withheld=Counter(
         m.topic for m in messages if in_gnss_outage(m.topic, m.t_ns, windows)))
@@ -144,7 +146,7 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
             except Exception as err:  # rcl's own params-file parser
                 raise ProfileError(f"{profile.path}: node {name}: "
                                    f"{bagio.first_line(err)}") from None
-        check_inputs(bag_path, bus.inputs)
+        check_inputs(bag_path, bus.inputs, remap)
         next_diag = messages[0].t_ns + DIAGNOSTICS_PERIOD_NS if messages else 0
         for m in tqdm(stream, disable=not progress, unit="msg", desc="replay",
                       total=len(messages)):

@@ -78,12 +78,12 @@ class _KeepingNavigator(Navigator):
 
 
 def smooth(bag_path, profile_path, out, outages=None, point=None, exports=(),
-           progress=False) -> dict:
+           progress=False, remap=None) -> dict:
     """Forward filter and RTS smoother of a profile over a bag; record both.
 
     Parameters
     ----------
-    bag_path, profile_path, out, outages, progress
+    bag_path, profile_path, out, outages, progress, remap
         As :func:`ins_gnss_ros.trial.offline.replay_offline`.
     point : (3,) array_like, optional
         Body point (base_link FLU, m) whose IMU-rate solution is recorded.
@@ -104,7 +104,7 @@ def smooth(bag_path, profile_path, out, outages=None, point=None, exports=(),
     tic = time.perf_counter()
     lever = None if point is None else np.asarray(point, float).reshape(3)
     run = forward_pass(bag_path, profile_path, outages, progress, out=out,
-                       navigator_type=None if lever is None else _KeepingNavigator)
+                       navigator_type=None if lever is None else _KeepingNavigator, remap=remap)
     out = Path(out)
     forward = run.navigator.output()
     config = run.navigator.config
