@@ -94,6 +94,21 @@ def test_a_quarter_turn_is_not_enough_and_says_so():
     assert "not yet calibrated" in cal.state() and "gap" in cal.state()
 
 
+@pytest.mark.parametrize("scale, unit", [(1e4, "gauss"), (1e6, "microtesla")])
+def test_readings_in_other_units_than_tesla_are_named(scale, unit):
+    """A driver publishing gauss or microtesla: while not calibrated, the state names the
+    units rather than asking for more turns (as it does in tesla)."""
+    car = Car(3)
+    cal = FieldCalibration()
+    raw, roll, pitch = _drive(car, 90.0)
+    for k, (m, r, p) in enumerate(zip(scale * raw, roll, pitch)):
+        cal.update(0.1 * k, m, r, p, H, UP, float(np.hypot(NOISE, np.hypot(H, UP) * TILT)))
+    assert not cal.ready
+    assert f"imu/mag_raw in {unit}?" in cal.state()
+    _, tesla = _calibrated(90.0)
+    assert "turn through more headings" in tesla.state()
+
+
 @pytest.mark.parametrize("seed", range(1, 9))
 def test_from_half_a_circle_the_error_stays_within_twice_the_sigma(seed):
     car, cal = _calibrated(200.0, seed)

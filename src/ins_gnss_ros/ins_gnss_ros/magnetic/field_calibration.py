@@ -82,6 +82,12 @@ class FieldCalibrationConfig:
     refit_interval: float = 1.0
 
 
+#: Readings beyond this ratio to the expected field (either way) are in other units than tesla.
+UNIT_RATIO = 100.0
+#: Units a driver may publish the field in, as readings over the field in tesla.
+FIELD_UNITS = {"milligauss": 1e7, "gauss": 1e4, "microtesla": 1e6, "nanotesla": 1e9}
+
+
 @dataclass(frozen=True)
 class FitResult:
     """One fit: the correction, its parameter covariance and its worst heading error.
@@ -308,6 +314,15 @@ class FieldCalibration:
         if fit is None:
             return (f"collecting readings while the vehicle turns: {len(self._raw)} of "
                     f"{cfg.min_samples} for a first fit")
+        # Readings orders of magnitude off the Earth's field are in other units (hard iron near
+        # a motor stays within tens of times the field): say so rather than ask for more turns
+        # (the simulated car's readings in gauss never calibrated).
+        ratio = float(np.median(np.linalg.norm(self._raw, axis=1))) / fit.scale
+        if not 1.0 / UNIT_RATIO < ratio < UNIT_RATIO:
+            unit = min(FIELD_UNITS, key=lambda u: abs(np.log10(ratio / FIELD_UNITS[u])))
+            return (f"not calibrated: the readings are {ratio:.3g} x the Earth's field here "
+                    f"({1e6 * fit.scale:.0f} uT): imu/mag_raw in {unit}? sensor_msgs/"
+                    "MagneticField is in tesla")
         return (f"not yet calibrated: worst heading sigma {np.degrees(fit.heading_sigma):.1f} deg "
                 f"(limit {limit:.1f}), azimuths seen with a gap of {np.degrees(fit.gap):.0f} deg "
                 f"(limit {np.degrees(cfg.max_gap):.0f}) in {fit.samples} readings: turn through "
