@@ -65,6 +65,10 @@ IN_STEP_S = 0.01
 SCALE_RANGE = (0.8, 1.25)
 #: IMU turns over the course changes (sum of squares, rad^2) a scale verdict needs.
 MIN_TURN_SQ = 1.0
+#: Least correlation (either sign) of the IMU's turns with the course's for a scale verdict:
+#: fixes noisy against their chords (single-point fixes 1.2 m apart at 5 Hz) make course turns
+#: of noise, and a scale of them (1.46 on such a simulated drive) says nothing of the gyros.
+MIN_CORRELATION = 0.5
 
 
 class ImuTimingCheck:
@@ -84,6 +88,7 @@ class ImuTimingCheck:
         self._rate_change_sq = np.zeros(len(OFFSETS))
         self._turn_products = np.zeros(len(OFFSETS))  # sum of course turn x IMU turn, rad^2
         self._imu_turn_sq = np.zeros(len(OFFSETS))    # sum of IMU turn^2, rad^2
+        self._course_turn_sq = 0.0                    # sum of course turn^2, rad^2
         self.pairs = 0
 
     def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray) -> None:
@@ -148,6 +153,7 @@ class ImuTimingCheck:
         self._cost += (turn - (y1 - y0)) ** 2
         self._turn_products += turn * (y1 - y0)
         self._imu_turn_sq += (y1 - y0) ** 2
+        self._course_turn_sq += turn * turn
         # d(residual)/ds = w(t1 - s) - w(t0 - s), from the rotation's slope at each end
         w0 = (np.interp(t0 - OFFSETS + RATE_STEP_S, t_imu, y_imu) - y0) / RATE_STEP_S
         w1 = (np.interp(t1 - OFFSETS + RATE_STEP_S, t_imu, y_imu) - y1) / RATE_STEP_S
@@ -168,9 +174,11 @@ class ImuTimingCheck:
 
     def scale(self) -> float | None:
         """The gyros' turn over the course's at the best-fitting offset (module doc); None
-        before the IMU turned by MIN_TURN_SQ over the course changes."""
+        before the IMU turned by MIN_TURN_SQ over the course changes, or while the two turn
+        together by less than MIN_CORRELATION."""
         k = int(np.argmin(self._cost))
-        if self._imu_turn_sq[k] < MIN_TURN_SQ or self._turn_products[k] == 0.0:
+        if self._imu_turn_sq[k] < MIN_TURN_SQ or abs(self._turn_products[k]) < \
+                MIN_CORRELATION * math.sqrt(self._imu_turn_sq[k] * self._course_turn_sq):
             return None
         return float(self._imu_turn_sq[k] / self._turn_products[k])
 
