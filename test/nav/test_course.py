@@ -44,6 +44,25 @@ def test_the_fixes_own_scatter_sets_when_the_motion_is_beyond_it():
     assert not velocities(noise=5.0, assumed=5.0)
 
 
+def test_repeated_fixes_do_not_pass_for_quiet_ones():
+    """Fixes duplicated (the same stamp) or republished (the same position, a later stamp) add
+    no noise sample: the white variance stays that of the fixes (0.3 m), not near 0."""
+    rng = np.random.default_rng(3)
+    cov = np.diag([25.0, 25.0, 100.0])
+    for repeat in ("duplicated", "republished"):
+        course = CourseFromFixes()
+        for k in range(100):
+            e, n = 0.3 * rng.standard_normal(2)
+            lat, lon = LAT + n / M_PER_RAD, LON + e / (M_PER_RAD * math.cos(LAT))
+            for copy in range(3):
+                course.observe(0.6 * k + (0.2 * copy if repeat == "republished" else 0.0),
+                               lat, lon, 10.0)
+        assert math.sqrt(course.fix_to_fix(cov)[0, 0]) == pytest.approx(0.3, rel=0.3), repeat
+    # a receiver's full covariance: the white part stays positive definite
+    np.linalg.cholesky(course.fix_to_fix(np.array([[25.0, 5.0, 18.0], [5.0, 25.0, 18.0],
+                                                   [18.0, 18.0, 100.0]])))
+
+
 def chord_velocities(position, rate=1.0, seconds=12.0, sigma=0.01):
     """Velocities from noise-free fixes at position(t) (east, north; m) claiming sigma m."""
     course, out = CourseFromFixes(), []

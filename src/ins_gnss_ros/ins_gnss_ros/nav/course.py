@@ -73,7 +73,10 @@ class CourseFromFixes:
             self._white = median / CHI2_1_MEDIAN / 6.0
         out = cov.copy()
         out[0, 0] = out[1, 1] = min(self._white, 0.5 * (cov[0, 0] + cov[1, 1]))
-        out[0, 1] = out[1, 0] = 0.0  # (a variance: never NaN or negative, as np.eye(2) * it)
+        # (a variance: never NaN or negative, as np.eye(2) * it); the white part's covariance
+        # with the vertical is not measured, and the given one could leave the matrix
+        # indefinite beside the smaller horizontal variance
+        out[0, 1] = out[1, 0] = out[0, 2] = out[2, 0] = out[1, 2] = out[2, 1] = 0.0
         return out
 
     def add(self, t: float, lat: float, lon: float, h: float, cov: np.ndarray):
@@ -105,6 +108,8 @@ class CourseFromFixes:
     def observe(self, t: float, lat: float, lon: float, h: float) -> None:
         """Every fix (t s; rad, rad, m), for the fix-to-fix noise of :meth:`fix_to_fix`."""
         r = geodetic_to_ecef(lat, lon, h)
+        if self._last3 and (t <= self._last3[-1][0] or np.array_equal(r, self._last3[-1][1])):
+            return  # a repeat (duplicated, or republished while frozen) has no noise of its own
         self._last3.append((t, r))
         if len(self._last3) < 3:
             return
