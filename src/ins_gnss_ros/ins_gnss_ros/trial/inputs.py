@@ -120,7 +120,7 @@ def check_inputs(bag_path, inputs, remap=None) -> None:
     """
     names = _names(bag_path, remap)
     if not set(names.values()) & set(inputs):
-        shown = [t if t == name or bagio.resolve(t) == name else f"{t} (as {name})"
+        shown = [t if bagio.resolve(t) == name else f"{t} (as {name})"
                  for t, name in names.items()]
         raise InputTopicsError(
             f"{bag_path}: none of the bag's topics ({', '.join(shown) or 'none'}) is an input "
