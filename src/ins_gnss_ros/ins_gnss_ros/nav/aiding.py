@@ -184,6 +184,12 @@ class InputStats:
                 f"{self.received} received, {self.refused} refused")
 
 
+def _unknown(cov: np.ndarray) -> bool:
+    """A reading's covariance gives no variance (ROS drivers leave it zero when they have
+    none)."""
+    return not all(v > 0.0 for v in cov.diagonal().tolist())
+
+
 def _floored(cov: np.ndarray, sigma_floor: float) -> np.ndarray:
     """cov with its variances raised to sigma_floor^2 (each diagonal element gets
     max(floor - variance, 0) added, element by element: np.diag and np.maximum on a 3 x 3
@@ -371,7 +377,7 @@ class Aiding:
         if not HEIGHT_RANGE[0] <= h <= HEIGHT_RANGE[1]:
             self.report("implausible gnss/fix altitude rejected")
             return self._seen("gnss/fix", t, False)
-        assumed = not covariance_known or not all(v > 0.0 for v in cov.diagonal().tolist())
+        assumed = not covariance_known or _unknown(cov)
         if assumed:
             sigma = UNKNOWN_FIX_SIGMA[min(status, 2)]
             cov = np.diag([sigma ** 2, sigma ** 2, (2.0 * sigma) ** 2])
@@ -384,9 +390,10 @@ class Aiding:
         self._course.observe(t, lat, lon, h)
         east, north, _ = to_map(self.datum, lat, lon, h).tolist()
         self.timing.fix(t, east, north)
-        self._velocity_check.fix(t, east, north, math.sqrt(0.5 * (cov[0, 0] + cov[1, 1])))
+        horizontal_var = 0.5 * float(cov[0, 0] + cov[1, 1])  # per axis, m^2
+        self._velocity_check.fix(t, east, north, math.sqrt(horizontal_var))
         common_var = 0.0
-        if 0.5 * float(cov[0, 0] + cov[1, 1]) >= SHARED_ERROR_SIGMA ** 2:
+        if horizontal_var >= SHARED_ERROR_SIGMA ** 2:
             # A single-point-level sigma, assumed or the receiver's, is its absolute accuracy,
             # mostly an error the fixes share (slow: atmosphere, orbits); only their white part
             # is news from fix to fix. The filter follows the fixes with that (nav/course.py
@@ -394,7 +401,7 @@ class Aiding:
             # (GnssFix.common_var): taken as white, a receiver's honest 2.3 m averaged down to
             # a published 0.1 m over a simulated drive with 1.9 m of slow error (NEES 290).
             white = _floored(self._course.fix_to_fix(cov), self.policy.position_sigma_floor)
-            if white[0, 0] < WHITE_SHARE * 0.5 * float(cov[0, 0] + cov[1, 1]):
+            if white[0, 0] < WHITE_SHARE * horizontal_var:
                 common_var = 0.5 * float(cov[0, 0] + cov[1, 1] - white[0, 0] - white[1, 1])
                 cov = white
         at_rest = not self._has_velocity() and \
@@ -456,7 +463,7 @@ class Aiding:
         if check.disagrees:
             self.report("gnss/vel refused: it disagrees with the fixes' displacement")
             return self._seen("gnss/vel", t, False)
-        if not all(v > 0.0 for v in np.diagonal(cov).tolist()):
+        if _unknown(cov):
             sigma = UNKNOWN_VELOCITY_SIGMA
             cov = np.diag([sigma ** 2, sigma ** 2, (2.0 * sigma) ** 2])
             self.report(f"gnss/vel without covariance: {sigma:g} m/s assumed", log=False)
