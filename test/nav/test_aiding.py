@@ -29,6 +29,9 @@ class Recorder:
     def add_measurement(self, m):
         self.measurements.append(m)
 
+    def note_imu_rates_wrong(self):
+        self.imu_rates_wrong = True
+
 
 def aiding(**policy):
     events = []

@@ -46,28 +46,31 @@ def test_the_offset_of_the_imu_stamps_is_found_whatever_the_mounting(offset, mou
     found, sigma = check.estimate()
     assert found == pytest.approx(offset, abs=0.005)
     assert sigma < 0.02  # reported (REPORT_SIGMA); the fixes' noise on 3.2 m chords dominates
-    verdict = check.summary()
-    assert ("in step" in verdict) == (offset == 0.0), verdict
-    assert check.problem() == (None if offset == 0.0 else verdict)
+    verdict = check.verdict()
+    assert ("in step" in verdict.summary) == (offset == 0.0), verdict
+    assert verdict.problem == (offset != 0.0) and not verdict.rates_wrong
+    assert verdict.stamps_off == (offset != 0.0)
 
 
 def test_fixes_stamped_late_are_no_problem_where_the_filter_estimates_their_latency():
     late = _drive(0.12, check=ImuTimingCheck(gnss_latency_state=True))
-    assert late.problem() is None
-    assert "the filter's time-offset state takes it" in late.summary()
-    assert "set the ekf's time_offset_sigma_s" in _drive(0.12).problem()
+    assert not late.verdict().problem and not late.verdict().stamps_off
+    assert "the filter's time-offset state takes it" in late.verdict().summary
+    assert "set the ekf's time_offset_sigma_s" in _drive(0.12).verdict().summary
     # the IMU's stamps late (fixes early): the state would leave the solution on the late clock
     early = _drive(-0.12, check=ImuTimingCheck(gnss_latency_state=True))
-    assert "add it to imu_preprocessor time_offset_s" in early.problem()
+    assert "add it to imu_preprocessor time_offset_s" in early.verdict().summary
+    assert early.verdict().stamps_off
 
 
 def test_gyro_rates_in_degrees_per_second_are_reported_instead_of_an_offset():
     assert _drive(0.0).scale() == pytest.approx(1.0, abs=0.02)
     check = _drive(0.0, (0.0, -7.0, 175.0), gyro_unit=math.degrees(1.0))
     assert check.scale() == pytest.approx(57.3, rel=0.02)
-    assert check.summary().startswith("the gyros turn 5")
-    assert "angular_velocity in deg/s (57.3 x)" in check.summary()
-    assert check.problem() == check.summary()
+    verdict = check.verdict()
+    assert verdict.summary.startswith("the gyros turn 5")
+    assert "angular_velocity in deg/s (57.3 x)" in verdict.summary
+    assert verdict.rates_wrong and not verdict.stamps_off
 
 
 def test_a_straight_or_slow_drive_says_what_it_needs():
@@ -77,8 +80,8 @@ def test_a_straight_or_slow_drive_says_what_it_needs():
         if k % 20 == 0:
             check.fix(0.01 * k, 0.0, 0.0)
     assert check.estimate() is None
-    assert check.summary().startswith("needs turns above 3 m/s: 0 course changes")
-    assert check.problem() is None
+    assert check.verdict().summary.startswith("needs turns above 3 m/s: 0 course changes")
+    assert not check.verdict().problem
 
 
 def test_an_accelerometer_with_gravity_down_is_reported():
@@ -87,11 +90,12 @@ def test_an_accelerometer_with_gravity_down_is_reported():
     check = _drive(0.0, (0.0, -7.0, 175.0), accel_sign=-1.0)
     # (about -1: the offset it is taken at fits turns of the wrong sign; the car drive: -1.08)
     assert check.scale() == pytest.approx(-1.0, abs=0.1)
-    assert "linear_acceleration with gravity down" in check.problem()
+    assert "linear_acceleration with gravity down" in check.verdict().summary
+    assert check.verdict().rates_wrong
 
 
 def test_course_turns_of_noise_give_no_verdict_on_the_gyros():
     """Single-point fixes (1 m) 1.6 m apart: the course over two chords is noise, and the
     scale fitted to it would pass for wrong gyro units."""
     check = _drive(0.0, fix_noise=1.0)
-    assert check.scale() is None and check.problem() is None
+    assert check.scale() is None and not check.verdict().problem

@@ -281,6 +281,27 @@ def test_time_offset_state_recovers_100_ms(sim):
     assert abs(td[-1] - 0.1) < 0.005, td[-1]
 
 
+def test_rates_the_turns_show_wrong_leave_the_solution_degraded_not_changed(sim):
+    """The front end's turn check (imu_timing.py) finds the IMU's rates wrong (gravity down,
+    deg/s): no solution on them is flagged a fix from then on, though the fixes are still taken
+    and the solution and its covariance are those of the navigator without the verdict."""
+    traj, imu, meas, _ = sim
+    told, untold = Navigator(config()), Navigator(config())
+    n, m = (int(np.searchsorted(imu.t, t)) for t in (60.0, 70.0))
+    for nav in (told, untold):
+        for fix in meas:
+            nav.add_measurement(fix)
+        nav.add_imu(imu.t[:n], imu.dtheta[:n], imu.dv[:n])
+        assert nav.mode == NAVIGATING
+    told.note_imu_rates_wrong()
+    for nav in (told, untold):
+        nav.add_imu(imu.t[n:m], imu.dtheta[n:m], imu.dv[n:m])
+    assert told.mode == DEAD_RECKONING and untold.mode == NAVIGATING
+    assert told.updates[-1].accepted
+    np.testing.assert_array_equal(told.covariance(), untold.covariance())
+    assert told.solution.lat == untold.solution.lat and told.solution.lon == untold.solution.lon
+
+
 SHARED = Path(__file__).resolve().parents[2] / ".." / "shared"
 DRIVE = SHARED / "data" / "car_drive_0708"
 

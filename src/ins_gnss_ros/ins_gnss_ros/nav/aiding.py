@@ -226,7 +226,8 @@ class Aiding:
         self.last_accepted_t = -math.inf  # newest accepted update, s
         self.forced: set[str] = set()  # kinds forced in since the filter last NAVIGATED
         self._course = CourseFromFixes()
-        # the IMU's clock against the fixes' (for diagnostics)
+        # the IMU's clock and rates against the fixes' course (for diagnostics and the
+        # navigator's mode)
         self.timing = ImuTimingCheck(gnss_latency_state="td" in navigator.config.extras)
         self._velocity_check = VelocityAgreement()
         noise = navigator.config.noise
@@ -390,6 +391,8 @@ class Aiding:
         self._course.observe(t, lat, lon, h)
         east, north, _ = to_map(self.datum, lat, lon, h).tolist()
         self.timing.fix(t, east, north)
+        if self.timing.verdict().rates_wrong:
+            self.navigator.note_imu_rates_wrong()
         horizontal_var = 0.5 * float(cov[0, 0] + cov[1, 1])  # per axis, m^2
         self._velocity_check.fix(t, east, north, math.sqrt(horizontal_var))
         common_var = 0.0

@@ -20,15 +20,20 @@ the yaw-rate changes that carry the information (linearised least squares:
 sigma^2 = residual variance / sum((w(t_(j+1)) - w(t_(j-1)))^2)).
 
 The same pairs give the gyros' scale, 1 for rates in rad/s and 57.3 for a driver publishing deg/s:
-at the fitted offset, the IMU turns' sum of squares over their products with the course turns
-(the inverse of the slope of the course turns on the IMU's, so that the fixes' noise, which is in
-the course turns, does not bias it; on a ship in waves it outweighs the few real turns many
-times). Beyond SCALE_RANGE the summary says so instead of an offset (which assumes the scale).
+at the offset where the two turn together best (largest correlation of either sign), the IMU
+turns' sum of squares over their products with the course turns (the inverse of the slope of the
+course turns on the IMU's, so that the fixes' noise, which is in the course turns, does not bias
+it; on a ship in waves it outweighs the few real turns many times). Not at the offset of least
+squared difference, which assumes the scale: with rates of the wrong sign or 57 x too large that
+is where the IMU turns least, and the verdict took 290 s of the car drive with gravity down. Beyond SCALE_RANGE the summary says so instead of an offset (which assumes the scale).
 A negative scale, the IMU turning against the course, is an "up" that points down: an
 accelerometer publishing acceleration (gravity down) instead of specific force, or axes that
 are not right-handed.
 
-A check, not a correction: the course is that of the antenna, and a wheeled vehicle's antenna
+A check, not a correction (the offset is ambiguous between the two clocks, and applying it would
+move the solution onto the other one mid-run): the ekf's /diagnostics names what it finds
+(:class:`Verdict`), and the navigator stops flagging a solution valid on rates it finds wrong
+(``Navigator.note_imu_rates_wrong``). The course is that of the antenna, and a wheeled vehicle's antenna
 ahead of its rear axle slips sideways in proportion to the turn rate, which leads the course by
 about (distance to the axle) / speed; on the car drive the fitted offset was the same within 20
 ms at 3-5 m/s and at 10-14 m/s. A ship's drift angle in a turn would bias it more. Only fixes
@@ -38,6 +43,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -71,6 +77,30 @@ MIN_TURN_SQ = 1.0
 MIN_CORRELATION = 0.5
 
 
+@dataclass(frozen=True)
+class Verdict:
+    """What the turns show of the IMU so far.
+
+    Attributes
+    ----------
+    summary : str
+        For /diagnostics.
+    rates_wrong : bool
+        The IMU's rates in other units, of the wrong sign or scale: no solution on them is a fix.
+    stamps_off : bool
+        The IMU's stamps off GNSS time, and the filter's time-offset state does not take it.
+    """
+
+    summary: str
+    rates_wrong: bool = False
+    stamps_off: bool = False
+
+    @property
+    def problem(self) -> bool:
+        """Whether the IMU's rates or stamps are wrong (the ekf's /diagnostics is then WARN)."""
+        return self.rates_wrong or self.stamps_off
+
+
 class ImuTimingCheck:
     """Accumulates increments and fixes; :meth:`estimate` gives the offset that fits best."""
 
@@ -90,6 +120,7 @@ class ImuTimingCheck:
         self._imu_turn_sq = np.zeros(len(OFFSETS))    # sum of IMU turn^2, rad^2
         self._course_turn_sq = 0.0                    # sum of course turn^2, rad^2
         self.pairs = 0
+        self._verdict = (-1, None)  # (pairs, Verdict): the sums change with the pairs only
 
     def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray) -> None:
         """An IMU increment ending at t (s, the IMU's stamps)."""
@@ -173,42 +204,41 @@ class ImuTimingCheck:
         return float(OFFSETS[k]), math.sqrt(residual_var / self._rate_change_sq[k])
 
     def scale(self) -> float | None:
-        """The gyros' turn over the course's at the best-fitting offset (module doc); None
+        """The gyros' turn over the course's where the two correlate best (module doc); None
         before the IMU turned by MIN_TURN_SQ over the course changes, or while the two turn
         together by less than MIN_CORRELATION."""
-        k = int(np.argmin(self._cost))
-        if self._imu_turn_sq[k] < MIN_TURN_SQ or abs(self._turn_products[k]) < \
-                MIN_CORRELATION * math.sqrt(self._imu_turn_sq[k] * self._course_turn_sq):
+        norms = np.sqrt(self._imu_turn_sq * self._course_turn_sq)
+        if not np.any(norms > 0.0):
+            return None
+        correlation = np.abs(self._turn_products) / np.where(norms > 0.0, norms, np.inf)
+        k = int(np.argmax(correlation))
+        if self._imu_turn_sq[k] < MIN_TURN_SQ or correlation[k] < MIN_CORRELATION:
             return None
         return float(self._imu_turn_sq[k] / self._turn_products[k])
 
-    def summary(self) -> str:
-        """For /diagnostics."""
-        return self._verdict()[0]
+    def verdict(self) -> Verdict:
+        """What the turns show so far (asked at every fix and status: kept until a course
+        change is added)."""
+        if self._verdict[0] != self.pairs:
+            self._verdict = (self.pairs, self._judge())
+        return self._verdict[1]
 
-    def problem(self) -> str | None:
-        """The summary when the turns show the IMU's rates in other units or of the wrong sign,
-        or its stamps off GNSS time (the ekf's /diagnostics is then WARN, not OK), else None."""
-        text, wrong = self._verdict()
-        return text if wrong else None
-
-    def _verdict(self) -> tuple[str, bool]:
-        """(summary, whether it finds the IMU's rates or stamps wrong)."""
+    def _judge(self) -> Verdict:
         scale = self.scale()
         if scale is not None and scale < 0.0:
-            return (f"the gyros turn against the course over ground ({scale:.2f} x, {self.pairs} "
-                    "course changes): linear_acceleration with gravity down (an acceleration, "
-                    "not the specific force), or axes not right-handed; the time offset is not "
-                    "judged"), True
+            return Verdict(f"the gyros turn against the course over ground ({scale:.2f} x, "
+                           f"{self.pairs} course changes): linear_acceleration with gravity down "
+                           "(an acceleration, not the specific force), or axes not "
+                           "right-handed; the time offset is not judged", rates_wrong=True)
         if scale is not None and not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1]:
-            return (f"the gyros turn {scale:.2f} x the course over ground ({self.pairs} course "
-                    "changes): angular_velocity in deg/s (57.3 x), or its scale or mounting "
-                    "wrong; the time offset is not judged"), True
+            return Verdict(f"the gyros turn {scale:.2f} x the course over ground ({self.pairs} "
+                           "course changes): angular_velocity in deg/s (57.3 x), or its scale "
+                           "or mounting wrong; the time offset is not judged", rates_wrong=True)
         est = self.estimate()
         if est is None or est[1] > REPORT_SIGMA:
-            return (f"needs turns above {MIN_SPEED:g} m/s: {self.pairs} course changes so far"
-                    + ("" if est is None else f", {1e3 * est[0]:+.0f} +- {1e3 * est[1]:.0f} ms")
-                    ), False
+            return Verdict(f"needs turns above {MIN_SPEED:g} m/s: {self.pairs} course changes "
+                           "so far" + ("" if est is None
+                                       else f", {1e3 * est[0]:+.0f} +- {1e3 * est[1]:.0f} ms"))
         offset, sigma = est
         off = abs(offset) > max(3.0 * sigma, IN_STEP_S)
         if not off:
@@ -223,5 +253,6 @@ class ImuTimingCheck:
                        "ekf's time_offset_sigma_s (0.1-0.2), or imu_preprocessor time_offset_s")
         else:
             verdict = "the IMU stamps are off GNSS time: add it to imu_preprocessor time_offset_s"
-        return (f"{1e3 * offset:+.0f} +- {1e3 * sigma:.0f} ms from {self.pairs} course changes "
-                f"(gyro turn vs course over ground): {verdict}"), off
+        return Verdict(f"{1e3 * offset:+.0f} +- {1e3 * sigma:.0f} ms from {self.pairs} course "
+                       f"changes (gyro turn vs course over ground): {verdict}",
+                       stamps_off=off)

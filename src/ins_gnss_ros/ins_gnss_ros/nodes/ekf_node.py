@@ -98,9 +98,9 @@ class EkfNode(EkfServices, NavNode):
             self.diag.set_value("GNSS antenna lever arm", (
                 f"{list(p['lever_arm'])} m FLU, not measured: within +-"
                 f"{list(p['lever_arm_sigma_m'])} m assumed (lever_arm, lever_arm_sigma_m)"))
-        # the turn check's fit over its candidate offsets, once per /diagnostics publication
+        # the turn check's verdict, at each /diagnostics publication
         self.diag.before_publish.append(lambda: self.diag.set_value(
-            "IMU time offset from turns", self.aiding.timing.summary()))
+            "IMU time offset from turns", self.aiding.timing.verdict().summary))
         if not p["datum.from_first_fix"]:
             self.aiding.datum = (np.radians(p["datum.latitude_deg"]),
                                  np.radians(p["datum.longitude_deg"]), p["datum.altitude_m"])
@@ -260,9 +260,9 @@ class EkfNode(EkfServices, NavNode):
         message = self.sync.waiting_for(nav.mode) or explanation
         # An IMU whose stamps or rates the turns show wrong errs in every turn, beyond the
         # covariance (the car drive 190 ms off: 12 % of its valid nav/fix beyond 5 sigma).
-        imu_problem = self.aiding.timing.problem()
-        if imu_problem is not None:
-            level, message = DiagnosticStatus.WARN, f"{message}; IMU from turns: {imu_problem}"
+        imu = self.aiding.timing.verdict()
+        if imu.problem:
+            level, message = DiagnosticStatus.WARN, f"{message}; IMU from turns: {imu.summary}"
         self.diag.set_state(level, message)
         for name, stats in self.aiding.inputs.items():
             self.diag.set_value(name, stats.summary(t))
