@@ -29,8 +29,8 @@ class Recorder:
     def add_measurement(self, m):
         self.measurements.append(m)
 
-    def note_imu_rates_wrong(self):
-        self.imu_rates_wrong = True
+    def note_imu_rates_wrong(self, wrong):
+        self.imu_rates_wrong = wrong
 
 
 def aiding(**policy):

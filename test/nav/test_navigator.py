@@ -293,7 +293,7 @@ def test_rates_the_turns_show_wrong_leave_the_solution_degraded_not_changed(sim)
             nav.add_measurement(fix)
         nav.add_imu(imu.t[:n], imu.dtheta[:n], imu.dv[:n])
         assert nav.mode == NAVIGATING
-    told.note_imu_rates_wrong()
+    told.note_imu_rates_wrong(True)
     for nav in (told, untold):
         nav.add_imu(imu.t[n:m], imu.dtheta[n:m], imu.dv[n:m])
     assert told.mode == DEAD_RECKONING and untold.mode == NAVIGATING

@@ -391,8 +391,7 @@ class Aiding:
         self._course.observe(t, lat, lon, h)
         east, north, _ = to_map(self.datum, lat, lon, h).tolist()
         self.timing.fix(t, east, north)
-        if self.timing.verdict().rates_wrong:
-            self.navigator.note_imu_rates_wrong()
+        self.navigator.note_imu_rates_wrong(self.timing.verdict().rates_wrong)
         horizontal_var = 0.5 * float(cov[0, 0] + cov[1, 1])  # per axis, m^2
         self._velocity_check.fix(t, east, north, math.sqrt(horizontal_var))
         common_var = 0.0

@@ -43,8 +43,8 @@ last 110 s of the drive, and the velocities forced after each 15 s outage (the I
 
 The solution is degraded too while an aiding kind keeps being rejected for `suspect_time` before
 it is forced: the other kinds may still be accepted (a GNSS clock jump shifts the velocities a
-little and the positions a lot), but the solution and the rejected kind disagree; and from the
-time the turns show the IMU's rates wrong (:attr:`Integrity.imu_rates_wrong`, imu_timing.py:
+little and the positions a lot), but the solution and the rejected kind disagree; and while the
+turns show the IMU's rates wrong (:attr:`Integrity.imu_rates_wrong`, imu_timing.py:
 gravity down, deg/s): the fixes still hold the solution, but what it does between them is not
 navigation (the car drive published with gravity down: 22 of its 154 valid fixes beyond 5 sigma).
 """
@@ -114,7 +114,7 @@ class Integrity:
         self.config = config
         self.floors = {}        # kind -> NoiseFloor
         self.rejecting = {}     # aiding kind -> (first, last) epoch of its current rejection
-        self.imu_rates_wrong = False  # the turns show the IMU's rates wrong: degraded for good
+        self.imu_rates_wrong = False  # the turns show the IMU's rates wrong: degraded
 
     def update(self, ekf, space, innov, epoch, rejected_since, widen_prior):
         """Gate and apply one measurement, forced in after `max_reject_time` s of continuous

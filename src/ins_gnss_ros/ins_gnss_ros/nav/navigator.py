@@ -126,11 +126,11 @@ class Navigator:
         # of the receiver, not of the run state, so a rewind keeps it.
         self._fix_common_var = 0.0
 
-    def note_imu_rates_wrong(self):
-        """The turns show the IMU's rates in other units or of the wrong sign (the front end's
-        imu_timing.ImuTimingCheck): the solution is degraded (DEAD_RECKONING, integrity.py)
-        from now on, the measurements still taken."""
-        self._integrity.imu_rates_wrong = True
+    def note_imu_rates_wrong(self, wrong):
+        """Whether the turns show the IMU's rates in other units or of the wrong sign (the
+        front end's imu_timing.ImuTimingCheck): while they do the solution is degraded
+        (DEAD_RECKONING, integrity.py), the measurements still taken."""
+        self._integrity.imu_rates_wrong = bool(wrong)
 
     def add_imu(self, t, dtheta, dv):
         """Add IMU samples.
