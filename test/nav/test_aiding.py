@@ -245,10 +245,12 @@ def test_fixes_without_covariance_are_weighted_by_their_white_noise_the_rest_kep
     weighted = np.diag(last.cov_enu)
     # the receiver's own white variance, from its fixes (the median of 100 squares: +-30 %)
     assert 0.6 * white ** 2 <= weighted[0] <= 1.4 * white ** 2 and weighted[0] == weighted[1]
-    assert weighted[2] == 100.0  # the vertical keeps the assumed 10 m
-    # what the fixes cannot show stays: the assumed 5 m in all, never beyond it
-    assert weighted[0] + last.common_var == pytest.approx(25.0, rel=0.4 if white > 1 else 1e-9)
-    assert weighted[0] + last.common_var <= 25.0 + 1e-9
+    # what the fixes cannot show stays: the assumed 5 m in all, never beyond it; the vertical
+    # (10 m assumed) split in the horizontal's shares
+    common = last.common_var
+    assert weighted[0] + common[0] == pytest.approx(25.0, rel=0.4 if white > 1 else 1e-9)
+    assert weighted[0] + common[0] <= 25.0 + 1e-9
+    assert weighted[2] == pytest.approx(4.0 * weighted[0]) and weighted[2] + common[1] == 100.0
 
 
 def still_imu(front, t0, t1, bias, rate=100.0, seed=4):

@@ -302,6 +302,24 @@ def test_rates_the_turns_show_wrong_leave_the_solution_degraded_not_changed(sim)
     assert told.solution.lat == untold.solution.lat and told.solution.lon == untold.solution.lon
 
 
+def test_the_fixes_common_error_is_published_not_filtered(sim):
+    """GnssFix.common_var (per horizontal axis, vertical): what the fixes share is added to the
+    published position variances; the filter's solution and P are those without it."""
+    traj, imu, meas, _ = sim
+    plain, shared = Navigator(config()), Navigator(config())
+    for m in meas:
+        plain.add_measurement(m)
+        shared.add_measurement(replace(m, common_var=(1.0, 4.0)) if isinstance(m, GnssFix)
+                               else m)
+    n = int(np.searchsorted(imu.t, 60.0))
+    for nav in (plain, shared):
+        nav.add_imu(imu.t[:n], imu.dtheta[:n], imu.dv[:n])
+    S = plain.space["pos"]
+    np.testing.assert_allclose(np.diag(shared.covariance())[S] - np.diag(plain.covariance())[S],
+                               [1.0, 1.0, 4.0])
+    assert shared.solution.lat == plain.solution.lat and shared.solution.h == plain.solution.h
+
+
 SHARED = Path(__file__).resolve().parents[2] / ".." / "shared"
 DRIVE = SHARED / "data" / "car_drive_0708"
 

@@ -394,7 +394,7 @@ class Aiding:
         self.navigator.note_imu_rates_wrong(self.timing.verdict().rates_wrong)
         horizontal_var = 0.5 * float(cov[0, 0] + cov[1, 1])  # per axis, m^2
         self._velocity_check.fix(t, east, north, math.sqrt(horizontal_var))
-        common_var = 0.0
+        common_var = (0.0, 0.0)
         if horizontal_var >= SHARED_ERROR_SIGMA ** 2:
             # A single-point-level sigma, assumed or the receiver's, is its absolute accuracy,
             # mostly an error the fixes share (slow: atmosphere, orbits); only their white part
@@ -404,7 +404,14 @@ class Aiding:
             # a published 0.1 m over a simulated drive with 1.9 m of slow error (NEES 290).
             white = _floored(self._course.fix_to_fix(cov), self.policy.position_sigma_floor)
             if white[0, 0] < WHITE_SHARE * horizontal_var:
-                common_var = 0.5 * float(cov[0, 0] + cov[1, 1] - white[0, 0] - white[1, 1])
+                # The vertical's white share is taken as the horizontal's (the same errors
+                # shared and white, in the receiver's vertical to horizontal ratio): the fixes'
+                # heights also carry the vehicle's climb, which hides their own noise.
+                share = float(white[0, 0] + white[1, 1]) / (2.0 * horizontal_var)
+                vertical = max(share * float(cov[2, 2]), self.policy.position_sigma_floor ** 2)
+                common_var = (horizontal_var - 0.5 * float(white[0, 0] + white[1, 1]),
+                              float(cov[2, 2]) - vertical)
+                white[2, 2] = vertical
                 cov = white
         at_rest = not self._has_velocity() and \
             self._rest.fix(t, lat, lon, h, self._course.fix_to_fix(cov))

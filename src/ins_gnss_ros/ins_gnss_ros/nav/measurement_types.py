@@ -16,9 +16,9 @@ import numpy as np
 class GnssFix:
     """Antenna position at GNSS time t (s): lat, lon (rad), h (m), covariance ENU (m^2).
 
-    ``common_var`` (m^2 per horizontal axis) is the variance of an error all of the receiver's
-    fixes share that ``cov_enu`` leaves out (the unknown absolute accuracy of a receiver that
-    gives no covariance, whose fixes are weighted by their fix-to-fix noise): no measurement
+    ``common_var`` (m^2 per horizontal axis, m^2 vertical) is the variance of an error all of
+    the receiver's fixes share that ``cov_enu`` leaves out (the absolute accuracy of a receiver
+    at single-point level, whose fixes are weighted by their fix-to-fix noise): no measurement
     can observe it, so it is not a filter state but part of the published covariance."""
 
     t: float
@@ -26,7 +26,7 @@ class GnssFix:
     lon: float
     h: float
     cov_enu: np.ndarray
-    common_var: float = 0.0
+    common_var: tuple[float, float] = (0.0, 0.0)
 
 
 @dataclass(frozen=True)

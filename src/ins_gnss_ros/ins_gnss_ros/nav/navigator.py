@@ -124,7 +124,7 @@ class Navigator:
         self._lever_columns = any(name in self._space for name in LEVER_ARM_EXTRAS)
         # The fixes' common error (GnssFix.common_var) of the latest fix used, m^2: a property
         # of the receiver, not of the run state, so a rewind keeps it.
-        self._fix_common_var = 0.0
+        self._fix_common_var = (0.0, 0.0)
 
     def note_imu_rates_wrong(self, wrong):
         """Whether the turns show the IMU's rates in other units or of the wrong sign (the
@@ -274,15 +274,16 @@ class Navigator:
 
     def _published_var(self):
         """What the published covariance adds to the diagonal of P, (n,): the noise floors of
-        forced measurement kinds (integrity.py) and, on the horizontal position, the error
-        common to the fixes the filter follows (GnssFix.common_var: the filter's position is
-        relative to them)."""
-        if not self._integrity.floors and not self._fix_common_var:
+        forced measurement kinds (integrity.py) and, on the position, the error common to the
+        fixes the filter follows (GnssFix.common_var: the filter's position is relative to
+        them)."""
+        if not self._integrity.floors and not any(self._fix_common_var):
             return self._no_var  # the usual case, asked at every epoch and update
         var = self._integrity.variances(self._space)
-        if self._fix_common_var:
-            east = self._space["pos"].start
-            var[east:east + 2] += self._fix_common_var
+        east = self._space["pos"].start
+        horizontal, vertical = self._fix_common_var
+        var[east:east + 2] += horizontal
+        var[east + 2] += vertical
         return var
 
     def updates_since(self, count):
