@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .spp import ModelErrors
+
 __all__ = ["BroadcastResiduals", "ResidualDraw"]
 
 #: Orbital period of GPS (half a sidereal day) and Galileo (14 h 05 min), s.
@@ -54,6 +56,15 @@ class BroadcastResiduals:
     iono_satellite_sigma: float = 0.25
     tropo_zenith_sigma: float = 0.05
     sisre_sigma: float = 1.0
+
+
+    def model_errors(self) -> ModelErrors:
+        """The receiver's error budget for these residuals (its solutions' covariance, as a
+        real receiver's accuracy estimate has one): the ionosphere's RMS fraction of the
+        Klobuchar delay, sqrt((scale - 1)^2 + (scale sigma)^2), the zenith troposphere and the
+        SISRE as drawn."""
+        iono = math.hypot(self.iono_scale - 1.0, self.iono_scale * self.iono_satellite_sigma)
+        return ModelErrors(iono, self.tropo_zenith_sigma, self.sisre_sigma)
 
 
 class ResidualDraw:

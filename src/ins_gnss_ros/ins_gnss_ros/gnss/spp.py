@@ -13,6 +13,13 @@ used, T_i Saastamoinen troposphere, I_i Klobuchar ionosphere (or none for the
 ionosphere-free combination).  Solved by iterated weighted least squares with weights
 1 / sigma_i^2, sigma_i = sigma0 / sin(E_i).
 
+The covariance is that of the weights (noise only) unless ``SppConfig.model_errors`` gives
+what the broadcast models leave per satellite (ionosphere after Klobuchar, troposphere after
+Saastamoinen, orbit and clock: :class:`ModelErrors`, the error budget receivers put into their
+accuracy estimates; RTKLIB's manual, appendix E.6, uses the same terms): the position is still
+the noise-weighted one, and its covariance the sandwich (H'WH)^-1 H'W R W H (H'WH)^-1 with R the
+noise plus those variances, independent between satellites.
+
 RAIM (Groves §17.4.1, Parkinson & Axelrad 1988): after convergence the weighted sum of
 squared residuals is tested against the chi-square threshold for n - m degrees of freedom;
 on failure the measurement with the largest normalised residual r_i / sqrt(C_r,ii),
@@ -37,6 +44,31 @@ DEFAULT_SIGNALS = {GPS: ("1C", "2L"), GALILEO: ("1C", "5Q"), BEIDOU: ("6I", "2I"
                    GLONASS: ("1C", "2C")}
 
 
+@dataclass(frozen=True)
+class ModelErrors:
+    """Range errors the broadcast models leave, per satellite (1 sigma).
+
+    Attributes
+    ----------
+    iono_fraction : float
+        Of the Klobuchar delay (single frequency; the ionosphere-free combination has none).
+    tropo_zenith : float
+        Zenith troposphere after Saastamoinen, m, mapped as the model maps its zenith delay.
+    sisre : float
+        Broadcast orbit and clock (signal-in-space range error), m.
+    """
+
+    iono_fraction: float
+    tropo_zenith: float
+    sisre: float
+
+    def variance(self, klobuchar_delay: float, tropo_slant: float, tropo_zenith: float) -> float:
+        """Their variance for one satellite, m^2 (no troposphere where the model has none:
+        above it, or an iteration's position still far from the ground)."""
+        tropo = self.tropo_zenith * tropo_slant / tropo_zenith if tropo_zenith > 0.0 else 0.0
+        return (self.iono_fraction * klobuchar_delay) ** 2 + tropo ** 2 + self.sisre ** 2
+
+
 @dataclass
 class SppConfig:
     """Settings of `solve_position`.
@@ -58,6 +90,9 @@ class SppConfig:
     max_exclusions : int
     signals : dict
         System -> (primary, secondary) signal codes.
+    model_errors : ModelErrors or None
+        What the broadcast models leave, in the solution's covariance (not its weights); None:
+        the covariance of the noise alone.
     """
 
     elevation_mask: float = math.radians(10.0)
@@ -67,6 +102,7 @@ class SppConfig:
     p_false_alarm: float = 1e-3
     max_exclusions: int = 3
     signals: dict = field(default_factory=lambda: dict(DEFAULT_SIGNALS))
+    model_errors: ModelErrors | None = None
 
 
 @dataclass
@@ -163,8 +199,9 @@ def select_measurements(epoch, ephemerides, config):
 def _solve_wls(t_rx, meas, config, x0):
     """Iterated weighted least squares over the given measurements.
 
-    Returns (state, systems, H, W, post-fit residuals, measurements used) once the position
-    step is below 0.1 mm, None when too few measurements remain or it does not converge.
+    Returns (state, systems, H, W, post-fit residuals, measurements used, model error
+    variances: ``config.model_errors`` per measurement, zeros without) once the position step
+    is below 0.1 mm, None when too few measurements remain or it does not converge.
     """
     systems = sorted({m.system for m in meas})
     n_state = 3 + len(systems)
@@ -176,7 +213,7 @@ def _solve_wls(t_rx, meas, config, x0):
         if near_earth:
             lat, lon, h = ecef_to_geodetic(rx)
             rot = ecef_to_enu_matrix(lat, lon)
-        rows, z, weights, sats = [], [], [], []
+        rows, z, weights, sats, model_var = [], [], [], [], []
         for m in meas:
             sat, clock, _, _ = satellite_at_reception(
                 m.eph, t_rx, m.pseudorange, rx if near_earth else None)
@@ -188,11 +225,17 @@ def _solve_wls(t_rx, meas, config, x0):
                 if elevation < config.elevation_mask:
                     continue
             predicted = rng - C_LIGHT * (clock - m.group_delay_s)
+            iono = 0.0
             if near_earth:
-                predicted += tropo_delay(lat, h, elevation)
+                tropo = tropo_delay(lat, h, elevation)
+                predicted += tropo
                 if not config.iono_free and config.klobuchar is not None:
-                    predicted += klobuchar_delay(t_rx, lat, lon, elevation, azimuth,
-                                                 *config.klobuchar, m.obs.frequency_hz)
+                    iono = klobuchar_delay(t_rx, lat, lon, elevation, azimuth,
+                                           *config.klobuchar, m.obs.frequency_hz)
+                    predicted += iono
+                if config.model_errors is not None:
+                    model_var.append(config.model_errors.variance(
+                        iono, tropo, tropo_delay(lat, h, math.pi / 2)))
             row = np.zeros(n_state)
             row[:3] = -los / rng
             row[3 + systems.index(m.system)] = 1.0
@@ -212,7 +255,8 @@ def _solve_wls(t_rx, meas, config, x0):
         dx = np.linalg.solve(normal, H.T @ (W * z))
         state += dx
         if np.linalg.norm(dx[:3]) < 1e-4 and near_earth:
-            return state, systems, H, W, z - H @ dx, sats
+            return state, systems, H, W, z - H @ dx, sats, \
+                np.array(model_var) if model_var else np.zeros(len(sats))
     return None
 
 
@@ -241,9 +285,9 @@ def solve_position(epoch, ephemerides, config=None, x0=None):
         result = _solve_wls(epoch.t_gps, meas, config, x0)
         if result is None:
             return None
-        state, systems, H, W, residuals, sats = result
+        state, systems, H, W, residuals, sats, model_var = result
         dof = len(residuals) - H.shape[1]
-        cov = np.linalg.inv(H.T @ (W[:, None] * H))
+        cov = np.linalg.inv(H.T @ (W[:, None] * H))  # of the noise the weights are
         test = float(np.sum(W * residuals ** 2))
         threshold = float(chi2.ppf(1.0 - config.p_false_alarm, dof)) if dof > 0 else math.nan
         passed = dof <= 0 or test <= threshold
@@ -256,6 +300,9 @@ def solve_position(epoch, ephemerides, config=None, x0=None):
         excluded.append(worst.sat_id)
         meas = [m for m in meas if m is not worst]
         x0 = state[:3]
+    if np.any(model_var > 0.0):  # the sandwich: the weights' estimate under R = noise + models
+        gain = cov @ (H.T * W)
+        cov = cov + (gain * model_var) @ gain.T
     xyz = state[:3]
     lat, lon, h = ecef_to_geodetic(xyz)
     rot = ecef_to_enu_matrix(lat, lon)
