@@ -88,7 +88,7 @@ def test_an_accelerometer_with_gravity_down_is_reported():
     """Acceleration published instead of specific force: the mean "up" points down, and the
     gyros' turn about it runs against the course."""
     check = _drive(0.0, (0.0, -7.0, 175.0), accel_sign=-1.0)
-    # (about -1: the offset it is taken at fits turns of the wrong sign; the car drive: -1.08)
+    # (about -1, taken where the turns correlate best; the car drive: -1.00)
     assert check.scale() == pytest.approx(-1.0, abs=0.1)
     assert "linear_acceleration with gravity down" in check.verdict().summary
     assert check.verdict().rates_wrong

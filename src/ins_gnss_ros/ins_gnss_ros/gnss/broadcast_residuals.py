@@ -57,7 +57,6 @@ class BroadcastResiduals:
     tropo_zenith_sigma: float = 0.05
     sisre_sigma: float = 1.0
 
-
     def model_errors(self) -> ModelErrors:
         """The receiver's error budget for these residuals (its solutions' covariance, as a
         real receiver's accuracy estimate has one): the ionosphere's RMS fraction of the

@@ -36,11 +36,12 @@ are not right-handed.
 A check, not a correction (the offset is ambiguous between the two clocks, and applying it would
 move the solution onto the other one mid-run): the ekf's /diagnostics names what it finds
 (:class:`Verdict`), and the navigator stops flagging a solution valid on rates it finds wrong
-(``Navigator.note_imu_rates_wrong``). The course is that of the antenna, and a wheeled vehicle's antenna
-ahead of its rear axle slips sideways in proportion to the turn rate, which leads the course by
-about (distance to the axle) / speed; on the car drive the fitted offset was the same within 20
-ms at 3-5 m/s and at 10-14 m/s. A ship's drift angle in a turn would bias it more. Only fixes
-above MIN_SPEED (the course is defined) and equally spaced ones are used.
+(``Navigator.note_imu_rates_wrong``). The course is that of the antenna, and a wheeled
+vehicle's antenna ahead of its rear axle slips sideways in proportion to the turn rate, which
+leads the course by about (distance to the axle) / speed; on the car drive the fitted offset
+was the same within 20 ms at 3-5 m/s and at 10-14 m/s. A ship's drift angle in a turn would
+bias it more. Only fixes above MIN_SPEED (the course is defined) and equally spaced ones are
+used.
 """
 from __future__ import annotations
 

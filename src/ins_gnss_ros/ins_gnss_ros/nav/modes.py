@@ -18,9 +18,9 @@ DEAD_RECKONING  (:func:`after_epoch`)
 
 Degraded (:meth:`~ins_gnss_ros.nav.integrity.Integrity.degraded`): a measurement kind was
 forced in and its noise floor has not yet decayed, an aiding kind has been rejected for
-``suspect_time`` s, or the turns show the IMU's rates wrong. While ALIGNING, GNSS is used only at rest and no update changes the mode.
-Constraint updates (non-holonomic, zero angular rate at a velocity fix) are not aiding: they
-never change the mode.
+``suspect_time`` s, or the turns show the IMU's rates wrong. While ALIGNING, GNSS is used only
+at rest and no update changes the mode. Constraint updates (non-holonomic, zero angular rate at
+a velocity fix) are not aiding: they never change the mode.
 """
 ALIGNING, NAVIGATING, DEAD_RECKONING = "ALIGNING", "NAVIGATING", "DEAD_RECKONING"
 MODES = (ALIGNING, NAVIGATING, DEAD_RECKONING)
