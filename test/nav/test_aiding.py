@@ -10,8 +10,9 @@ import pytest
 from ins_gnss_ros.nav.aiding import Aiding, AidingPolicy, WheelPolicy
 from ins_gnss_ros.nav.earth import earth_rate_enu, normal_gravity
 from ins_gnss_ros.nav.filter_config import PARAMS, navigator_config
-from ins_gnss_ros.nav import ALIGNING, GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, \
-    WheelOdometry, ZeroVelocity
+from ins_gnss_ros.nav.imu_timing import Verdict
+from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, GnssFix, GnssVelocity, HeadingFix, \
+    PhaseDifferences, WheelOdometry, ZeroVelocity
 from ins_gnss_ros.nav.navigator import Navigator
 from ins_gnss_ros.nav.recording import published_covariance
 from ins_gnss_ros.params import ParameterError, resolve
@@ -102,6 +103,19 @@ def test_wheel_odometry_variances_delay_and_zero_speed():
     assert isinstance(nav.measurements[-1], WheelOdometry)
     assert events == ["wheel/odom without a finite forward speed rejected"]
     assert front.inputs["wheel/odom"].received == 8 and front.inputs["wheel/odom"].refused == 1
+
+
+def test_rates_the_turns_find_wrong_are_the_explanation_of_dead_reckoning():
+    class Turns:  # the turn check's verdict on an accelerometer publishing gravity down
+        @staticmethod
+        def verdict():
+            return Verdict("the gyros turn against the course over ground", rates_wrong=True)
+
+    front, nav, _ = aiding()
+    nav.mode = DEAD_RECKONING
+    front.timing = Turns()
+    assert front.explain(1.0, imu_running=True) == (
+        "dead reckoning (degraded): the IMU's rates are wrong (IMU from turns)")
 
 
 def test_readings_whose_stamps_do_not_fit_the_imu_clock_are_refused_and_explained():

@@ -306,6 +306,8 @@ class Aiding:
         problem = self._problem()
         if problem:
             return f"dead reckoning: {problem}"
+        if self.timing.verdict().rates_wrong:
+            return "dead reckoning (degraded): the IMU's rates are wrong (IMU from turns)"
         if self.forced:
             return ("dead reckoning (degraded): forced in, their noise floors not yet decayed: "
                     + ", ".join(sorted(self.forced)))
