@@ -232,7 +232,7 @@ class ImuTimingCheck:
         residual = max(self._course_turn_sq - slope * float(self._turn_products[k]), 0.0)
         return slope, math.sqrt(residual / max(self.pairs - 1, 1) / imu_sq)
 
-    def _rates_wrong(self) -> float | None:
+    def _wrong_scale(self) -> float | None:
         """The scale, where the slope lies SCALE_SIGMAS beyond 1 / SCALE_RANGE; else None."""
         fit = self._slope()
         if fit is None:
@@ -251,7 +251,7 @@ class ImuTimingCheck:
         return self._verdict[1]
 
     def _judge(self) -> Verdict:
-        scale = self._rates_wrong()
+        scale = self._wrong_scale()
         if scale is not None and scale < 0.0:
             return Verdict(f"the gyros turn against the course over ground ({scale:.2f} x, "
                            f"{self.pairs} course changes): linear_acceleration with gravity down "
