@@ -62,13 +62,7 @@ def _run_with_restart(bag, profile, restart: str | None, out: Path):
     rclpy.init(context=context, args=[])
     bus = InProcessBus()
     writer = bagio.BagWriter(out)
-    feeding = [None]  # the input being delivered: not an output
-
-    def record(topic, msg):
-        if msg is not feeding[0]:
-            writer.write(topic, msg, bagio.msg_stamp_ns(msg))
-
-    bus.recorders.append(record)
+    bus.recorders.append(lambda topic, msg: writer.write(topic, msg, bagio.msg_stamp_ns(msg)))
 
     def start(name):
         return registry.node_class(name)(
@@ -92,13 +86,13 @@ def _run_with_restart(bag, profile, restart: str | None, out: Path):
                 # A killed process: its subscriptions vanish with it (the bus has no
                 # unsubscribe, so its callbacks are taken off by hand).
                 for callbacks in bus._subscribers.values():
-                    callbacks[:] = [c for c in callbacks if getattr(c, "__self__", None) is not old]
+                    callbacks[:] = [(c, form) for c, form in callbacks
+                                    if getattr(c, "__self__", None) is not old]
                 old.destroy_node()
                 nodes[restart] = start(restart)
                 restart = None
             bus.now_ns = m.t_ns
-            feeding[0] = m.msg
-            bus.publish(m.topic, m.msg)
+            bus.publish(m.topic, m.msg, recorded=False)
             bus.drain()
     finally:
         for node in nodes.values():

@@ -104,3 +104,43 @@ def test_field_reader_reads_rclpy_payloads_of_any_frame_id():
             read(bad)
     with pytest.raises(cdr.CdrLayoutError):
         cdr.field_reader("sensor_msgs/msg/Imu", ("angular_velocity.x", "header.stamp.sec"))
+
+
+@pytest.mark.parametrize("msgtype, strings, make", [
+    ("ins_gnss_msgs/msg/ImuDelta", 1, _delta),
+    ("sensor_msgs/msg/Imu", 1, lambda k, frame: msgs.imu_msg(
+        T0 + k, RNG.normal(size=3), RNG.normal(size=3), frame)),
+    ("nav_msgs/msg/Odometry", 2, None),
+    ("builtin_interfaces/msg/Time", 0, None),
+])
+def test_field_writer_packs_what_rclpy_serializes(msgtype, strings, make):
+    """field_writer's payload, from every numeric field's value in field order, decodes by
+    rclpy's own deserializer into the message and is the object codec's bytes, whatever the
+    length of its strings (each shifts what follows by its own padding)."""
+    from nav_msgs.msg import Odometry
+
+    from ins_gnss_ros.io import msg_class
+    from ins_gnss_ros.io.cdr import _flat
+
+    for k in range(9):
+        frames = tuple(("imu_link", "base_link")[i][:(k + 3 * i) % 9] for i in range(strings))
+        if make is not None:
+            msg = make(k, frames[0])
+        else:
+            msg = msg_class(msgtype)()
+            if msg_class(msgtype) is Odometry:
+                msg.header.frame_id, msg.child_frame_id = frames
+                msg.pose.covariance = RNG.normal(size=36)
+                msg.twist.twist.angular.y = RNG.normal()
+            else:
+                msg.sec, msg.nanosec = -k, 7 * k
+        values = []
+        for path, f in _flat(type(msg)):
+            if f.kind != cdr.STRING:
+                value = msg
+                for part in path.split("."):
+                    value = getattr(value, part)
+                values += list(value) if f.kind == cdr.ARRAY else [value]
+        data = cdr.field_writer(msgtype, frames)(*values)
+        assert messages_equal(deserialize_message(data, type(msg)), msg)
+        assert data == cdr.codec(type(msg)).encode(msg)   # padding zero (rclpy's is not set)

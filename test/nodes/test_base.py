@@ -175,18 +175,21 @@ def test_a_paced_subscription_handles_what_came_while_it_rested(executor, probe,
 def test_on_the_bus_a_paced_subscription_is_handled_as_it_comes(ros_context):
     from sensor_msgs.msg import Imu
 
+    from ins_gnss_ros.io import codec
     from ins_gnss_ros.nodes.base import DRIVER_QOS, InProcessBus
 
     bus = InProcessBus()
     node = _Counting(context=ros_context, bus=bus)
-    handled = []
+    handled, payloads = [], []
     paced = node.subscribe_paced(Imu, "imu_raw", handled.append, DRIVER_QOS)
+    node.subscribe_paced(Imu, "imu_raw", payloads.append, DRIVER_QOS, serialized=True)
     paced.due(10**18)  # nothing to wait for on the bus
     msgs = [Imu() for _ in range(3)]
     for msg in msgs:
         bus.publish("imu_raw", msg)
     bus.drain()
     assert [id(m) for m in handled] == [id(m) for m in msgs]
+    assert payloads == [codec(Imu).encode(m) for m in msgs]
     node.destroy_node()
 
 
@@ -272,3 +275,42 @@ def test_now_msg_equals_rclpy_time_conversion(ros_context):
     t_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
     assert before <= t_ns <= on_clock.get_clock().now().nanoseconds
     on_clock.destroy_node()
+
+
+def test_the_bus_hands_each_form_and_converts_once(ros_context):
+    """A message travels as published, object or CDR payload: a subscriber of the other form
+    gets it converted (once for all of them), one of either form gets it as it came; the
+    recorders get objects, the raw recorders what was published, an input (``recorded``
+    false) reaches neither; a topic carries one type."""
+    from ins_gnss_msgs.msg import ImuDelta
+    from sensor_msgs.msg import Imu
+
+    from ins_gnss_ros.io import codec, messages_equal, sec_to_stamp
+    from ins_gnss_ros.nodes.base import InProcessBus
+
+    bus = InProcessBus()
+    node = _Counting(context=ros_context, bus=bus)
+    pub = node.publisher(ImuDelta, "delta", 10)
+    got = {form: [] for form in (bus.OBJECT, bus.PAYLOAD, bus.AS_PUBLISHED)}
+    for form, seen in got.items():
+        bus.subscribe("delta", seen.append, form)
+    objects, raw = [], []
+    bus.recorders.append(lambda topic, msg: objects.append(msg))
+    bus.raw_recorders.append(lambda topic, msg, cls: raw.append((msg, cls)))
+    delta = ImuDelta(dt=0.01)
+    delta.header.stamp = sec_to_stamp(1.5)
+    payload = codec(ImuDelta).encode(delta)
+    pub.publish(delta)
+    pub.publish(payload)
+    bus.publish("delta", payload, recorded=False)
+    bus.drain()
+    obj, pay, as_published = got.values()
+    assert obj[0] is delta and all(messages_equal(m, delta) for m in obj)
+    assert obj[1] is objects[1]   # decoded once for the subscribers and the recorders
+    assert pay == [payload] * 3 and pay[1] is payload
+    assert as_published[0] is delta and as_published[1] is payload
+    assert len(objects) == 2 and [cls for _, cls in raw] == [ImuDelta] * 2
+    assert raw[0][0] is delta and raw[1][0] is payload
+    with pytest.raises(TypeError, match="/delta: Imu published where ImuDelta is"):
+        node.publisher(Imu, "delta", 10)
+    node.destroy_node()

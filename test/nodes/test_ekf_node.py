@@ -80,6 +80,15 @@ def _ekf_params():
             Parameter("gnss.velocity_sigma_floor_mps", value=0.0)]
 
 
+def _payload(msg) -> bytes:
+    """An ImuDelta as the nodes take it: its CDR payload."""
+    from ins_gnss_msgs.msg import ImuDelta
+
+    from ins_gnss_ros.io import codec
+
+    return codec(ImuDelta).encode(msg)
+
+
 def test_closed_loop_follows_truth_and_equals_offline_navigator(trial, ros_context):
     from ins_gnss_ros.nodes.ekf_node import EkfNode
     from ins_gnss_ros.nodes.strapdown_node import StrapdownNode
@@ -303,7 +312,7 @@ def test_imu_gap_is_bridged_and_a_long_one_restarts_the_alignment(ros_context):
 
     def run(t_from, t_to):
         for k in range(int(round(t_from * 100)), int(round(t_to * 100))):
-            node.on_delta(delta(k / 100))
+            node.on_delta(_payload(delta(k / 100)))
             if k % 25 == 0:
                 node.on_input(node.inputs.fix, _fix_msg(k / 100, lat, lon, h, np.zeros(3)))
                 node.on_input(node.inputs.velocity, _vel_msg(k / 100, np.zeros(3), np.zeros(3)))
@@ -311,8 +320,8 @@ def test_imu_gap_is_bridged_and_a_long_one_restarts_the_alignment(ros_context):
     run(0.01, 5.0)
     assert node.navigator.solution is not None
     sigma_v = np.sqrt(np.diag(node.navigator.covariance())[S["vel"]])
-    node.on_delta(delta(5.5))                         # 0.49 s lost before 5.5 s
-    node.on_delta(delta(5.51))                        # (the segment's end is known)
+    node.on_delta(_payload(delta(5.5)))               # 0.49 s lost before 5.5 s
+    node.on_delta(_payload(delta(5.51)))              # (the segment's end is known)
     assert node.diag.counts["gap in increments: bridged by holding the rates"] == 1
     # imu_gap.accel_sigma_mps2 (1 m/s^2) held over 0.49 s
     assert np.all(np.sqrt(np.diag(node.navigator.covariance())[S["vel"]]) > sigma_v + 0.4)

@@ -42,22 +42,21 @@ def _epochs(k, seed=0):
 
 
 def test_column_payloads_are_the_messages_of_each_epoch():
-    """fix_payloads, odom_payloads and ins_state_payloads (many epochs at once) decode, by
-    rclpy's own deserializer, into the messages fix_msg, odom_msg and fill_ins_state build for
-    each epoch alone, bit for bit."""
+    """fix_payloads and odom_payloads (many epochs at once) are the bytes fix_payload and
+    odom_payload pack for each epoch alone; ins_state_payloads and ins_state_payload decode,
+    by rclpy's own deserializer, into the message fill_ins_state builds."""
     import numpy as np
-    from geometry_msgs.msg import Vector3
     from ins_gnss_msgs.msg import InsState
-    from nav_msgs.msg import Odometry
     from rclpy.serialization import deserialize_message
-    from sensor_msgs.msg import NavSatFix
 
     from ins_gnss_ros.io import messages_equal, ns_to_stamp
     from ins_gnss_ros.nav.ekf import StateSpace
     from ins_gnss_ros.nav.error_model import make_layout
+    from ins_gnss_ros.nav.increments import SensorErrors
     from ins_gnss_ros.nav.strapdown import NavState
-    from ins_gnss_ros.nodes.convert import fill_ins_state, ins_state_payloads
-    from ins_gnss_ros.nodes.nav_messages import fix_msg, fix_payloads, odom_msg, odom_payloads
+    from ins_gnss_ros.nodes.convert import fill_ins_state, ins_state_payload, ins_state_payloads
+    from ins_gnss_ros.nodes.nav_messages import fix_payload, fix_payloads, odom_payload, \
+        odom_payloads
 
     k = 50
     lat, lon, h, v, q, P = _epochs(k)
@@ -72,14 +71,18 @@ def test_column_payloads_are_the_messages_of_each_epoch():
     for i in range(k):
         st = NavState(lat[i], lon[i], h[i], v[i], q[i], int(stamps[i]) * 1e-9)
         stamp = ns_to_stamp(stamps[i])
-        assert messages_equal(deserialize_message(fixes[i], NavSatFix), fix_msg(
-            stamp, st, P[i][space["pos"], space["pos"]], int(status[i]), frame_id="base_link"))
-        assert messages_equal(deserialize_message(odoms[i], Odometry), odom_msg(
-            stamp, st, P[i], space, datum, Vector3(), 1e-6, ("map", "base_link")))
+        assert fixes[i] == fix_payload(int(stamps[i]), st, P[i][space["pos"], space["pos"]],
+                                       int(status[i]), frame_id="base_link")
+        assert odoms[i] == odom_payload(int(stamps[i]), st, P[i], space, datum, (0.0,) * 3,
+                                        1e-6, ("map", "base_link"))
         state = InsState()
-        fill_ins_state(state, st)
-        state.header.stamp, state.header.frame_id = stamp, "map"
+        fill_ins_state(state, st)   # stamped from st.t (s)
+        state.header.frame_id = "map"
         state.mode, state.correction_sequence = InsState.MODE_NAVIGATING, 1
+        assert messages_equal(deserialize_message(ins_state_payload(
+            st, np.zeros(3), np.zeros(3), SensorErrors(), InsState.MODE_NAVIGATING, 1),
+            InsState), state)
+        state.header.stamp = stamp
         assert messages_equal(deserialize_message(states[i], InsState), state)
 
 

@@ -6,12 +6,21 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
-from ins_gnss_ros.io import sec_to_stamp
+from ins_gnss_ros.io import codec, sec_to_stamp
 from ins_gnss_ros.nav.earth import WGS84, earth_rate_enu, normal_gravity, radii
 from ins_gnss_ros.nodes.convert import to_vector3
 
 LAT = np.radians(60.0)
 DT = 0.01
+
+
+def _payload(msg) -> bytes:
+    """An ImuDelta as the nodes take it: its CDR payload."""
+    from ins_gnss_msgs.msg import ImuDelta
+
+    from ins_gnss_ros.io import codec
+
+    return codec(ImuDelta).encode(msg)
 
 
 def _delta(t):
@@ -47,7 +56,7 @@ def test_stationary_and_late_correction_recover_truth(node):
 
     t0 = 1000.0
     for k in range(1, 101):
-        node.on_delta(_delta(t0 + k * DT))
+        node.on_delta(_payload(_delta(t0 + k * DT)))
     # The filter found, for the epoch 0.5 s ago, a 10 m north position error.
     corr = InsCorrection(sequence=1, mode=InsCorrection.MODE_NAVIGATING)
     corr.header.stamp = sec_to_stamp(t0 + 0.5)
@@ -64,11 +73,11 @@ def test_stationary_and_late_correction_recover_truth(node):
 
 def test_bad_increments_are_counted_not_used(node):
     msg = _delta(5.0)
-    node.on_delta(msg)
+    node.on_delta(_payload(msg))
     bad = _delta(5.01)
     bad.delta_angle.x = float("nan")
-    node.on_delta(bad)
-    node.on_delta(_delta(5.0))  # backwards in time
+    node.on_delta(_payload(bad))
+    node.on_delta(_payload(_delta(5.0)))  # backwards in time
     assert node.loop.state.t == pytest.approx(5.0)
     assert sum(node.diag.counts.values()) == 2
 
@@ -80,32 +89,33 @@ def test_gap_is_bridged_by_held_rates_and_a_long_gap_loses_the_imu(node):
     from ins_gnss_msgs.msg import InsCorrection, InsState
 
     published = []
-    node.pub.publish = published.append  # the messages, without the DDS round trip
+    # the messages (decoded payloads), without the DDS round trip
+    node.pub.publish = lambda data: published.append(codec(InsState).decode(data))
     t0 = 1000.0
     for k in range(1, 51):
-        node.on_delta(_delta(t0 + k * DT))
-    node.on_delta(_delta(t0 + 1.0))                  # 0.49 s of increments lost
+        node.on_delta(_payload(_delta(t0 + k * DT)))
+    node.on_delta(_payload(_delta(t0 + 1.0)))  # 0.49 s of increments lost
     assert node.diag.counts["gap in increments: bridged by holding the rates"] == 1
     assert node.loop.state.t == pytest.approx(t0 + 1.0)
     assert np.abs(node.loop.state.v_enu).max() < 1e-3  # without holding: 4.8 m/s of free fall
     assert published[-1].mode == InsState.MODE_ALIGNING  # no correction yet
-    node.on_delta(_delta(t0 + 5.0))                  # 4 s lost: the IMU was lost
+    node.on_delta(_payload(_delta(t0 + 5.0)))  # 4 s lost: the IMU was lost
     assert node.diag.counts["imu lost: gap in increments beyond max_imu_gap_s, new run"] == 1
     assert published[-1].mode == InsState.MODE_INVALID
     old = InsCorrection(sequence=1, mode=InsCorrection.MODE_NAVIGATING)
     old.header.stamp = sec_to_stamp(t0 + 0.5)
     node.on_correction(old)
     assert node.diag.counts["correction older than this run ignored"] == 1
-    node.on_delta(_delta(t0 + 5.0 + DT))
+    node.on_delta(_payload(_delta(t0 + 5.0 + DT)))
     assert published[-1].mode == InsState.MODE_INVALID
     new = InsCorrection(sequence=2, mode=InsCorrection.MODE_NAVIGATING)
     new.header.stamp = sec_to_stamp(t0 + 5.0)
     node.on_correction(new)
-    node.on_delta(_delta(t0 + 5.0 + 2 * DT))
+    node.on_delta(_payload(_delta(t0 + 5.0 + 2 * DT)))
     assert published[-1].mode == InsState.MODE_NAVIGATING
     assert published[-1].correction_sequence == 2
     for k in range(3, 214):  # 2.1 s without a correction: aligned once, dead reckoning now
-        node.on_delta(_delta(t0 + 5.0 + k * DT))
+        node.on_delta(_payload(_delta(t0 + 5.0 + k * DT)))
     assert published[-1].mode == InsState.MODE_DEAD_RECKONING
 
 
@@ -117,7 +127,7 @@ def test_ins_state_says_the_mode_of_the_filter_that_corrected_it(node):
     from ins_gnss_msgs.msg import InsCorrection, InsState
 
     published = []
-    node.pub.publish = published.append
+    node.pub.publish = lambda data: published.append(codec(InsState).decode(data))
     t0 = 1000.0
 
     def correct(sequence, mode, k):
@@ -126,19 +136,19 @@ def test_ins_state_says_the_mode_of_the_filter_that_corrected_it(node):
         node.on_correction(msg)
 
     for k in range(1, 51):
-        node.on_delta(_delta(t0 + k * DT))
+        node.on_delta(_payload(_delta(t0 + k * DT)))
     assert (published[-1].mode, published[-1].correction_sequence) == (InsState.MODE_ALIGNING, 0)
     correct(1, InsCorrection.MODE_ALIGNING, 50)
-    node.on_delta(_delta(t0 + 51 * DT))
+    node.on_delta(_payload(_delta(t0 + 51 * DT)))
     assert (published[-1].mode, published[-1].correction_sequence) == (InsState.MODE_ALIGNING, 1)
     correct(2, InsCorrection.MODE_NAVIGATING, 51)
-    node.on_delta(_delta(t0 + 52 * DT))
+    node.on_delta(_payload(_delta(t0 + 52 * DT)))
     assert published[-1].mode == InsState.MODE_NAVIGATING
     correct(3, InsCorrection.MODE_DEAD_RECKONING, 52)
-    node.on_delta(_delta(t0 + 53 * DT))
+    node.on_delta(_payload(_delta(t0 + 53 * DT)))
     assert published[-1].mode == InsState.MODE_DEAD_RECKONING
     correct(4, 7, 53)
-    node.on_delta(_delta(t0 + 54 * DT))
+    node.on_delta(_payload(_delta(t0 + 54 * DT)))
     assert node.diag.counts["correction with an unknown mode rejected"] == 1
     assert (published[-1].mode, published[-1].correction_sequence) == \
         (InsState.MODE_DEAD_RECKONING, 3)

@@ -65,3 +65,24 @@ def test_a_bag_under_other_names_reads_with_a_remapping(tmp_path):
     for rule in ("/fix", "/fix:=", ":=/gnss/fix"):
         with pytest.raises(ValueError, match="expected FROM:=TO"):
             parse_remap([rule])
+
+
+def test_payloads_of_a_fixed_layout_stay_undecoded_and_checked(tmp_path, bags):
+    """With ``payloads``, fixed-layout inputs (ImuDelta, NavSatFix) are the bag's own bytes,
+    decoding to the messages read otherwise; a payload cut short is a BagError at reading."""
+    from ins_gnss_ros.trial.inputs import payload_types
+
+    absolute = bags[0]
+    assert payload_types(absolute) == {"/imu/delta": "ins_gnss_msgs/msg/ImuDelta",
+                                       "/gnss/fix": "sensor_msgs/msg/NavSatFix"}
+    decoded, kept = read_inputs(absolute), read_inputs(absolute, payloads=True)
+    assert all(type(m.msg) is bytes for m in kept)
+    assert all(bagio.messages_equal(bagio.codec(type(a.msg)).decode(b.msg), a.msg)
+               for a, b in zip(decoded, kept))
+    rows = bagio.read_raw(absolute)
+    with bagio.BagWriter(tmp_path / "cut") as writer:
+        for row in rows:
+            writer.write_raw(row.topic, row.msgtype, row.t_ns,
+                             row.data[:40] if row.topic == "/imu/delta" else row.data)
+    with pytest.raises(bagio.BagError, match="/imu/delta at .* does not decode"):
+        read_inputs(tmp_path / "cut", payloads=True)

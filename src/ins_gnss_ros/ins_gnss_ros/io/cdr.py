@@ -42,7 +42,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .messages import MessageTypeError, msg_class, template
+from .messages import MessageTypeError, msg_class, msgtype_of_class, template
 
 
 class CdrLayoutError(ValueError):
@@ -687,6 +687,78 @@ def field_reader(msgtype: str, paths: tuple):
             raise CdrLayoutError(f"{msgtype}: payload too short ({err})") from None
 
     return read
+
+
+_STAMP = struct.Struct("<iI")
+
+
+def payload_stamp_ns(data) -> int:
+    """The header stamp (ns) of the CDR payload of a message whose first field is a
+    ``std_msgs/Header`` (:func:`starts_with_header`): its int32 sec and uint32 nanosec follow
+    the 4-byte encapsulation."""
+    sec, nanosec = _STAMP.unpack_from(data, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+@lru_cache(maxsize=None)
+def starts_with_header(cls) -> bool:
+    """Whether the first field of the rclpy message class ``cls`` is a ``std_msgs/Header``."""
+    first = fields(cls)[0]
+    return first.kind == MESSAGE and msgtype_of_class(first.element) == "std_msgs/msg/Header"
+
+
+@lru_cache(maxsize=None)
+def field_writer(msgtype: str, strings: tuple = ()):
+    """A function taking the values of every numeric field of a type without sequences (in
+    field order as :func:`column_layout` lists them, an array field as its elements) to the
+    message's little-endian CDR payload, its strings given once (``strings``: the value of
+    each, in field order): the bytes :meth:`Codec.encode` gives for that message.
+
+    For a stream written message by message (the imu_preprocessor's increments, the
+    strapdown's states): the values packed into one layout, no message object each.
+
+    Raises
+    ------
+    CdrLayoutError
+        The type has no fixed layout, or not as many strings as ``strings``.
+    """
+    encoded = [value.encode() for value in strings]
+    dtype = column_layout(msgtype, tuple(len(value) for value in encoded))
+    # The payload as numeric runs packed by a struct each, between constant bytes (padding,
+    # each string's length, its bytes and NUL): at most one run per string plus one.
+    runs, constants, fmt, pos = [], [], ["<"], 4
+    placed = sorted(((at, name, sub) for name, (sub, at) in dtype.fields.items()
+                     if name != HEADER), key=lambda field: field[0])
+    for at, name, sub in placed:
+        if name.endswith(LENGTH):
+            runs.append(struct.Struct("".join(fmt)))
+            text = encoded[len(constants)]
+            constants.append(bytes(at - pos) + _U32.pack(len(text) + 1) + text + b"\0")
+            fmt, pos = ["<"], at + 4 + len(text) + 1
+        elif sub.base.kind != "S":
+            count = sub.shape[0] if sub.shape else 1
+            fmt.append(f"{at - pos}x{count}{_CODE_OF_DTYPE[sub.base.str]}")
+            pos = at + sub.itemsize
+    runs.append(struct.Struct("".join(fmt) + f"{dtype.itemsize - pos}x"))
+    if not constants:
+        whole = runs[0]
+        return lambda *values: _CDR_LE + whole.pack(*values)
+    # Where each run's values start and end in the arguments.
+    bounds, k = [], 0
+    for run in runs:
+        n = len(run.unpack(bytes(run.size)))
+        bounds.append((k, k + n))
+        k += n
+    pieces = list(zip(runs, bounds, constants + [b""]))
+
+    def write(*values) -> bytes:
+        out = [_CDR_LE]
+        for run, (first, end), constant in pieces:
+            out.append(run.pack(*values[first:end]))
+            out.append(constant)
+        return b"".join(out)
+
+    return write
 
 
 def encode_columns(msgtype: str, columns: dict, strings: dict | None = None) -> list:

@@ -22,11 +22,12 @@ class MessageTypeError(ValueError):
 
 def msgtype_of(msg) -> str:
     """ROS type name ``pkg/msg/Name`` of an rclpy message object."""
-    return _msgtype_of_class(type(msg))
+    return msgtype_of_class(type(msg))
 
 
 @lru_cache(maxsize=None)
-def _msgtype_of_class(cls) -> str:
+def msgtype_of_class(cls) -> str:
+    """ROS type name ``pkg/msg/Name`` of an rclpy message class."""
     return f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"
 
 

@@ -46,13 +46,18 @@ def set_stamp_ns(stamp: Time, t_ns: int) -> None:
     stamp.sec, stamp.nanosec = divmod(t_ns, NS)
 
 
-def set_stamp_sec(stamp: Time, t: float) -> None:
-    """Write ``t`` (s) into an existing stamp, rounded to the nearest ns."""
+def sec_nanosec(t: float) -> tuple[int, int]:
+    """The (sec, nanosec) of a stamp of ``t`` (s), rounded to the nearest ns."""
     sec = math.floor(t)
     nanosec = int(round((t - sec) * 1e9))
     if nanosec >= NS:  # rounding carried into the next second
         sec, nanosec = sec + 1, nanosec - NS
-    stamp.sec, stamp.nanosec = sec, nanosec
+    return sec, nanosec
+
+
+def set_stamp_sec(stamp: Time, t: float) -> None:
+    """Write ``t`` (s) into an existing stamp, rounded to the nearest ns."""
+    stamp.sec, stamp.nanosec = sec_nanosec(t)
 
 
 def sec_to_stamp_ns(t) -> np.ndarray:

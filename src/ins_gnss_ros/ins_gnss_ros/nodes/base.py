@@ -15,7 +15,6 @@ process. Navigation logic must therefore use message stamps, never the wall cloc
 from __future__ import annotations
 
 import os
-import struct
 import sys
 import time
 from collections import Counter, defaultdict, deque
@@ -38,7 +37,7 @@ from rclpy.task import Future
 
 from ..io import NS, ns_to_stamp
 from ..io.arrival import ArrivalForecast
-from ..io.cdr import codec
+from ..io.cdr import codec, payload_stamp_ns
 from ..params import Param, ParameterError
 
 # Sensor streams: reliable so that our own pipeline never silently drops an IMU increment (a
@@ -160,26 +159,47 @@ class InProcessBus:
 
     ``publish`` only queues; :meth:`drain` delivers queued messages first-in first-out to the
     subscribers in the order they subscribed, including what their callbacks publish in turn.
-    Every published message is also passed to the ``recorders`` (``f(topic, msg)``).
+    A message travels as it was published, a message object or its CDR payload (``bytes``, of
+    the type its publisher :meth:`advertise` d: the high-rate streams, packed by field as on
+    DDS), and is converted at most once each way for the subscribers that take the other form
+    (:meth:`subscribe`'s ``form``). Every published message is also passed to the
+    ``recorders`` as an object (``f(topic, msg)``) and to the ``raw_recorders`` as it was
+    published (``f(topic, msg, msg_class)``), unless published with ``recorded`` false.
     Topics are absolute names: a relative name is taken in the root namespace.
     """
 
+    #: Subscriber forms: the message object, its CDR payload, or whichever was published.
+    OBJECT, PAYLOAD, AS_PUBLISHED = "object", "payload", "as published"
+
     def __init__(self):
-        self._subscribers: dict[str, list[Callable[[Any], None]]] = defaultdict(list)
+        self._subscribers: dict[str, list[tuple[Callable[[Any], None], str]]] = \
+            defaultdict(list)
         self._services: dict[str, tuple[Any, Callable[[Any, Any], Any]]] = {}
-        self._queue: deque[tuple[str, Any]] = deque()
+        self._types: dict[str, Any] = {}  # topic -> class of the payloads published on it
+        self._queue: deque[tuple[str, Any, bool]] = deque()
         self.recorders: list[Callable[[str, Any], None]] = []
+        self.raw_recorders: list[Callable[[str, Any, Any], None]] = []
         self.now_ns = 0  # replay time, set by whoever drives the bus
 
     @staticmethod
     def resolve(topic: str) -> str:
         return topic if topic.startswith("/") else "/" + topic
 
-    def subscribe(self, topic: str, callback: Callable[[Any], None]) -> None:
-        self._subscribers[self.resolve(topic)].append(callback)
+    def advertise(self, topic: str, msg_type) -> None:
+        """Payloads published on ``topic`` are of ``msg_type`` (a second type is refused)."""
+        topic = self.resolve(topic)
+        if self._types.setdefault(topic, msg_type) is not msg_type:
+            raise TypeError(f"{topic}: {msg_type.__name__} published where "
+                            f"{self._types[topic].__name__} is")
 
-    def publish(self, topic: str, msg: Any) -> None:
-        self._queue.append((self.resolve(topic), msg))
+    def subscribe(self, topic: str, callback: Callable[[Any], None],
+                  form: str = OBJECT) -> None:
+        self._subscribers[self.resolve(topic)].append((callback, form))
+
+    def publish(self, topic: str, msg: Any, recorded: bool = True) -> None:
+        """Queue ``msg`` (an object, or the payload of the type advertised on ``topic``);
+        ``recorded`` false: not passed to the recorders (a replay's input)."""
+        self._queue.append((self.resolve(topic), msg, recorded))
 
     def add_service(self, name: str, srv_type, callback: Callable[[Any, Any], Any]) -> None:
         self._services[self.resolve(name)] = (srv_type, callback)
@@ -193,17 +213,37 @@ class InProcessBus:
         return response
 
     def drain(self) -> None:
+        payload_form, object_form = self.PAYLOAD, self.OBJECT
         while self._queue:
-            topic, msg = self._queue.popleft()
-            for record in self.recorders:
-                record(topic, msg)
-            for callback in self._subscribers.get(topic, ()):
-                callback(msg)
+            topic, msg, recorded = self._queue.popleft()
+            if type(msg) is bytes:
+                cls, payload, obj = self._types[topic], msg, None
+            else:
+                cls, payload, obj = type(msg), None, msg
+            if recorded:
+                for record in self.raw_recorders:
+                    record(topic, msg, cls)
+                for record in self.recorders:
+                    if obj is None:
+                        obj = codec(cls).decode(payload)
+                    record(topic, obj)
+            for callback, form in self._subscribers.get(topic, ()):
+                if form == payload_form:
+                    if payload is None:
+                        payload = codec(cls).encode(obj)
+                    callback(payload)
+                elif form == object_form:
+                    if obj is None:
+                        obj = codec(cls).decode(payload)
+                    callback(obj)
+                else:
+                    callback(msg)
 
 
 class _BusPublisher:
-    def __init__(self, bus: InProcessBus, topic: str):
+    def __init__(self, bus: InProcessBus, msg_type, topic: str):
         self._bus, self.topic = bus, bus.resolve(topic)
+        bus.advertise(topic, msg_type)
 
     def publish(self, msg: Any) -> None:
         self._bus.publish(self.topic, msg)
@@ -283,18 +323,17 @@ class Queued:
     order, and :meth:`handle` has nothing to do.
     """
 
-    def __init__(self, msg_type, handler, take: Callable[[], Any] | None = None):
-        self._decode, self._handler, self._take = codec(msg_type).decode, handler, take
+    def __init__(self, handler: Callable[[bytes], None],
+                 take: Callable[[], Any] | None = None):
+        # On DDS: ``handler`` takes one serialized message, ``take()`` gives the next or None.
+        self._handler, self._take = handler, take
 
     def handle(self) -> None:
         """Hand every message that came since the last call to the handler, oldest first."""
         if self._take is None:
             return
         while (data := self._take()) is not None:
-            self._handler(self._decode(data))
-
-
-_STAMP = struct.Struct("<iI")
+            self._handler(data)
 
 
 class Paced:
@@ -343,9 +382,7 @@ class Paced:
         allows, and handle what came meanwhile."""
         arrival = time.monotonic_ns()
         self._handle(data)
-        # header.stamp (int32 sec, uint32 nanosec) follows the 4-byte CDR encapsulation
-        sec, nanosec = _STAMP.unpack_from(data, 4)
-        self._forecast.add(sec * NS + nanosec, arrival)
+        self._forecast.add(payload_stamp_ns(data), arrival)
         now = time.monotonic_ns()
         until, self._rest_until = self._rest_until, None
         if until is None or until <= now:
@@ -385,10 +422,11 @@ class _CountedPublisher:
         return not self._volatile or self._subscribers > 0
 
     def publish(self, msg) -> None:
+        """Publish a message object, or its CDR payload as it is."""
         if not self.wanted():
             return
         self._traffic[self._key] += 1
-        self._publisher.publish(self._encode(msg))
+        self._publisher.publish(msg if type(msg) is bytes else self._encode(msg))
 
     def __getattr__(self, name):
         return getattr(self._publisher, name)
@@ -415,41 +453,49 @@ class NavNode(Node):
         self.diag = Diagnostics(self)
 
     def publisher(self, msg_type, topic: str, qos):
-        """A DDS publisher, or the bus' stand-in with the same ``publish``."""
+        """A DDS publisher, or the bus' stand-in with the same ``publish``; either takes a
+        message object or its CDR payload (``bytes``, e.g. packed by
+        :func:`..io.cdr.field_writer`)."""
         if self.bus is not None:
-            return _BusPublisher(self.bus, topic)
+            return _BusPublisher(self.bus, msg_type, topic)
         if topic == "/diagnostics":
             return self.create_publisher(msg_type, topic, qos)
         return _CountedPublisher(self, msg_type, topic, qos, self.diag.traffic)
 
-    def subscribe(self, msg_type, topic: str, callback, qos) -> None:
+    def subscribe(self, msg_type, topic: str, callback, qos, serialized: bool = False) -> None:
+        """``callback`` takes each message decoded, or with ``serialized`` its CDR payload:
+        for a handler that reads a few fields (:func:`..io.cdr.field_reader`) rather than
+        build a message object per message, on DDS and on the bus alike."""
         if self.bus is not None:
-            self.bus.subscribe(topic, callback)
-        else:
-            # Taken serialized and decoded by the project's codec: rclpy builds each message
-            # through the generated class's constructor and properties (Imu ~33 us, InsState
-            # ~48 us here, the codec 12 us; docs/results/live_cost.md).
-            decode = codec(msg_type).decode
-            self.create_subscription(msg_type, topic,
-                                     self._counted(topic, lambda data: callback(decode(data))),
-                                     qos, raw=True)
+            self.bus.subscribe(topic, callback, InProcessBus.PAYLOAD if serialized
+                               else InProcessBus.OBJECT)
+            return
+        self.create_subscription(msg_type, topic,
+                                 self._counted(topic, self._taking(msg_type, callback,
+                                                                   serialized)),
+                                 qos, raw=True)
+
+    @staticmethod
+    def _taking(msg_type, callback, serialized: bool):
+        """``callback`` as a DDS subscription's raw callback: messages are taken serialized and
+        decoded by the project's codec (rclpy builds each through the generated class's
+        constructor and properties: Imu ~33 us, InsState ~48 us here, the codec 12 us;
+        docs/results/live_cost.md), or not decoded at all for a ``serialized`` handler."""
+        if serialized:
+            return callback
+        decode = codec(msg_type).decode
+        return lambda data: callback(decode(data))
 
     def subscribe_paced(self, msg_type, topic: str, callback, qos,
-                        serialized: Callable[[bytes], None] | None = None) -> Paced:
+                        serialized: bool = False) -> Paced:
         """As :meth:`subscribe`, for a high-rate input of messages with a header of which
         ``callback`` needs only some at once: it calls :meth:`Paced.due` on the returned
         object to let the messages before the next needed one wait and be handled together
-        (on DDS without sim time; see :class:`Paced`). On DDS ``serialized``, if given, takes
-        each message's CDR payload instead of ``callback`` taking the decoded message: for a
-        handler that reads a few fields (:func:`..io.cdr.field_reader`) rather than build a
-        message object per sample."""
+        (on DDS without sim time; see :class:`Paced`)."""
         if self.bus is not None:
-            self.bus.subscribe(topic, callback)
+            self.subscribe(msg_type, topic, callback, qos, serialized)
             return Paced()
-        if serialized is None:
-            decode = codec(msg_type).decode
-            serialized = lambda data: callback(decode(data))  # noqa: E731
-        counted = self._counted(topic, serialized)
+        counted = self._counted(topic, self._taking(msg_type, callback, serialized))
         if self.get_clock().ros_time_is_active:
             self.create_subscription(msg_type, topic, counted, qos, raw=True)
             return Paced()
@@ -481,10 +527,10 @@ class NavNode(Node):
         nothing to do until some other input comes does not receive the stream meanwhile (an
         undispatched subscription still wakes its process for every message, and costs the
         publisher a delivery). On the bus the topic is subscribed at once either way (a
-        replay then reads as it always did)."""
+        replay then reads as it always did), each message kept as it was published."""
         if self.bus is not None:
             latest = Latest(msg_type, handler)
-            self.bus.subscribe(topic, latest.put)
+            self.bus.subscribe(topic, latest.put, InProcessBus.AS_PUBLISHED)
             return latest
         latest = Latest(msg_type, handler,
                         partial(self._undispatched_take, msg_type, topic, qos, 1, "taken"))
@@ -492,19 +538,21 @@ class NavNode(Node):
             latest.start()
         return latest
 
-    def subscribe_queued(self, msg_type, topic: str, qos, handler) -> Queued:
-        """A subscription whose messages reach ``handler`` when the node calls
-        :meth:`Queued.handle`, all of them and in order, and at the latest at the node's next
-        /diagnostics publication (1 s: when the node's other inputs stop, what came is still
-        handled, and counted before the counts are reported).
+    def subscribe_queued(self, msg_type, topic: str, qos, handler,
+                         serialized: bool = False) -> Queued:
+        """A subscription whose messages reach ``handler`` (decoded, or with ``serialized``
+        as their CDR payloads) when the node calls :meth:`Queued.handle`, all of them and in
+        order, and at the latest at the node's next /diagnostics publication (1 s: when the
+        node's other inputs stop, what came is still handled, and counted before the counts
+        are reported).
 
         On DDS, as :meth:`subscribe_latest`, from a hidden node no executor spins, keeping
         ``qos.depth`` messages; each is counted in ``diag.traffic["received <topic>"]`` when
         taken. On the bus each message is handled as it comes."""
         if self.bus is not None:
-            self.bus.subscribe(topic, handler)
-            return Queued(msg_type, handler)
-        queued = Queued(msg_type, handler,
+            self.subscribe(msg_type, topic, handler, qos, serialized)
+            return Queued(handler)
+        queued = Queued(self._taking(msg_type, handler, serialized),
                         self._undispatched_take(msg_type, topic, qos, qos.depth, "received"))
         self.diag.before_publish.append(queued.handle)
         return queued

@@ -7,12 +7,14 @@ built 200 times a second.
 
 from __future__ import annotations
 
+from typing import NamedTuple
 
 import numpy as np
 from geometry_msgs.msg import Quaternion, Vector3
 from ins_gnss_msgs.msg import InsState
 
-from ..io import NS, encode_columns, set_stamp_sec, stamp_to_sec
+from ..io import NS, encode_columns, field_reader, field_writer, sec_nanosec, set_stamp_sec, \
+    stamp_to_sec
 from ..nav.increments import SensorErrors, increment_problem
 from ..nav.modes import ALIGNING, DEAD_RECKONING, INVALID, NAVIGATING
 from ..nav.strapdown import NavState
@@ -85,11 +87,49 @@ def ins_state_payloads(stamp_ns, lat, lon, h, v_enu, q_nb, mode, angular_velocit
     return encode_columns("ins_gnss_msgs/msg/InsState", columns, {"header.frame_id": "map"})
 
 
-def increment_of(msg) -> tuple[str | None, np.ndarray, np.ndarray]:
-    """(problem, dtheta, dv) of an ins_gnss_msgs/ImuDelta: ``problem`` is why it cannot be
-    integrated (:func:`ins_gnss_ros.nav.increments.increment_problem`), None when it can."""
-    a, v = msg.delta_angle, msg.delta_velocity
-    return increment_problem((a.x, a.y, a.z), (v.x, v.y, v.z), msg.dt), vec(a), vec(v)
+def ins_state_payload(state: NavState, angular_velocity: np.ndarray,
+                      specific_force: np.ndarray, errors: SensorErrors, mode: int,
+                      correction_sequence: int) -> bytes:
+    """CDR payload of one ins_gnss_msgs/InsState (frame "map"): the fields
+    :func:`fill_ins_state` writes, the rates and the applied sensor errors, ``mode`` an
+    InsState mode; the bytes the message object would encode to."""
+    w, x, y, z = state.q_nb.tolist()
+    return _write_ins_state(
+        *sec_nanosec(state.t), float(state.lat), float(state.lon), float(state.h),
+        *state.v_enu.tolist(), x, y, z, w, *angular_velocity.tolist(),
+        *specific_force.tolist(), *errors.gyro_bias.tolist(), *errors.accel_bias.tolist(),
+        *errors.gyro_scale.tolist(), *errors.accel_scale.tolist(), mode, correction_sequence)
+
+
+_write_ins_state = field_writer("ins_gnss_msgs/msg/InsState", ("map",))
+_read_delta = field_reader("ins_gnss_msgs/msg/ImuDelta", (
+    "header.stamp.sec", "header.stamp.nanosec", "delta_angle.x", "delta_angle.y",
+    "delta_angle.z", "delta_velocity.x", "delta_velocity.y", "delta_velocity.z", "dt"))
+
+
+class Increment(NamedTuple):
+    """An ins_gnss_msgs/ImuDelta as its readers take it (:func:`increment_of`)."""
+
+    problem: str | None   # why it cannot be integrated (increment_problem), None if it can
+    t: float              # stamp, s (as stamp_to_sec)
+    t_ns: int             # stamp, ns
+    dtheta: np.ndarray
+    dv: np.ndarray
+    dt: float
+
+
+def increment_of(data: bytes) -> Increment:
+    """The increment in the CDR payload of an ins_gnss_msgs/ImuDelta, read by field.
+
+    Raises
+    ------
+    ins_gnss_ros.io.CdrLayoutError
+        Not a payload of that type.
+    """
+    sec, nanosec, ax, ay, az, vx, vy, vz, dt = _read_delta(data)
+    dtheta, dv = (ax, ay, az), (vx, vy, vz)
+    return Increment(increment_problem(dtheta, dv, dt), sec + nanosec * 1e-9, sec * NS + nanosec,
+                     np.array(dtheta), np.array(dv), dt)
 
 
 def heading_of(msg) -> tuple[float, float, float, float | None] | None:

@@ -60,7 +60,7 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
 from tf2_msgs.msg import TFMessage
 
-from ..io import new, ns_to_stamp, stamp_to_ns, stamp_to_sec
+from ..io import NS, codec, field_reader, new, ns_to_stamp, stamp_to_ns
 from ..nav import ALIGNING, NAVIGATING, Navigator
 from ..nav.aiding import Aiding, AidingPolicy
 from ..nav.error_model import LAYOUTS
@@ -73,7 +73,8 @@ from .base import DRIVER_QOS, LATCHED_QOS, SENSOR_QOS, STATE_QOS, TF_QOS, TF_STA
 from .convert import MODE_VALUES, increment_of, nav_state_from_msg, sensor_errors_of, set_vector3
 from .ekf_inputs import EkfInputs
 from .ekf_services import EkfServices
-from .nav_messages import datum_msg, fix_msg, fix_status, imu_msg, odom_msg, status_msg
+from .nav_messages import datum_msg, fix_payload, fix_status, imu_payload, odom_payload, \
+    status_msg
 from .tf_messages import FRAME_PARAMS, solution_tf, static_tf
 
 #: QoS of the inputs that are not sensor streams (EkfInputs.handlers gives the topics).
@@ -104,9 +105,13 @@ class EkfNode(EkfServices, NavNode):
         if not p["datum.from_first_fix"]:
             self.aiding.datum = (np.radians(p["datum.latitude_deg"]),
                                  np.radians(p["datum.longitude_deg"]), p["datum.altitude_m"])
+        # ins/state is kept as its payloads: only the matched one and the published ones are
+        # decoded.
+        self._decode_state = codec(InsState).decode
+        self._read_state_stamp = field_reader("ins_gnss_msgs/msg/InsState", (
+            "header.stamp.sec", "header.stamp.nanosec", "correction_sequence"))
         self.sync = StrapdownSync(p["history_s"], p["sync.min_interval_s"],
-                                  p["sync.resend_after_s"],
-                                  lambda msg: (nav_state_from_msg(msg), sensor_errors_of(msg)))
+                                  p["sync.resend_after_s"], self._state_of)
         self.reported_updates = 0
         self.accepted = 0
         self.rejected = 0
@@ -127,27 +132,27 @@ class EkfNode(EkfServices, NavNode):
         self.pub_tf_static = self.publisher(TFMessage, "/tf_static", TF_STATIC_QOS) \
             if p["publish_tf"] else None
         self.register_services()
-        self.subscribe(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS)
+        self.subscribe(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS, serialized=True)
         # Every state is kept for the synchronisation, but none is needed before the filter's
         # next step: on DDS they are taken at the next increment or aiding message instead of
         # each waking this process's executor (~190 us of CPU each, at the moment the
         # strapdown's other readers want the CPU; docs/results/live_cost.md).
         self.ins_states = self.subscribe_queued(InsState, "ins/state", SENSOR_QOS,
-                                                self.on_ins_state)
+                                                self.on_ins_state, serialized=True)
         for topic, (msg_type, handler) in self.inputs.handlers().items():
             self.subscribe(msg_type, topic, partial(self.on_input, handler),
                            INPUT_QOS.get(topic, SENSOR_QOS))
 
     # -- inputs --------------------------------------------------------------------------------
-    def on_delta(self, msg: ImuDelta) -> None:
+    def on_delta(self, data: bytes) -> None:
         self.ins_states.handle()
+        inc = increment_of(data)
         if self.pub_tf_static is not None:
-            self.publish_static_tf(msg.header.stamp)
-        problem, dtheta, dv = increment_of(msg)
-        if problem is not None:
-            self.diag.count(problem)
+            self.publish_static_tf(ns_to_stamp(inc.t_ns))
+        if inc.problem is not None:
+            self.diag.count(inc.problem)
             return
-        if self.aiding.increment(stamp_to_sec(msg.header.stamp), dtheta, dv, msg.dt) is not None:
+        if self.aiding.increment(inc.t, inc.dtheta, inc.dv, inc.dt) is not None:
             # The strapdown publishes its state after the gap before this filter has applied
             # the measurements of the gap: nav/fix waits for the next synchronisation.
             self.sync.invalidate()
@@ -159,15 +164,17 @@ class EkfNode(EkfServices, NavNode):
             self.note_datum(msg.header.stamp)  # a first fix sets the datum
             self.after_filter()
 
-    def on_ins_state(self, msg: InsState) -> None:
-        stamp = stamp_to_ns(msg.header.stamp)
+    def on_ins_state(self, data: bytes) -> None:
+        sec, nanosec, sequence = self._read_state_stamp(data)
+        stamp = sec * NS + nanosec
         was_applied = self.sync.alignment_applied
-        self.sync.add_state(stamp, msg.correction_sequence, msg)
+        self.sync.add_state(stamp, sequence, data)
         self.after_filter()
         t = stamp * 1e-9
-        if self.navigator.started and self.sync.current(msg.correction_sequence) \
+        if self.navigator.started and self.sync.current(sequence) \
                 and t - self.last_output_t >= 1.0 / self.p["output_rate_hz"]:
             self.last_output_t = t
+            msg = self._decode_state(data)
             self.publish_solution(nav_state_from_msg(msg), msg)
         # The mode is reported even when nothing updates, and at once when this state is the
         # first to carry the alignment.
@@ -175,6 +182,11 @@ class EkfNode(EkfServices, NavNode):
             self.publish_status(t, [])
 
     # -- synchronisation and outputs -----------------------------------------------------------
+    def _state_of(self, data: bytes):
+        """(NavState, SensorErrors applied) of a kept ins/state payload."""
+        msg = self._decode_state(data)
+        return nav_state_from_msg(msg), sensor_errors_of(msg)
+
     def note_datum(self, stamp) -> None:
         """Publish the datum (latched) and report it on /diagnostics when it is new."""
         datum = self.aiding.datum
@@ -285,22 +297,24 @@ class EkfNode(EkfServices, NavNode):
         P, S, p = self.navigator.covariance(), self.navigator.space, self.p
         status, service = (NavSatStatus.STATUS_FIX, 0) if self.aiding.use_ranges \
             else self.inputs.fix_input
-        self.pub_fix.publish(fix_msg(ins.header.stamp, st, P[S["pos"], S["pos"]],
-                                     fix_status(self.sync.mode(self.navigator.mode) == NAVIGATING,
-                                                status),
-                                     service, p["base_link_frame"]))
+        stamp_ns = stamp_to_ns(ins.header.stamp)
+        self.pub_fix.publish(fix_payload(stamp_ns, st, P[S["pos"], S["pos"]],
+                                         fix_status(self.sync.mode(self.navigator.mode)
+                                                    == NAVIGATING, status),
+                                         service, p["base_link_frame"]))
         # one navigation-rate sample of gyro and accelerometer white noise (the rate and the
         # specific force are not filter states)
         noise, interval = self.config.noise, self.config.cov_interval
         rate_var = noise.gyro_psd / interval
-        self.pub_imu.publish(imu_msg(ins.header.stamp, st, P, S, ins.angular_velocity,
-                                     ins.specific_force, rate_var, noise.accel_psd / interval,
-                                     p["base_link_frame"]))
+        w, f = ins.angular_velocity, ins.specific_force
+        rate, force = (w.x, w.y, w.z), (f.x, f.y, f.z)
+        self.pub_imu.publish(imu_payload(stamp_ns, st, P, S, rate, force, rate_var,
+                                         noise.accel_psd / interval, p["base_link_frame"]))
         if self.aiding.datum is not None:
             self.note_datum(ins.header.stamp)
             frames = (p["map_frame"], p["base_link_frame"])
-            self.pub_odom.publish(odom_msg(ins.header.stamp, st, P, S, self.aiding.datum,
-                                           ins.angular_velocity, rate_var, frames))
+            self.pub_odom.publish(odom_payload(stamp_ns, st, P, S, self.aiding.datum, rate,
+                                               rate_var, frames))
             if self.pub_tf is not None:
                 self.pub_tf.publish(solution_tf(ins.header.stamp, st, self.aiding.datum, *frames,
                                                 self.odom))

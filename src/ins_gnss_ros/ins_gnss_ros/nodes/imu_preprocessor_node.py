@@ -27,16 +27,21 @@ from tf2_msgs.msg import TFMessage
 
 from ..imu.preprocessor_params import PARAMS, orientation_headings_from_params, \
     preprocessor_from_params
-from ..io import NS, codec, field_reader, new, ns_to_stamp, set_stamp_ns, stamp_to_ns
+from ..io import NS, codec, field_reader, field_writer, new, ns_to_stamp, set_stamp_ns, \
+    stamp_to_ns
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, TF_STATIC_QOS, NavNode, run
 from .convert import sensor_errors_of, set_vector3, vec
 from .tf_messages import IMU_FRAME_PARAMS, static_tf
 
 
-#: What is read of every raw sample on DDS, straight from its payload.
+#: What is read of every raw sample, straight from its payload.
 RAW_FIELDS = ("header.stamp.sec", "header.stamp.nanosec", "angular_velocity.x",
               "angular_velocity.y", "angular_velocity.z", "linear_acceleration.x",
               "linear_acceleration.y", "linear_acceleration.z")
+#: What is read of a raw sample for imu/data: the rates' covariances (REP-145).
+COVARIANCE_FIELDS = ("angular_velocity_covariance", "linear_acceleration_covariance")
+#: imu/data's orientation and its covariance: none estimated (REP-145), identity quaternion.
+NO_ORIENTATION = (0.0, 0.0, 0.0, 1.0, -1.0) + (0.0,) * 8
 
 #: ImuPreprocessor events -> diagnostics.
 _EVENTS = {"clock_jump": "imu clock jump: stamps corrected by the arrival clock",
@@ -63,10 +68,14 @@ class ImuPreprocessorNode(NavNode):
             p, self.preprocessor.calibration.c_bs)
         if self.orientation is not None:
             self.pub_heading = self.publisher(Heading, "imu/heading", SENSOR_QOS)
+        # Samples and increments are read and written by field, on DDS and on the bus alike.
         self._read_raw = field_reader("sensor_msgs/msg/Imu", RAW_FIELDS)
+        self._read_covariances = field_reader("sensor_msgs/msg/Imu", COVARIANCE_FIELDS)
         self._decode_raw = codec(Imu).decode
+        self._write_delta = field_writer("ins_gnss_msgs/msg/ImuDelta", (self._frame_id,))
+        self._write_data = field_writer("sensor_msgs/msg/Imu", (self._frame_id,))
         self.raw_input = self.subscribe_paced(Imu, "imu/data_raw", self.on_imu, DRIVER_QOS,
-                                              serialized=self.on_imu_serialized)
+                                              serialized=True)
         self.subscribe(MagneticField, "imu/mag_raw", self.on_mag, DRIVER_QOS)
         if p["use_temperature"]:
             self.subscribe(Temperature, "imu/temperature", self.on_temperature, DRIVER_QOS)
@@ -83,22 +92,14 @@ class ImuPreprocessorNode(NavNode):
             (self.p["imu_frame"], (0.0, 0.0, 0.0), self.preprocessor.calibration.c_bs)]))
 
     # -- IMU samples ---------------------------------------------------------------------------
-    def on_imu(self, msg: Imu) -> None:
-        """A raw sample as a message object (the bus)."""
-        w, f = msg.angular_velocity, msg.linear_acceleration
-        self.on_sample(stamp_to_ns(msg.header.stamp), (w.x, w.y, w.z), (f.x, f.y, f.z), msg)
-
-    def on_imu_serialized(self, data: bytes) -> None:
-        """A raw sample as its CDR payload (DDS): the fields used for every sample are read
-        straight from it, the rest is decoded only when needed (:meth:`_raw_message`)."""
+    def on_imu(self, data: bytes) -> None:
+        """A raw sample as its CDR payload: the fields used for every sample are read straight
+        from it, the rest only when needed."""
         sec, nanosec, wx, wy, wz, fx, fy, fz = self._read_raw(data)
         self.on_sample(sec * NS + nanosec, (wx, wy, wz), (fx, fy, fz), data)
 
-    def _raw_message(self, raw) -> Imu:
-        return self._decode_raw(raw) if isinstance(raw, bytes) else raw
-
-    def on_sample(self, stamp_ns: int, gyro: tuple, accel: tuple, raw) -> None:
-        """One raw sample: its stamp (ns), rates, and the message or its payload."""
+    def on_sample(self, stamp_ns: int, gyro: tuple, accel: tuple, raw: bytes) -> None:
+        """One raw sample: its stamp (ns), rates, and its payload."""
         if self.pub_tf_static is not None:
             self.publish_static_tf(ns_to_stamp(stamp_ns))
         for out in self.preprocessor.add(stamp_ns, self.now_ns(), gyro, accel, raw):
@@ -113,13 +114,8 @@ class ImuPreprocessorNode(NavNode):
                 self.diag.count("imu gap bridged")
                 self.diag.set_value("imu samples synthesised", self.preprocessor.synthesised)
             for inc in out.increments:
-                delta = new(ImuDelta)
-                delta.dt = inc.dt
-                set_vector3(delta.delta_angle, inc.dtheta)
-                set_vector3(delta.delta_velocity, inc.dv)
-                set_stamp_ns(delta.header.stamp, inc.t_ns)
-                delta.header.frame_id = self._frame_id
-                self.pub_delta.publish(delta)
+                self.pub_delta.publish(self._write_delta(
+                    *divmod(inc.t_ns, NS), *inc.dtheta.tolist(), *inc.dv.tolist(), inc.dt))
             if self.pub_data.wanted():  # the default graph has no imu/data subscriber
                 self._publish_data(out.tag, out.t_ns, *out.rates)
             if self.orientation is not None:
@@ -137,7 +133,7 @@ class ImuPreprocessorNode(NavNode):
         """imu/heading from the sample's own orientation, when due and valid."""
         if not self.orientation.due(t_ns):
             return
-        raw = self._raw_message(raw)
+        raw = self._decode_raw(raw)
         o = raw.orientation
         heading = self.orientation.add(t_ns, (o.w, o.x, o.y, o.z), raw.orientation_covariance)
         if heading is None:
@@ -180,19 +176,12 @@ class ImuPreprocessorNode(NavNode):
         self.diag.set_value("rates", rates)
         self.get_logger().info(rates)
 
-    def _publish_data(self, raw, t_ns: int, w_b: tuple, f_b: tuple) -> None:
-        raw = self._raw_message(raw)
-        out = new(Imu)
-        w, f = out.angular_velocity, out.linear_acceleration
-        (w.x, w.y, w.z), (f.x, f.y, f.z) = w_b, f_b
-        set_stamp_ns(out.header.stamp, t_ns)
-        out.header.frame_id = self._frame_id
-        out.orientation_covariance[0] = -1.0  # REP-145: no orientation estimate
-        # Copied into the message's own arrays: assigning a list runs the generated setter's
-        # per-element type and range checks.
-        out.angular_velocity_covariance[:] = self.preprocessor.covariance_in_base(raw.angular_velocity_covariance)
-        out.linear_acceleration_covariance[:] = self.preprocessor.covariance_in_base(raw.linear_acceleration_covariance)
-        self.pub_data.publish(out)
+    def _publish_data(self, raw: bytes, t_ns: int, w_b: tuple, f_b: tuple) -> None:
+        covariances = self._read_covariances(raw)
+        rotate = self.preprocessor.covariance_in_base
+        self.pub_data.publish(self._write_data(
+            *divmod(t_ns, NS), *NO_ORIENTATION, *w_b, *rotate(covariances[:9]).tolist(), *f_b,
+            *rotate(covariances[9:]).tolist()))
 
     def on_temperature(self, msg: Temperature) -> None:
         if not np.isfinite(msg.temperature):

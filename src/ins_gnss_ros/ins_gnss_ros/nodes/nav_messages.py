@@ -1,19 +1,18 @@
 """The navigation solution and the filter's status as ROS messages (``nav/fix``, ``nav/odom``,
-``nav/imu``, ``nav/status``, ``nav/datum``), for the ``ekf`` node and the offline replay alike."""
+``nav/imu``, ``nav/status``, ``nav/datum``), for the ``ekf`` node and the offline replay alike.
+The 10 Hz solution is packed straight into CDR payloads (:func:`~..io.cdr.field_writer`),
+one epoch at a time for the node and in columns for the offline path, the same bytes."""
 from __future__ import annotations
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Vector3
 from ins_gnss_msgs.msg import FilterStatus, MeasurementUpdate
-from nav_msgs.msg import Odometry
-from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
+from sensor_msgs.msg import NavSatFix, NavSatStatus
 
-from ..io import NS, encode_columns, new, sec_to_stamp
+from ..io import NS, encode_columns, field_writer, new, sec_to_stamp
 from ..nav.local_frame import to_map
 from ..nav.rotations import quat_to_dcm
 from ..nav.strapdown import NavState
-from .convert import to_quaternion, to_vector3
 
 
 def fix_status(navigating: bool, input_status: int) -> int:
@@ -29,21 +28,19 @@ def fix_status(navigating: bool, input_status: int) -> int:
     return NavSatStatus.STATUS_FIX
 
 
-def fix_msg(stamp: Time, st: NavState, cov_pos: np.ndarray, status: int, service: int = 0,
-            frame_id: str = "base_link") -> NavSatFix:
-    """nav/fix: the solution's position with its ENU covariance (m^2), NavSatStatus ``status``
-    (:func:`fix_status`) and ``service`` bits (the GNSS systems the filter uses)."""
-    fix = new(NavSatFix)
-    fix.header.stamp, fix.header.frame_id = stamp, frame_id
-    fix.status.status, fix.status.service = status, service
-    fix.latitude, fix.longitude, fix.altitude = np.degrees(st.lat), np.degrees(st.lon), st.h
-    fix.position_covariance = cov_pos.flatten().tolist()
-    fix.position_covariance_type = NavSatFix.COVARIANCE_TYPE_KNOWN
-    return fix
+def fix_payload(stamp_ns: int, st: NavState, cov_pos: np.ndarray, status: int,
+                service: int = 0, frame_id: str = "base_link") -> bytes:
+    """nav/fix (CDR payload): the solution's position with its ENU covariance (m^2),
+    NavSatStatus ``status`` (:func:`fix_status`) and ``service`` bits (the GNSS systems the
+    filter uses)."""
+    return field_writer("sensor_msgs/msg/NavSatFix", (frame_id,))(
+        *divmod(stamp_ns, NS), status, service, float(np.degrees(st.lat)),
+        float(np.degrees(st.lon)), float(st.h), *cov_pos.ravel().tolist(),
+        NavSatFix.COVARIANCE_TYPE_KNOWN)
 
 
 def fix_payloads(stamp_ns, lat, lon, h, cov_pos, status, frame_id: str = "base_link") -> list:
-    """The CDR payloads of :func:`fix_msg` for k epochs at once (``service`` 0): stamps (ns),
+    """The CDR payloads of :func:`fix_payload` for k epochs at once (``service`` 0): stamps (ns),
     lat, lon (rad), h (m) (k,), ``cov_pos`` (k, 3, 3), ``status`` (k,) or one for all."""
     sec, nanosec = np.divmod(np.asarray(stamp_ns, np.int64), NS)
     return encode_columns("sensor_msgs/msg/NavSatFix", {
@@ -65,45 +62,38 @@ def datum_msg(stamp: Time, datum: tuple, frame_id: str) -> NavSatFix:
     return msg
 
 
-def imu_msg(stamp: Time, st: NavState, P: np.ndarray, S, angular_velocity: Vector3,
-            specific_force: Vector3, rate_variance: float, accel_variance: float,
-            frame_id: str = "base_link") -> Imu:
-    """nav/imu: sensor_msgs/Imu with the INS orientation (ENU <- base_link FLU, REP-103/145) and
-    its covariance (small rotations about ENU axes from P), the compensated body rate and
-    specific force with the variances (rad^2/s^2, m^2/s^4) of one navigation-rate sample."""
-    msg = new(Imu)
-    msg.header.stamp, msg.header.frame_id = stamp, frame_id
-    msg.orientation = to_quaternion(st.q_nb)
-    msg.orientation_covariance = P[S["att"], S["att"]].flatten().tolist()
-    msg.angular_velocity, msg.linear_acceleration = angular_velocity, specific_force
-    msg.angular_velocity_covariance = (np.eye(3) * rate_variance).flatten().tolist()
-    msg.linear_acceleration_covariance = (np.eye(3) * accel_variance).flatten().tolist()
-    return msg
+def imu_payload(stamp_ns: int, st: NavState, P: np.ndarray, S, angular_velocity: tuple,
+                specific_force: tuple, rate_variance: float, accel_variance: float,
+                frame_id: str = "base_link") -> bytes:
+    """nav/imu (CDR payload): sensor_msgs/Imu with the INS orientation (ENU <- base_link FLU,
+    REP-103/145) and its covariance (small rotations about ENU axes from P), the compensated
+    body rate and specific force (3 floats each) with the variances (rad^2/s^2, m^2/s^4) of
+    one navigation-rate sample."""
+    w, x, y, z = st.q_nb.tolist()
+    return field_writer("sensor_msgs/msg/Imu", (frame_id,))(
+        *divmod(stamp_ns, NS), x, y, z, w, *P[S["att"], S["att"]].ravel().tolist(),
+        *angular_velocity, *(np.eye(3) * rate_variance).ravel().tolist(), *specific_force,
+        *(np.eye(3) * accel_variance).ravel().tolist())
 
 
-def odom_msg(stamp: Time, st: NavState, P: np.ndarray, S, datum: tuple,
-             angular_velocity: Vector3, rate_variance: float,
-             frames: tuple[str, str] = ("map", "base_link")) -> Odometry:
-    """nav/odom: pose in the ENU map frame around ``datum`` (lat rad, lon rad, h m), twist
-    in base_link, covariances from the filter's P (state space S); the angular rate is not a
-    filter state: its variance (rad^2/s^2) is given. ``frames``: (map, base_link) names."""
-    odom = new(Odometry)
-    odom.header.stamp, (odom.header.frame_id, odom.child_frame_id) = stamp, frames
+def odom_payload(stamp_ns: int, st: NavState, P: np.ndarray, S, datum: tuple,
+                 angular_velocity: tuple, rate_variance: float,
+                 frames: tuple[str, str] = ("map", "base_link")) -> bytes:
+    """nav/odom (CDR payload): pose in the ENU map frame around ``datum`` (lat rad, lon rad,
+    h m), twist in base_link, covariances from the filter's P (state space S); the angular
+    rate (3 floats) is not a filter state: its variance (rad^2/s^2) is given. ``frames``:
+    (map, base_link) names."""
     enu, linear, pose_cov, twist_cov = _odom_numbers(st.lat, st.lon, st.h, st.v_enu, st.q_nb,
                                                      P, S, datum, rate_variance)
-    odom.pose.pose.position.x, odom.pose.pose.position.y, odom.pose.pose.position.z = \
-        (float(x) for x in enu)
-    odom.pose.pose.orientation = to_quaternion(st.q_nb)
-    odom.pose.covariance = pose_cov.flatten().tolist()
-    odom.twist.twist.linear = to_vector3(linear)
-    odom.twist.twist.angular = angular_velocity
-    odom.twist.covariance = twist_cov.flatten().tolist()
-    return odom
+    w, x, y, z = st.q_nb.tolist()
+    return field_writer("nav_msgs/msg/Odometry", frames)(
+        *divmod(stamp_ns, NS), *enu.tolist(), x, y, z, w, *pose_cov.ravel().tolist(),
+        *linear.tolist(), *angular_velocity, *twist_cov.ravel().tolist())
 
 
 def odom_payloads(stamp_ns, lat, lon, h, v_enu, q_nb, P, S, datum: tuple,
                   rate_variance: float, frames: tuple[str, str] = ("map", "base_link")) -> list:
-    """The CDR payloads of :func:`odom_msg` for k epochs at once (angular velocity zero):
+    """The CDR payloads of :func:`odom_payload` for k epochs at once (angular velocity zero):
     stamps (ns), lat, lon, h (k,), v_enu (k, 3), q_nb (k, 4), P (k, n, n)."""
     enu, linear, pose_cov, twist_cov = _odom_numbers(lat, lon, h, v_enu, q_nb, P, S, datum,
                                                      rate_variance)

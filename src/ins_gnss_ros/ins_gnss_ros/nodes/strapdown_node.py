@@ -25,14 +25,14 @@ from __future__ import annotations
 import numpy as np
 from ins_gnss_msgs.msg import ImuDelta, InsCorrection, InsState
 
-from ..io import new, stamp_to_ns, stamp_to_sec
+from ..io import stamp_to_ns
 from ..nav.conventions import yaw_from_azimuth
 from ..nav.modes import MODES
 from ..nav.rotations import quat_from_euler
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import ClosedLoopStrapdown, Correction
 from .base import SENSOR_QOS, STATE_QOS, NavNode, Param, run
-from .convert import MODE_VALUES, fill_ins_state, increment_of, sensor_errors_of, set_vector3, vec
+from .convert import MODE_VALUES, increment_of, ins_state_payload, sensor_errors_of, vec
 
 #: InsCorrection mode -> the filter's mode (:mod:`..nav.modes`).
 _CORRECTION_MODES = {MODE_VALUES[mode]: mode for mode in MODES}
@@ -82,15 +82,16 @@ class StrapdownNode(NavNode):
                                         p["apply_sensor_corrections"])
         self.count = 0
         self.pub = self.publisher(InsState, "ins/state", SENSOR_QOS)
-        self.subscribe(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS)
+        # Increments read and states written by field (CDR payloads), on DDS and on the bus.
+        self.subscribe(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS, serialized=True)
         self.subscribe(InsCorrection, "ins/correction", self.on_correction, STATE_QOS)
 
-    def on_delta(self, msg: ImuDelta) -> None:
-        problem, dtheta, dv = increment_of(msg)
-        if problem is not None:
-            self.diag.count(problem)
+    def on_delta(self, data: bytes) -> None:
+        inc = increment_of(data)
+        if inc.problem is not None:
+            self.diag.count(inc.problem)
             return
-        event = self.loop.add(stamp_to_sec(msg.header.stamp), dtheta, dv, msg.dt)
+        event = self.loop.add(inc.t, inc.dtheta, inc.dv, inc.dt)
         if event is not None:
             self.diag.count(_EVENTS[event])
             if event == "stale":
@@ -116,20 +117,10 @@ class StrapdownNode(NavNode):
 
     def publish_state(self) -> None:
         loop = self.loop
-        state = loop.state
-        msg = new(InsState)
-        msg.header.frame_id = "map"
-        fill_ins_state(msg, state)
         dtheta, dv, dt = loop.last_compensated
-        set_vector3(msg.angular_velocity, dtheta / dt)
-        set_vector3(msg.specific_force, dv / dt)
-        set_vector3(msg.gyro_bias, loop.sensor.gyro_bias)
-        set_vector3(msg.accel_bias, loop.sensor.accel_bias)
-        set_vector3(msg.gyro_scale_factor, loop.sensor.gyro_scale)
-        set_vector3(msg.accel_scale_factor, loop.sensor.accel_scale)
-        msg.mode = MODE_VALUES[loop.mode(self.p["dead_reckoning_after_s"])]
-        msg.correction_sequence = loop.correction_sequence
-        self.pub.publish(msg)
+        self.pub.publish(ins_state_payload(
+            loop.state, dtheta / dt, dv / dt, loop.sensor,
+            MODE_VALUES[loop.mode(self.p["dead_reckoning_after_s"])], loop.correction_sequence))
 
 
 def main(args=None) -> int:

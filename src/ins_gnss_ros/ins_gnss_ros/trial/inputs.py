@@ -92,10 +92,54 @@ def input_count(bag_path, remap=None) -> int:
                if not names[topic].startswith(TRUTH_PREFIX))
 
 
-def read_inputs(bag_path, remap=None) -> list:
-    """The messages a graph may see, decoded: :class:`~ins_gnss_ros.io.BagMessage` list in
-    stamp order, absolute topic names (after ``remap``)."""
-    return list(_decoded(bag_path, input_rows(bag_path, remap)))
+def read_inputs(bag_path, remap=None, payloads: bool = False) -> list:
+    """The messages a graph may see: :class:`~ins_gnss_ros.io.BagMessage` list in stamp order,
+    absolute topic names (after ``remap``), decoded.
+
+    With ``payloads``, those of a type with a fixed layout (:func:`payload_types`) are kept as
+    their CDR payloads, checked against the layout but not decoded: an in-process bus hands
+    them as they are to a node that reads them by field, and decodes them once for one that
+    takes message objects.
+
+    Raises
+    ------
+    ins_gnss_ros.io.BagError
+        A message that does not decode, or a payload that does not fit its type's layout.
+    """
+    rows = input_rows(bag_path, remap)
+    if not payloads:
+        return list(_decoded(bag_path, rows))
+    checks = {topic: bagio.field_reader(msgtype, ())
+              for topic, msgtype in payload_types(bag_path, remap).items()}
+    out = []
+    for row in rows:
+        check = checks.get(row.topic)
+        if check is None:
+            out.append(bagio.BagMessage(row.topic, row.t_ns, bagio.decode_message(row, bag_path)))
+            continue
+        try:
+            check(row.data)
+        except bagio.CdrLayoutError as err:
+            raise bagio.BagError(f"{bag_path}: message on {row.topic} at {row.t_ns} ns does not "
+                                 f"decode ({err})") from None
+        out.append(bagio.BagMessage(row.topic, row.t_ns, row.data))
+    return out
+
+
+def payload_types(bag_path, remap=None) -> dict[str, str]:
+    """{absolute topic (after ``remap``): type name} of the bag's input topics whose type has
+    a fixed layout (no sequences, at most one string: :func:`~ins_gnss_ros.io.field_reader`
+    reads it)."""
+    names, out = _names(bag_path, remap), {}
+    for topic, msgtype in bagio.bag_topics(bag_path).items():
+        if names[topic].startswith(TRUTH_PREFIX):
+            continue
+        try:
+            bagio.field_reader(msgtype, ())
+        except bagio.CdrLayoutError:   # a sequence, two strings, or not installed
+            continue
+        out[names[topic]] = msgtype
+    return out
 
 
 def iter_topic(bag_path, topic: str) -> Iterator:

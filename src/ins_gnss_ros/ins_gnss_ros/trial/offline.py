@@ -38,6 +38,7 @@ OFFLINE_TOPICS = ("/imu/delta", "/imu/data_raw", "/gnss/fix", "/gnss/vel", "/gns
 
 #: The imu/data_raw type and the fields of it the offline path reads, in field order.
 IMU_TYPE = "sensor_msgs/msg/Imu"
+DELTA_TYPE = "ins_gnss_msgs/msg/ImuDelta"
 IMU_FIELDS = ("header.stamp.sec", "header.stamp.nanosec", "orientation.x", "orientation.y",
               "orientation.z", "orientation.w", "orientation_covariance", "angular_velocity.x",
               "angular_velocity.y", "angular_velocity.z", "linear_acceleration.x",
@@ -194,7 +195,7 @@ class _Feeder:
         self.orientation, self.declination = orientation_headings_from_params(
             pre_p, preprocessor.calibration.c_bs) if ekf_p["use_imu_heading"] else (None, None)
         self.aiding, self.preprocessor, self.events = aiding, preprocessor, events
-        self.handlers = {"/imu/delta": self.delta}
+        self.handlers = {}
         inputs = EkfInputs(aiding, ekf_p, lambda text, log=True: events.update([text]))
         for topic, (_, handler) in inputs.handlers().items():
             self.handlers["/" + topic] = handler
@@ -203,6 +204,9 @@ class _Feeder:
         """One input row of the bag, as the node it is addressed to takes it."""
         if row.topic == "/imu/data_raw":
             self.raw(row, bag_path)
+            return
+        if row.topic == "/imu/delta":
+            self.delta(row, bag_path)
             return
         handler = self.handlers.get(row.topic)
         if handler is not None:
@@ -215,9 +219,17 @@ class _Feeder:
             return
         self.aiding.increment(t, dtheta, dv, dt)
 
-    def delta(self, msg):
-        problem, dtheta, dv = self.increment_of(msg)
-        self.increment(problem, bagio.stamp_to_sec(msg.header.stamp), dtheta, dv, msg.dt)
+    def delta(self, row, bag_path):
+        """An imu/delta row, read by field as the ekf node reads it."""
+        if row.msgtype != DELTA_TYPE:
+            raise bagio.BagError(f"{bag_path}: {row.topic} carries {row.msgtype}, not "
+                                 f"{DELTA_TYPE}")
+        try:
+            inc = self.increment_of(row.data)
+        except bagio.CdrLayoutError as err:
+            raise bagio.BagError(f"{bag_path}: message on {row.topic} at {row.t_ns} ns does not "
+                                 f"decode ({err})") from None
+        self.increment(inc.problem, inc.t, inc.dtheta, inc.dv, inc.dt)
 
     def raw(self, row, bag_path):
         """An imu/data_raw row, its fields read straight from the payload (IMU_FIELDS): a

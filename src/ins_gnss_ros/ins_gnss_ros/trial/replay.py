@@ -30,7 +30,7 @@ from collections import Counter
 from ins_gnss_ros import io as bagio
 from ins_gnss_ros.gnss.constants import UBX_GNSS_ID
 from ins_gnss_ros.nodes import registry
-from ins_gnss_ros.trial.inputs import check_inputs, read_inputs
+from ins_gnss_ros.trial.inputs import check_inputs, payload_types, read_inputs
 from ins_gnss_ros.trial.outages import gnss_windows, highest_satellites, in_gnss_outage, \
     parse_satellite_spec, reduce_constellation
 from ins_gnss_ros.trial.profile import ProfileError, load_profile, profile_with_truth_init
@@ -96,7 +96,10 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
         from ins_gnss_ros.faults import FaultInjector, load_fault_spec
 
         injector = FaultInjector(load_fault_spec(faults))
-    messages = read_inputs(bag_path, remap)
+    # The bag's payloads go to the nodes as they are unless faults or satellite windows,
+    # which act on message objects, come between.
+    payloads = injector is None and satellites is None
+    messages = read_inputs(bag_path, remap, payloads)
     windows = gnss_windows(messages, outages)
     counts = MessageCounts(withheld=Counter(
         m.topic for m in messages if in_gnss_outage(m.topic, m.t_ns, windows)))
@@ -123,16 +126,24 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
     context = rclpy.Context()
     rclpy.init(context=context, args=[])
     bus = _bus()
-    feeding = [None]  # the input message being delivered: not an output
+    if payloads:
+        for topic, msgtype in payload_types(bag_path, remap).items():
+            bus.advertise(topic, bagio.msg_class(msgtype))
 
-    def record(topic, msg):
-        if msg is not feeding[0]:
+    def record(topic, msg, cls):
+        """What a node published, as it was published (object or payload)."""
+        if type(msg) is not bytes:
             header = getattr(msg, "header", None)
             writer.write(topic, msg, bus.now_ns if header is None
                          else bagio.stamp_to_ns(header.stamp))
-            counts.recorded[topic] += 1
+        elif bagio.starts_with_header(cls):
+            writer.write_raw(topic, bagio.msgtype_of_class(cls), bagio.payload_stamp_ns(msg),
+                             msg)
+        else:
+            writer.write(topic, bagio.codec(cls).decode(msg), bus.now_ns)
+        counts.recorded[topic] += 1
 
-    bus.recorders.append(record)
+    bus.raw_recorders.append(record)
     nodes = []
     try:
         for name in profile.replay_graph:
@@ -160,11 +171,9 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
             if in_gnss_outage(m.topic, m.t_ns, windows):
                 continue
             bus.now_ns = m.t_ns
-            feeding[0] = m.msg
-            bus.publish(m.topic, m.msg)
+            bus.publish(m.topic, m.msg, recorded=False)
             counts.played[m.topic] += 1
             bus.drain()
-        feeding[0] = None
     finally:
         for node in nodes:
             node.destroy_node()
@@ -186,8 +195,8 @@ def _bus():
             super().__init__()
             self.inputs = set()
 
-        def subscribe(self, topic, callback):
+        def subscribe(self, topic, callback, form=InProcessBus.OBJECT):
             self.inputs.add(self.resolve(topic))
-            super().subscribe(topic, callback)
+            super().subscribe(topic, callback, form)
 
     return Bus()
