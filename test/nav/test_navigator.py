@@ -102,6 +102,23 @@ def test_modes_and_convergence(sim):
     assert np.all(np.abs(phi) < 3 * out.sigma("att")[k])
 
 
+def test_the_yaw_is_published_unknown_until_the_heading_is_aligned(sim):
+    # The filter keeps the yaw out of P until the heading is aligned: P's yaw variance is the
+    # gyro noise since the start, and published as such it vouched for a yaw that is anything.
+    traj, _, _, out = sim
+    S = out.space
+    yaw = S["att"].start + 2
+    published = published_covariance(out.P, out.published_var)
+    aligning = np.flatnonzero(out.mode == ALIGNING)
+    navigating = np.flatnonzero(out.mode == NAVIGATING)
+    assert len(aligning) and len(navigating)
+    assert np.all(np.sqrt(published[aligning, yaw, yaw]) > np.radians(100.0))
+    assert np.all(np.sqrt(out.P[aligning, yaw, yaw]) < np.radians(5.0))  # the filter's own
+    assert np.all(out.published_var[navigating, yaw] == 0.0)
+    _, _, phi = nav_error(out.state(aligning[-1]), truth_state(traj, out.t[aligning[-1]]))
+    assert abs(phi[2]) < 3.0 * np.sqrt(published[aligning[-1], yaw, yaw])
+
+
 def test_nees_is_sane(sim):
     traj, _, _, out = sim
     # One short run of the filter core: a loose band around the dimension 3 (the product's

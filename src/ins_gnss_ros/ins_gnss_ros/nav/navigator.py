@@ -59,6 +59,11 @@ REST_HOLD = 0.5
 UNINFORMED_VELOCITY = 0.3
 #: Velocity sigma of a start with neither a GNSS speed nor rest known, m/s per axis.
 UNKNOWN_SPEED_SIGMA = 30.0
+#: Yaw variance published while the heading is not aligned, rad^2: that of a yaw spread evenly
+#: over the circle (pi^2 / 3). The filter keeps the yaw out of P until then (alignment.
+#: initial_covariance), so P's yaw variance is only the gyro noise since the start: published
+#: as such, nav/odom said 0.2-1 deg for a yaw 149 deg off (simulated car, seed 3).
+UNKNOWN_YAW_VAR = np.pi ** 2 / 3.0
 
 
 def _view(part, name, doc):
@@ -276,14 +281,17 @@ class Navigator:
         """What the published covariance adds to the diagonal of P, (n,): the noise floors of
         forced measurement kinds (integrity.py) and, on the position, the error common to the
         fixes the filter follows (GnssFix.common_var: the filter's position is relative to
-        them)."""
-        if not self._integrity.floors and not any(self._fix_common_var):
+        them) and, on the yaw, UNKNOWN_YAW_VAR until the heading is aligned."""
+        aligned = self._state.heading_known
+        if not self._integrity.floors and not any(self._fix_common_var) and aligned:
             return self._no_var  # the usual case, asked at every epoch and update
         var = self._integrity.variances(self._space)
         east = self._space["pos"].start
         horizontal, vertical = self._fix_common_var
         var[east:east + 2] += horizontal
         var[east + 2] += vertical
+        if not aligned:
+            var[self._space["att"].start + 2] += UNKNOWN_YAW_VAR
         return var
 
     def updates_since(self, count):
