@@ -725,35 +725,32 @@ def field_writer(msgtype: str, strings: tuple = ()):
     encoded = [value.encode() for value in strings]
     dtype = column_layout(msgtype, tuple(len(value) for value in encoded))
     # The payload as numeric runs packed by a struct each, between constant bytes (padding,
-    # each string's length, its bytes and NUL): at most one run per string plus one.
-    runs, constants, fmt, pos = [], [], ["<"], 4
+    # each string's length, its bytes and NUL): one run more than there are strings.
+    runs, constants = [], []       # runs: (struct, its first and end index in the values)
+    fmt, pos, first, end = ["<"], 4, 0, 0
     placed = sorted(((at, name, sub) for name, (sub, at) in dtype.fields.items()
                      if name != HEADER), key=lambda field: field[0])
     for at, name, sub in placed:
         if name.endswith(LENGTH):
-            runs.append(struct.Struct("".join(fmt)))
+            runs.append((struct.Struct("".join(fmt)), first, end))
             text = encoded[len(constants)]
             constants.append(bytes(at - pos) + _U32.pack(len(text) + 1) + text + b"\0")
-            fmt, pos = ["<"], at + 4 + len(text) + 1
+            fmt, pos, first = ["<"], at + 4 + len(text) + 1, end
         elif sub.base.kind != "S":
             count = sub.shape[0] if sub.shape else 1
             fmt.append(f"{at - pos}x{count}{_CODE_OF_DTYPE[sub.base.str]}")
-            pos = at + sub.itemsize
-    runs.append(struct.Struct("".join(fmt) + f"{dtype.itemsize - pos}x"))
+            pos, end = at + sub.itemsize, end + count
+    fmt.append(f"{dtype.itemsize - pos}x")
+    runs.append((struct.Struct("".join(fmt)), first, end))
     if not constants:
-        whole = runs[0]
+        whole = runs[0][0]
         return lambda *values: _CDR_LE + whole.pack(*values)
-    # Where each run's values start and end in the arguments.
-    bounds, k = [], 0
-    for run in runs:
-        n = len(run.unpack(bytes(run.size)))
-        bounds.append((k, k + n))
-        k += n
-    pieces = list(zip(runs, bounds, constants + [b""]))
+    pieces = [(run, first, end, constant)
+              for (run, first, end), constant in zip(runs, constants + [b""])]
 
     def write(*values) -> bytes:
         out = [_CDR_LE]
-        for run, (first, end), constant in pieces:
+        for run, first, end, constant in pieces:
             out.append(run.pack(*values[first:end]))
             out.append(constant)
         return b"".join(out)

@@ -87,6 +87,9 @@ def ins_state_payloads(stamp_ns, lat, lon, h, v_enu, q_nb, mode, angular_velocit
     return encode_columns("ins_gnss_msgs/msg/InsState", columns, {"header.frame_id": "map"})
 
 
+_write_ins_state = field_writer("ins_gnss_msgs/msg/InsState", ("map",))
+
+
 def ins_state_payload(state: NavState, angular_velocity: np.ndarray,
                       specific_force: np.ndarray, errors: SensorErrors, mode: int,
                       correction_sequence: int) -> bytes:
@@ -101,7 +104,6 @@ def ins_state_payload(state: NavState, angular_velocity: np.ndarray,
         *errors.gyro_scale.tolist(), *errors.accel_scale.tolist(), mode, correction_sequence)
 
 
-_write_ins_state = field_writer("ins_gnss_msgs/msg/InsState", ("map",))
 _read_delta = field_reader("ins_gnss_msgs/msg/ImuDelta", (
     "header.stamp.sec", "header.stamp.nanosec", "delta_angle.x", "delta_angle.y",
     "delta_angle.z", "delta_velocity.x", "delta_velocity.y", "delta_velocity.z", "dt"))
