@@ -23,6 +23,7 @@ class Recorder:
 
     config = SimpleNamespace(noise=SimpleNamespace(accel_psd=1e-6, gyro_psd=1e-8), extras={})
     started = True
+    solution = None  # (levelled: the gyros' azimuth projects on body z)
 
     def __init__(self):
         self.measurements, self.heading_known = [], True

@@ -14,6 +14,7 @@ same values from a bag (the configuration both build from the ``ekf`` parameters
 """
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 from typing import Callable
@@ -22,6 +23,7 @@ import numpy as np
 
 from ..magnetic.wmm import decimal_year, field_elements
 from .course import CourseFromFixes
+from .heading_noise import HeadingNoise
 from .imu_timing import ImuTimingCheck
 from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
 from .local_frame import to_map
@@ -237,6 +239,14 @@ class Aiding:
         self._start_rest = False  # started in this still run before the fixes confirmed it
         self.last_increment_t = math.inf  # end of the last increment, s
         self.wheel_still_since = math.inf  # stamp of the first of the zero wheel speeds, s
+        # The measured error correlation of each heading source with a bias of its own
+        # (nav/heading_noise.py), by source; its readings are taken against the azimuth the
+        # gyros integrate from the first such reading on (rad, clockwise from north; kept as
+        # (stamps, azimuths) over max_delay), a body rotation's up component from the third
+        # row of C_nb of the solution at the latest reading
+        self.heading_noise: dict[str, HeadingNoise] = {}
+        self._gyro_azimuth: tuple[list, list] | None = None
+        self._up_row = (0.0, 0.0, 1.0)
 
     def _seen(self, name: str, t: float, used: bool) -> bool:
         stats = self._stats(name, t)
@@ -333,6 +343,8 @@ class Aiding:
         self.last_increment_t = t
         self.timing.increment(t, dtheta, dv)
         gap = classify_gap(interval, dt, self.policy.max_imu_gap)
+        if self._gyro_azimuth is not None:
+            self._integrate_azimuth(t, dtheta, gap)
         if gap == LOST:
             self.report("imu lost: gap in increments beyond max_imu_gap_s, aligning again")
             self.navigator.reset()
@@ -502,9 +514,68 @@ class Aiding:
                 self.navigator.heading_known:
             self.report("gnss/heading not fused: its phase double differences are", log=False)
             return self._seen(source, t, False)
+        if HEADING_SOURCES[source] is not None:
+            variance = self._correlated_variance(source, t, float(azimuth), float(variance))
         self.navigator.add_measurement(HeadingFix(t, float(azimuth), float(variance),
                                                   bias=HEADING_SOURCES[source]))
         return self._seen(source, t, True)
+
+    def _correlated_variance(self, source: str, t: float, azimuth: float,
+                             variance: float) -> float:
+        """The variance to fuse a biased source's heading with: the reported one raised to
+        what the source's readings have been measured to carry (nav/heading_noise.py); the
+        reading that aligns the heading has its reported variance (one reading, nothing
+        averaged)."""
+        noise = self.heading_noise.get(source)
+        if noise is None:
+            noise = self.heading_noise[source] = HeadingNoise()
+        solution = self.navigator.solution
+        if solution is not None:
+            w, x, y, z = solution.q_nb.tolist()
+            self._up_row = (2.0 * (x * z - w * y), 2.0 * (y * z + w * x),
+                            1.0 - 2.0 * (x * x + y * y))
+        if self._gyro_azimuth is None:
+            self._gyro_azimuth = ([], [])
+        gyro = self._gyro_at(t)
+        if gyro is not None:  # (a reading beyond the increments kept is left out)
+            noise.add(t, azimuth - gyro)
+        effective = noise.variance(t, variance)
+        if not self.navigator.heading_known:
+            return variance
+        if effective > variance:
+            self.report(f"{source}: variance raised for its errors' time correlation",
+                        log=False)
+        return effective
+
+    def _integrate_azimuth(self, t: float, dtheta: np.ndarray, gap: str) -> None:
+        """The gyros' azimuth at the end of this increment (a gap or a lost IMU starts it
+        again: the heading errors are not differenced across it)."""
+        stamps, azimuths = self._gyro_azimuth
+        if gap != CONTIGUOUS or not stamps:
+            stamps.clear()
+            azimuths.clear()
+            for noise in self.heading_noise.values():
+                noise.restart()
+            previous = 0.0
+        else:
+            previous = azimuths[-1]
+        r = self._up_row
+        d = dtheta.tolist()
+        # azimuth is clockwise, the body rotation's up component counter-clockwise
+        stamps.append(t)
+        azimuths.append(previous - (r[0] * d[0] + r[1] * d[1] + r[2] * d[2]))
+        old = bisect.bisect_left(stamps, t - self.policy.max_delay)
+        if old > len(stamps) // 2:
+            del stamps[:old], azimuths[:old]
+
+    def _gyro_at(self, t: float) -> float | None:
+        """The gyros' azimuth at t (s), interpolated; None outside the kept increments."""
+        stamps, azimuths = self._gyro_azimuth
+        i = bisect.bisect_left(stamps, t)
+        if i == 0 or i == len(stamps):
+            return None
+        t0, t1 = stamps[i - 1], stamps[i]
+        return azimuths[i - 1] + (azimuths[i] - azimuths[i - 1]) * (t - t0) / (t1 - t0)
 
     def phase_differences(self, t: float, baseline_b: np.ndarray, geometry: np.ndarray,
                           value: np.ndarray, cov: np.ndarray) -> bool:
