@@ -281,7 +281,7 @@ def test_the_bus_hands_each_form_and_converts_once(ros_context):
     """A message travels as published, object or CDR payload: a subscriber of the other form
     gets it converted (once for all of them), one of either form gets it as it came; the
     recorders get objects, the raw recorders what was published, an input (``recorded``
-    false) reaches neither; a topic carries one type."""
+    false) reaches neither; a topic carries one type, published or taken."""
     from ins_gnss_msgs.msg import ImuDelta
     from sensor_msgs.msg import Imu
 
@@ -311,6 +311,9 @@ def test_the_bus_hands_each_form_and_converts_once(ros_context):
     assert as_published[0] is delta and as_published[1] is payload
     assert len(objects) == 2 and [cls for _, cls in raw] == [ImuDelta] * 2
     assert raw[0][0] is delta and raw[1][0] is payload
-    with pytest.raises(TypeError, match="/delta: Imu published where ImuDelta is"):
+    with pytest.raises(TypeError, match="/delta: sensor_msgs/msg/Imu published where "
+                                        "ins_gnss_msgs/msg/ImuDelta is"):
         node.publisher(Imu, "delta", 10)
+    with pytest.raises(TypeError, match="/delta: sensor_msgs/msg/Imu"):
+        node.subscribe(Imu, "delta", print, 10)
     node.destroy_node()

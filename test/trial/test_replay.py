@@ -254,6 +254,22 @@ def test_a_bag_matching_no_input_is_refused(magnetometer_bag, profile, tmp_path,
     assert err.startswith("trial: error: ") and "\n" not in err and "/imu/mag" in err
 
 
+def test_a_bag_of_another_type_on_an_input_is_refused(tmp_path, profile, capsys):
+    """Magnetometer samples recorded as imu/delta: one line naming the topic and both types,
+    not a traceback from the strapdown reading them as increments."""
+    t0 = 1_767_225_600 * 10**9
+    with bagio.BagWriter(tmp_path / "wrong") as writer:
+        for k in range(10):
+            writer.write("imu/delta", msgs.mag_msg(t0 + k * 10**8, [2e-5, 0.0, -4e-5], 1e-14))
+    with pytest.raises(InputTopicsError, match="/imu/delta: sensor_msgs/msg/MagneticField "
+                                               "published where ins_gnss_msgs/msg/ImuDelta is"):
+        replay(tmp_path / "wrong", profile, tmp_path / "a")
+    assert main(["replay", str(tmp_path / "wrong"), "--config", str(profile), "--out",
+                 str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("trial: error: ") and "\n" not in err
+
+
 def test_a_bag_matching_no_input_is_refused_by_the_processes(magnetometer_bag, profile,
                                                               tmp_path):
     """The node processes' subscriptions, found by graph queries, are the inputs."""

@@ -38,6 +38,7 @@ from rclpy.task import Future
 from ..io import NS, ns_to_stamp
 from ..io.arrival import ArrivalForecast
 from ..io.cdr import codec, payload_stamp_ns
+from ..io.messages import msgtype_of_class
 from ..params import Param, ParameterError
 
 # Sensor streams: reliable so that our own pipeline never silently drops an IMU increment (a
@@ -175,7 +176,8 @@ class InProcessBus:
         self._subscribers: dict[str, list[tuple[Callable[[Any], None], str]]] = \
             defaultdict(list)
         self._services: dict[str, tuple[Any, Callable[[Any, Any], Any]]] = {}
-        self._types: dict[str, Any] = {}  # topic -> class of the payloads published on it
+        # topic -> the message class published or taken on it (one per topic)
+        self._types: dict[str, Any] = {}
         self._queue: deque[tuple[str, Any, bool]] = deque()
         self.recorders: list[Callable[[str, Any], None]] = []
         self.raw_recorders: list[Callable[[str, Any, Any], None]] = []
@@ -186,14 +188,25 @@ class InProcessBus:
         return topic if topic.startswith("/") else "/" + topic
 
     def advertise(self, topic: str, msg_type) -> None:
-        """Payloads published on ``topic`` are of ``msg_type`` (a second type is refused)."""
+        """Messages published on ``topic`` are of ``msg_type`` (a payload is decoded as one).
+
+        Raises
+        ------
+        TypeError
+            Another type is published or taken on the topic.
+        """
         topic = self.resolve(topic)
-        if self._types.setdefault(topic, msg_type) is not msg_type:
-            raise TypeError(f"{topic}: {msg_type.__name__} published where "
-                            f"{self._types[topic].__name__} is")
+        known = self._types.setdefault(topic, msg_type)
+        if known is not msg_type:
+            raise TypeError(f"{topic}: {msgtype_of_class(msg_type)} published where "
+                            f"{msgtype_of_class(known)} is")
 
     def subscribe(self, topic: str, callback: Callable[[Any], None],
-                  form: str = OBJECT) -> None:
+                  form: str = OBJECT, msg_type=None) -> None:
+        """``callback`` takes the topic's messages in ``form``; ``msg_type``, if given, is the
+        class it takes (:meth:`advertise` refuses another)."""
+        if msg_type is not None:
+            self.advertise(topic, msg_type)
         self._subscribers[self.resolve(topic)].append((callback, form))
 
     def publish(self, topic: str, msg: Any, recorded: bool = True) -> None:
@@ -217,7 +230,7 @@ class InProcessBus:
         while self._queue:
             topic, msg, recorded = self._queue.popleft()
             if type(msg) is bytes:
-                cls, payload, obj = self._types[topic], msg, None
+                cls, payload, obj = self._types.get(topic), msg, None
             else:
                 cls, payload, obj = type(msg), None, msg
             if recorded:
@@ -468,7 +481,7 @@ class NavNode(Node):
         build a message object per message, on DDS and on the bus alike."""
         if self.bus is not None:
             self.bus.subscribe(topic, callback, InProcessBus.PAYLOAD if serialized
-                               else InProcessBus.OBJECT)
+                               else InProcessBus.OBJECT, msg_type)
             return
         self.create_subscription(msg_type, topic,
                                  self._counted(topic, self._taking(msg_type, callback,
@@ -530,7 +543,7 @@ class NavNode(Node):
         replay then reads as it always did), each message kept as it was published."""
         if self.bus is not None:
             latest = Latest(msg_type, handler)
-            self.bus.subscribe(topic, latest.put, InProcessBus.AS_PUBLISHED)
+            self.bus.subscribe(topic, latest.put, InProcessBus.AS_PUBLISHED, msg_type)
             return latest
         latest = Latest(msg_type, handler,
                         partial(self._undispatched_take, msg_type, topic, qos, 1, "taken"))

@@ -21,7 +21,8 @@ TRUTH_PREFIX = "/truth/"
 
 
 class InputTopicsError(ValueError):
-    """A bag none of whose topics is an input of the graph (nothing would reach the nodes)."""
+    """A bag none of whose topics is an input of the graph (nothing would reach the nodes), or
+    one whose type on an input is not the one the nodes take."""
 
 
 def parse_remap(rules) -> dict[str, str]:
@@ -126,19 +127,23 @@ def read_inputs(bag_path, remap=None, payloads: bool = False) -> list:
     return out
 
 
+def input_types(bag_path, remap=None) -> dict[str, str]:
+    """{absolute topic (after ``remap``): type name} of the bag's topics a graph may see."""
+    names = _names(bag_path, remap)
+    return {names[topic]: msgtype for topic, msgtype in bagio.bag_topics(bag_path).items()
+            if not names[topic].startswith(TRUTH_PREFIX)}
+
+
 def payload_types(bag_path, remap=None) -> dict[str, str]:
-    """{absolute topic (after ``remap``): type name} of the bag's input topics whose type has
-    a fixed layout (no sequences, at most one string: :func:`~ins_gnss_ros.io.field_reader`
-    reads it)."""
-    names, out = _names(bag_path, remap), {}
-    for topic, msgtype in bagio.bag_topics(bag_path).items():
-        if names[topic].startswith(TRUTH_PREFIX):
-            continue
+    """:func:`input_types` of a fixed layout (no sequences, at most one string:
+    :func:`~ins_gnss_ros.io.field_reader` reads it)."""
+    out = {}
+    for topic, msgtype in input_types(bag_path, remap).items():
         try:
             bagio.field_reader(msgtype, ())
         except bagio.CdrLayoutError:   # a sequence, two strings, or not installed
             continue
-        out[names[topic]] = msgtype
+        out[topic] = msgtype
     return out
 
 

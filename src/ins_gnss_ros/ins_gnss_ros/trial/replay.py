@@ -30,7 +30,7 @@ from collections import Counter
 from ins_gnss_ros import io as bagio
 from ins_gnss_ros.gnss.constants import UBX_GNSS_ID
 from ins_gnss_ros.nodes import registry
-from ins_gnss_ros.trial.inputs import check_inputs, payload_types, read_inputs
+from ins_gnss_ros.trial.inputs import InputTopicsError, check_inputs, input_types, read_inputs
 from ins_gnss_ros.trial.outages import gnss_windows, highest_satellites, in_gnss_outage, \
     parse_satellite_spec, reduce_constellation
 from ins_gnss_ros.trial.profile import ProfileError, load_profile, profile_with_truth_init
@@ -82,7 +82,8 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
     ProfileError
         A node refused the profile's parameters.
     ins_gnss_ros.trial.inputs.InputTopicsError
-        No topic of the bag is one the nodes subscribe to.
+        No topic of the bag is one the nodes subscribe to, or one they subscribe to is of
+        another type in the bag.
     """
     import rclpy
     from rclpy.exceptions import ParameterException
@@ -126,9 +127,6 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
     context = rclpy.Context()
     rclpy.init(context=context, args=[])
     bus = _bus()
-    if payloads:
-        for topic, msgtype in payload_types(bag_path, remap).items():
-            bus.advertise(topic, bagio.msg_class(msgtype))
 
     def record(topic, msg, cls):
         """What a node published, as it was published (object or payload)."""
@@ -158,6 +156,15 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
                 raise ProfileError(f"{profile.path}: node {name}: "
                                    f"{bagio.first_line(err)}") from None
         check_inputs(bag_path, bus.inputs, remap)
+        # The bag's type on each topic the nodes take: theirs, or one clear error now
+        # rather than a traceback from a node (and the type the bus decodes payloads as).
+        for topic, msgtype in input_types(bag_path, remap).items():
+            if topic in bus.inputs:
+                try:
+                    bus.advertise(topic, bagio.msg_class(msgtype))
+                except TypeError as err:
+                    raise InputTopicsError(f"{bag_path}: {err} (the bag's type on a topic "
+                                           "the nodes take)") from None
         next_diag = messages[0].t_ns + DIAGNOSTICS_PERIOD_NS if messages else 0
         for m in tqdm(stream, disable=not progress, unit="msg", desc="replay",
                       total=len(messages)):
@@ -195,8 +202,8 @@ def _bus():
             super().__init__()
             self.inputs = set()
 
-        def subscribe(self, topic, callback, form=InProcessBus.OBJECT):
+        def subscribe(self, topic, callback, form=InProcessBus.OBJECT, msg_type=None):
             self.inputs.add(self.resolve(topic))
-            super().subscribe(topic, callback, form)
+            super().subscribe(topic, callback, form, msg_type)
 
     return Bus()
