@@ -100,3 +100,6 @@ def test_the_front_end_differences_the_readings_against_the_gyros():
     assert true.variance == R
     assert 70.0 <= mag.variance / R <= 160.0  # 2 T / DT = 100
     assert "mag/heading" in front.heading_noise and "gnss/heading" not in front.heading_noise
+    # what /diagnostics says of it (EkfNode): the measured rungs and S
+    summary = front.heading_noise["mag/heading"].summary()
+    assert summary.startswith("tau*H(tau) rad^2 s: 0.05 s ") and "; S " in summary

@@ -99,9 +99,11 @@ class EkfNode(EkfServices, NavNode):
             self.diag.set_value("GNSS antenna lever arm", (
                 f"{list(p['lever_arm'])} m FLU, not measured: within +-"
                 f"{list(p['lever_arm_sigma_m'])} m assumed (lever_arm, lever_arm_sigma_m)"))
-        # the turn check's verdict, at each /diagnostics publication
+        # the turn check's verdict and what each biased heading source's readings carry
+        # (nav/heading_noise.py), at each /diagnostics publication
         self.diag.before_publish.append(lambda: self.diag.set_value(
             "IMU time offset from turns", self.aiding.timing.verdict().summary))
+        self.diag.before_publish.append(self._report_heading_noise)
         if not p["datum.from_first_fix"]:
             self.aiding.datum = (np.radians(p["datum.latitude_deg"]),
                                  np.radians(p["datum.longitude_deg"]), p["datum.altitude_m"])
@@ -180,6 +182,10 @@ class EkfNode(EkfServices, NavNode):
         # first to carry the alignment.
         if t - self.last_status_t >= 1.0 or (self.sync.alignment_applied and not was_applied):
             self.publish_status(t, [])
+
+    def _report_heading_noise(self) -> None:
+        for source, noise in self.aiding.heading_noise.items():
+            self.diag.set_value(f"{source} error correlation", noise.summary())
 
     # -- synchronisation and outputs -----------------------------------------------------------
     def _state_of(self, data: bytes):
