@@ -27,6 +27,7 @@ from .heading_noise import HeadingNoise
 from .imu_timing import ImuTimingCheck
 from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
 from .local_frame import to_map
+from .rotations import quat_to_dcm
 from .measurement_types import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, SpeedLog, \
     StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
@@ -531,9 +532,7 @@ class Aiding:
             noise = self.heading_noise[source] = HeadingNoise()
         solution = self.navigator.solution
         if solution is not None:
-            w, x, y, z = solution.q_nb.tolist()
-            self._up_row = (2.0 * (x * z - w * y), 2.0 * (y * z + w * x),
-                            1.0 - 2.0 * (x * x + y * y))
+            self._up_row = tuple(quat_to_dcm(solution.q_nb)[2].tolist())
         if self._gyro_azimuth is None:
             self._gyro_azimuth = ([], [])
         gyro = self._gyro_at(t)
