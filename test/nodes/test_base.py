@@ -7,6 +7,8 @@ import signal
 import subprocess
 
 import pytest
+from rclpy.exceptions import InvalidParameterValueException
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from ins_gnss_ros.nodes.base import EXECUTOR_ENV, EXECUTORS, NavNode, Param, ParameterError
@@ -55,6 +57,24 @@ def test_diagnostics_report_counts_and_use_sim_time(executor, probe, ros_context
     assert status.level == DiagnosticStatus.WARN
     assert {kv.key: kv.value for kv in status.values} == {"bad sample: NaN": "1"}
     assert [a for a in arrays if a.status[0].values][-1].header.stamp.sec == 1234
+
+
+class _Refusing(_Counting):
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        raise ParameterError("parameter 'gain': refused")
+
+
+@pytest.mark.parametrize("node_class, gain, match", [(_Counting, 2.0, "gain"),
+                                                     (_Refusing, 0.5, "refused")])
+def test_a_node_whose_constructor_raises_destroys_itself(ros_context, monkeypatch, node_class,
+                                                         gain, match):
+    destroyed = []
+    monkeypatch.setattr(NavNode, "destroy_node",
+                        lambda self: destroyed.append(Node.destroy_node(self)))
+    with pytest.raises((ParameterError, InvalidParameterValueException), match=match):
+        node_class(context=ros_context, parameter_overrides=[Parameter("gain", value=gain)])
+    assert len(destroyed) == 1
 
 
 def test_now_is_the_system_time_without_sim_time(ros_context):

@@ -18,7 +18,7 @@ import os
 import sys
 import time
 from collections import Counter, defaultdict, deque
-from functools import partial
+from functools import partial, wraps
 from typing import Any, Callable, Sequence
 
 import rclpy
@@ -454,6 +454,30 @@ class NavNode(Node):
     """
 
     PARAMS: Sequence[Param] = ()
+
+    def __init_subclass__(cls, **kwargs):
+        """A node whose constructor raises (a bad parameter, found after rclpy created the
+        node) destroys itself before the error leaves it. Left to the garbage collector, such
+        half-built nodes are destroyed at whatever allocation triggers a collection, possibly
+        inside rclpy's creation of the next node: a test run creating several hung there once
+        (rclpy's destroy_node itself frees entities eagerly for a like hang, ros2/build_cop
+        issue 248)."""
+        super().__init_subclass__(**kwargs)
+        init = cls.__dict__.get("__init__")
+        if init is None:
+            return
+
+        @wraps(init)
+        def init_or_destroy(self, *args, **kw):
+            try:
+                init(self, *args, **kw)
+            except BaseException:
+                outermost = type(self).__init__ is init_or_destroy
+                if outermost and hasattr(self, "_type_description_service"):  # rclpy's, built
+                    self.destroy_node()
+                raise
+
+        cls.__init__ = init_or_destroy
 
     def __init__(self, name: str, *, bus: InProcessBus | None = None, **kwargs):
         super().__init__(name, **kwargs)
