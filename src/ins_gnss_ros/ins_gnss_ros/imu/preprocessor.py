@@ -32,6 +32,7 @@ are not measurements: they are not returned as calibrated rates.
 from __future__ import annotations
 
 import math
+import struct
 from typing import NamedTuple
 
 import numpy as np
@@ -47,6 +48,7 @@ __all__ = ["EVENTS", "ImuPreprocessor", "Increment", "Processed", "SettingError"
            "navigation_interval"]
 
 NS = 1_000_000_000
+_NINE_DOUBLES = struct.Struct("<9d")  # a 3x3 covariance as a memo key
 
 
 class SettingError(ValueError):
@@ -242,7 +244,7 @@ class ImuPreprocessor:
         self._last_ns: int | None = None     # end of the last integrated sample
         self._last_rates = None              # its rates (trapezoid of instant samples)
         self._last_mag_ns: int | None = None
-        self._covariances: dict[bytes, np.ndarray] = {}
+        self._covariances: dict[bytes, tuple] = {}
 
     def _start(self, rate_hz: float, strict: bool) -> tuple:
         """Build the rate-dependent stages; returns the events of the start. ``strict``: a
@@ -416,22 +418,24 @@ class ImuPreprocessor:
         self._last_mag_ns = t_ns
         return t_ns, self.calibration.c_bs @ m
 
-    def covariance_in_base(self, cov) -> np.ndarray:
+    def covariance_in_base(self, cov) -> tuple:
         """A sensor-frame 3x3 covariance (row-major 9, e.g. of a sensor_msgs reading) rotated
-        into base_link by the mounting; unknown (-1 first, REP-145) stays unknown.
+        into base_link by the mounting, as 9 floats; unknown (-1 first, REP-145) stays
+        unknown.
 
         Memoised: a driver repeats the same few covariances on every sample, and the matrix
-        products cost more than the lookup. The array is the memo's own: callers copy it.
+        products cost more than the lookup (keyed by the values' bytes: -0.0 is not 0.0).
         """
-        key = np.asarray(cov, float).tobytes()
+        key = _NINE_DOUBLES.pack(*cov)
         out = self._covariances.get(key)
         if out is None:
             if len(self._covariances) > 64:  # a driver with varying covariances
                 self._covariances.clear()
             if cov[0] == -1.0:
-                out = np.array(cov, float)
+                out = tuple(float(v) for v in cov)
             else:
                 c = self.calibration.c_bs
-                out = (c @ np.reshape(np.asarray(cov, float), (3, 3)) @ c.T).ravel()
+                out = tuple((c @ np.reshape(np.asarray(cov, float), (3, 3)) @ c.T)
+                            .ravel().tolist())
             self._covariances[key] = out
         return out

@@ -214,8 +214,12 @@ class EkfNode(EkfServices, NavNode):
         nav = self.navigator
         if nav.mode == ALIGNING:
             self.sync.aligning()
-        self.report_updates()
-        if not nav.started or not self.sync.due(nav.solution.t, nav.revision):
+        # Called after every increment and state, most of which change neither: the two
+        # counters tell without asking for the updates or the solution.
+        if nav.update_count != self.reported_updates:
+            self.report_updates()
+        if nav.revision <= self.sync.synced_revision or not nav.started \
+                or not self.sync.due(nav.solution.t, nav.revision):
             return
         result = self.sync.correction(nav.solution.t, nav.state_at, nav.estimates, nav.revision,
                                       nav.mode)

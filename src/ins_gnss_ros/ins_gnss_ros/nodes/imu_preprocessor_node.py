@@ -180,8 +180,8 @@ class ImuPreprocessorNode(NavNode):
         covariances = self._read_covariances(raw)
         rotate = self.preprocessor.covariance_in_base
         self.pub_data.publish(self._write_data(
-            *divmod(t_ns, NS), *NO_ORIENTATION, *w_b, *rotate(covariances[:9]).tolist(), *f_b,
-            *rotate(covariances[9:]).tolist()))
+            *divmod(t_ns, NS), *NO_ORIENTATION, *w_b, *rotate(covariances[:9]), *f_b,
+            *rotate(covariances[9:])))
 
     def on_temperature(self, msg: Temperature) -> None:
         if not np.isfinite(msg.temperature):
