@@ -13,6 +13,8 @@ from ins_gnss_ros.nav.earth import radii
 from ins_gnss_ros.nav.ekf import ExtraState
 from ins_gnss_ros.nav.error_model import nav_error
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
+from ins_gnss_ros.nav.measurement_types import ZeroVelocity
+from ins_gnss_ros.nav.navigator import unknown_direction_var
 from ins_gnss_ros.nav.recording import published_covariance
 from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, \
     GnssVelocity, Navigator, NavigatorConfig, point_track
@@ -117,6 +119,44 @@ def test_the_yaw_is_published_unknown_until_the_heading_is_aligned(sim):
     assert np.all(out.published_var[navigating, yaw] == 0.0)
     _, _, phi = nav_error(out.state(aligning[-1]), truth_state(traj, out.t[aligning[-1]]))
     assert abs(phi[2]) < 3.0 * np.sqrt(published[aligning[-1], yaw, yaw])
+
+
+def test_unknown_direction_var_covers_a_vector_turned_by_any_yaw():
+    # (R - I) d for a yaw spread evenly over the circle: covariance |d|^2 / 2 I + d d^T, whose
+    # largest eigenvalue 1.5 |d|^2 is the variance published per axis.
+    rng = np.random.default_rng(1)
+    d = np.array([3.0, -4.0])
+    yaw = rng.uniform(-np.pi, np.pi, 200_000)
+    c, s = np.cos(yaw), np.sin(yaw)
+    err = np.column_stack([(c - 1) * d[0] - s * d[1], s * d[0] + (c - 1) * d[1]])
+    expected = 0.5 * (d @ d) * np.eye(2) + np.outer(d, d)
+    np.testing.assert_allclose(err.T @ err / len(err), expected, rtol=0.01, atol=0.1)
+    assert unknown_direction_var(np.hypot(*d)) == pytest.approx(np.linalg.eigvalsh(expected)[-1])
+    # no error of such a vector is beyond its published variance by more than sqrt(4 / 1.5)
+    assert np.max(np.hypot(*err.T)) / np.sqrt(unknown_direction_var(5.0)) <= np.sqrt(4 / 1.5)
+
+
+def test_a_start_from_rest_without_a_heading_publishes_what_the_unknown_yaw_does():
+    # Fixes only, at rest for 15 s, then driving: the fixes pin the antenna (the IMU is off by
+    # the unknown turn of the lever arm) and are refused in motion while aligning, so the INS
+    # runs off in whatever direction its yaw says. P alone knew none of it.
+    traj, imu = simulate(duration=25.0)
+    fixes = [m for m in gnss(traj, np.random.default_rng(3)) if isinstance(m, GnssFix)]
+    rest = [ZeroVelocity(t) for t in np.arange(0.5, 14.6, 0.5)]
+    out = run(imu, sorted(fixes + rest, key=lambda m: m.t), config())
+    S = out.space
+    published = published_covariance(out.P, out.published_var)
+    worst_published, worst_p = 0.0, 0.0
+    for k in np.flatnonzero(out.mode == ALIGNING):
+        errors = nav_error(out.state(k), truth_state(traj, out.t[k]))[:2]
+        for e, block in zip(errors, ("pos", "vel")):
+            e, i = e[:2], S[block].start
+            worst_published = max(worst_published, float(
+                e @ np.linalg.solve(published[k, i:i + 2, i:i + 2], e)))
+            worst_p = max(worst_p, float(e @ np.linalg.solve(out.P[k, i:i + 2, i:i + 2], e)))
+    assert out.t[out.mode == ALIGNING][-1] > 24.0  # aligning all the way: no heading source
+    assert worst_p > 1000.0
+    assert worst_published < 4.0 / 1.5 + 0.5  # within the bound above, and P's own share
 
 
 def test_nees_is_sane(sim):
