@@ -474,7 +474,7 @@ class NavNode(Node):
             except BaseException:
                 outermost = type(self).__init__ is init_or_destroy
                 if outermost and hasattr(self, "_type_description_service"):  # rclpy's, built
-                    self.destroy_node()
+                    NavNode.destroy_node(self)  # a subclass's own may need what was not built
                 raise
 
         cls.__init__ = init_or_destroy
