@@ -57,10 +57,12 @@ MAX_COVARIANCE_GAP_S = 0.5
 
 def attach_odometry_covariance(estimate: Trajectory, messages, t0_ns: int) -> Trajectory:
     """``estimate`` with position, velocity and attitude covariances from nav/Odometry messages,
-    interpolated linearly to its epochs. Epochs farther than MAX_COVARIANCE_GAP_S from every
-    message (before the filter published any, across a gap in its output) get NaN: their
-    covariance is unknown, and holding the nearest one would judge a state no filter vouched
-    for (the strapdown's start-up state before the first correction) against it."""
+    interpolated linearly to its epochs. Epochs in a gap of the output longer than
+    MAX_COVARIANCE_GAP_S, before the first message or after the last get NaN: their
+    covariance is unknown, and holding or interpolating the covariances around it would judge
+    a state no filter vouched for (the strapdown's start-up state before the first correction,
+    its states out of step with the filter) against them (a drive with a lossy IMU link: the
+    covariance from before a GNSS outage given to states at its end, position NEES 512)."""
     if not messages or estimate.q_nb is None:
         return estimate
     t = np.array([(bagio.msg_stamp_ns(m.msg) - t0_ns) * 1e-9 for m in messages])
@@ -70,8 +72,8 @@ def attach_odometry_covariance(estimate: Trajectory, messages, t0_ns: int) -> Tr
     t, pose, twist = t[order], pose[order], twist[order]
     right = np.clip(np.searchsorted(t, estimate.time), 0, len(t) - 1)
     left = np.clip(right - 1, 0, len(t) - 1)
-    nearest = np.minimum(np.abs(t[right] - estimate.time), np.abs(estimate.time - t[left]))
-    unknown = (nearest > MAX_COVARIANCE_GAP_S) | (estimate.time < t[0]) | (estimate.time > t[-1])
+    in_gap = (t[right] - t[left] > MAX_COVARIANCE_GAP_S) & (t[right] != estimate.time)
+    unknown = in_gap | (estimate.time < t[0]) | (estimate.time > t[-1])
 
     def at_estimate(cov):
         flat = cov.reshape(len(t), -1)
