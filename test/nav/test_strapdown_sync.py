@@ -71,6 +71,11 @@ def test_sync_corrects_against_the_matching_state_and_falls_back_when_out_of_ste
     c, resent = sync.correction(2.2, lambda t: solution, estimates, 2, NAVIGATING)
     assert resent and c.t_ns == 1_090_000_000
     assert sync.synced_revision == 2 and not sync.due(3.0, 2) and sync.due(3.0, 3)
+    # A gap the strapdown bridged before the filter applied its measurements: its states are no
+    # longer current, and a correction is due at once, not at the filter's next update (in a
+    # GNSS outage that may be its end).
+    sync.invalidate()
+    assert not sync.current(2) and sync.due(3.0, 2)
 
 
 def test_the_filter_is_reported_aligned_only_once_the_strapdown_applied_the_alignment():
