@@ -75,6 +75,28 @@ def test_short_gap_bridged_long_gap_restarts_the_integration():
     np.testing.assert_allclose([i.dtheta[2] for i in incs], 0.1 * 0.01, rtol=1e-9)
 
 
+def test_increments_with_bridged_samples_carry_what_the_bridge_may_miss():
+    # Noisy rates at 200 Hz, two samples an increment; after 20 s one sample lost: the
+    # increment holding it carries (sigma dt)^2 of the miss the checker measured, and no other
+    # increment carries anything.
+    pre = _pre(max_bridge=2)
+    step, n = NS // 200, 4000
+    rng = np.random.default_rng(2)
+    gyro = 0.01 * rng.standard_normal((n, 3))
+    accel = np.array(G_UP) + 0.05 * rng.standard_normal((n, 3))
+    stamps = [T0 + k * step for k in range(n)]
+    _, before = _feed(pre, stamps[:-3], gyro[:-3], accel[:-3])
+    sigma_w, sigma_f = pre.checker.miss.sigma(1)
+    out, after = _feed(pre, stamps[-2:], gyro[-2:], accel[-2:])  # stamps[-3] lost
+    assert out[0].reason == "gap_bridged"
+    assert all(i.angle_var == i.velocity_var == 0.0 for i in before)
+    bridged = [i for i in after if i.angle_var > 0.0]
+    assert len(bridged) == 1
+    assert bridged[0].angle_var == pytest.approx((sigma_w * step / NS) ** 2)
+    assert bridged[0].velocity_var == pytest.approx((sigma_f * step / NS) ** 2)
+    assert sigma_w == pytest.approx(np.sqrt(1.5) * 0.01, rel=0.1)
+
+
 def test_rejected_sample_gives_no_rates():
     pre = _pre()
     assert pre.add(T0, T0, (np.nan, 0.0, 0.0), G_UP, "msg") == (

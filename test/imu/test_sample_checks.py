@@ -81,6 +81,33 @@ def test_bridging_values(mode):
         np.testing.assert_allclose(r.fill_accel[:, 2], 9.0)
 
 
+@pytest.mark.parametrize("mode", ["interpolate", "hold"])
+def test_what_a_bridge_may_miss_is_measured_on_the_stream(mode):
+    # White noise of sigma on a slow sine: an interpolated sample misses the true one by the
+    # noise of the sample and of the mean of its two neighbours, sqrt(1.5) sigma; a held one by
+    # that of two samples, sqrt(2) sigma (the sine's share is far below).
+    sigma_w, sigma_f, dt = 0.01, 0.05, 1 / RATE
+    rng = np.random.default_rng(4)
+    chk = _checker(max_bridge=5, bridge=mode)
+    n = 20_000
+    t = np.arange(n) * dt
+    gyro = 0.1 * np.sin(0.5 * t)[:, None] + sigma_w * rng.standard_normal((n, 3))
+    accel = np.array([0.0, 0.0, 9.8]) + sigma_f * rng.standard_normal((n, 3))
+    for k in range(n - 1):
+        assert chk.check(t[k], gyro[k], accel[k]).reason == "ok"
+    factor = np.sqrt(1.5 if mode == "interpolate" else 2.0)
+    w, f = chk.miss.sigma(1)
+    assert w == pytest.approx(factor * sigma_w, rel=0.05)
+    assert f == pytest.approx(factor * sigma_f, rel=0.05)
+    # a gap of two samples: the same bridge over a span twice as long (interpolating at the
+    # middle of 2 x 2 samples, holding over 2): the noise share is the same
+    assert chk.miss.sigma(2)[0] == pytest.approx(factor * sigma_w, rel=0.05)
+    expected = chk.miss.sigma(1)
+    r = chk.check(t[-2] + 2 * dt, gyro[-1], accel[-1])  # one sample lost
+    assert r.reason == "gap_bridged" and r.fill_miss == expected
+    assert _checker().check(0.0, gyro[0], accel[0]).fill_miss == (0.0, 0.0)  # nothing bridged
+
+
 def test_results_without_fill_samples_are_shared_and_immutable():
     """Results that bring no fill samples are one shared object per reason: frozen, with
     read-only empty arrays, so that no caller can change what the next sample gets."""

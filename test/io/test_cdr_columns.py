@@ -80,7 +80,8 @@ def test_refused_layouts_and_payloads():
         cdr.decode_columns("ins_gnss_msgs/msg/ImuDelta", [b"\x00\x00" + good[2:]])
     with pytest.raises(cdr.CdrLayoutError):
         cdr.decode_columns("ins_gnss_msgs/msg/ImuDelta", [good[:40]])
-    with pytest.raises(cdr.CdrLayoutError, match="missing: delta_angle.x.*, dt, header"):
+    with pytest.raises(cdr.CdrLayoutError,
+                       match="missing: bridged_angle_variance, .*delta_angle.x.*, dt, header"):
         cdr.encode_columns("ins_gnss_msgs/msg/ImuDelta", {"header.stamp.sec": 1},
                    {"header.frame_id": "x"})
 

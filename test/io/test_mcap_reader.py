@@ -26,7 +26,8 @@ def chunked_bag(tmp_path_factory):
         "header.stamp.sec": 1_767_225_600 + np.arange(n) // 200,
         "header.stamp.nanosec": (np.arange(n) % 200) * 5_000_000,
         **{f"{v}.{c}": RNG.normal(size=n) for v in ("delta_angle", "delta_velocity")
-           for c in "xyz"}, "dt": 0.005}, {"header.frame_id": "base_link"})
+           for c in "xyz"}, "dt": 0.005, "bridged_angle_variance": 0.0,
+        "bridged_velocity_variance": 0.0}, {"header.frame_id": "base_link"})
     with bagio.BagWriter(path) as writer:
         for k, data in enumerate(payloads):
             t = (1_767_225_600 + k // 200) * 1_000_000_000 + (k % 200) * 5_000_000

@@ -382,3 +382,25 @@ def test_diagnostics_say_the_first_fixes_wait_for_the_imu():
     assert front.fix(0.3, 59.9, 30.3, 10.0, np.eye(3), 0, covariance_known=False)
     assert not nav.started
     assert front.explain(0.3, imu_running=True).startswith("aligning: gnss/fix held")
+
+
+def test_what_the_preprocessor_bridged_reaches_the_filter_as_process_noise():
+    class Bridges(Recorder):
+        def __init__(self):
+            super().__init__()
+            self.gaps, self.samples = [], []
+
+        def add_bridged_gap(self, *gap):
+            self.gaps.append(gap)
+
+        def add_imu(self, t, dtheta, dv):
+            self.samples.append(t)
+
+    nav = Bridges()
+    front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
+    up = np.array([0.0, 0.0, 0.0981])
+    front.increment(1.00, np.zeros(3), up, 0.01)
+    front.increment(1.01, np.zeros(3), up, 0.01, 4e-8, 9e-6)  # a sample of it interpolated
+    front.increment(1.02, np.zeros(3), up, 0.01)
+    assert nav.samples == [1.00, 1.01, 1.02]
+    assert nav.gaps == [(pytest.approx(1.0), 1.01, 4e-8, 9e-6)]

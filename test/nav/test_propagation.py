@@ -93,3 +93,27 @@ def test_the_compiled_time_update_is_the_segment_loop_then_the_filter_prediction
     assert np.array_equal(s.a_enu, (v - start.v_enu) / T)
     assert np.array_equal(s.omega, sums[0] / T)
     assert np.array_equal(phi, phi_ref) and np.array_equal(s.ekf.P, ekf.P)
+
+
+def test_a_bridged_gap_adds_its_variance_over_the_time_spent_in_it():
+    space = StateSpace(make_layout(("pos", "vel", "att"), filter_noise(GRADES["tactical"])))
+    gaps = BridgedGaps(accel_sigma=2.0, rate_sigma=0.1)
+    gaps.add(10.0, 10.5, horizon=0.0)                                  # held by the caller
+    gaps.add(20.0, 20.01, horizon=0.0, angle_var=4e-8, velocity_var=9e-6)  # interpolated
+    vel, att = space["vel"], space["att"]
+
+    def added(t0, t1, yaw_known=True):
+        P = np.zeros((space.size, space.size))
+        gaps.add_noise(P, space, t0, t1, yaw_known)
+        return np.diag(P)[vel], np.diag(P)[att]
+
+    v, a = added(9.0, 11.0)                       # the whole held gap: (sigma T)^2
+    np.testing.assert_allclose(v, (2.0 * 0.5) ** 2)
+    np.testing.assert_allclose(a, (0.1 * 0.5) ** 2)
+    v, a = added(10.0, 10.25)                     # half of it: half
+    np.testing.assert_allclose(v, 0.5 * (2.0 * 0.5) ** 2)
+    v, a = added(19.9, 20.1, yaw_known=False)     # the interpolated sample, yaw out of P
+    np.testing.assert_allclose(v, 9e-6)
+    np.testing.assert_allclose(a, [4e-8, 4e-8, 0.0])
+    gaps.add(30.0, 30.01, horizon=25.0, angle_var=1e-8, velocity_var=1e-6)
+    assert [g[0] for g in gaps.gaps] == [30.0]    # those ended before the horizon forgotten

@@ -78,8 +78,14 @@ def test_bad_increments_are_counted_not_used(node):
     bad.delta_angle.x = float("nan")
     node.on_delta(_payload(bad))
     node.on_delta(_payload(_delta(5.0)))  # backwards in time
+    for variance in (-1e-9, float("inf")):  # what a bridge may miss: never negative or infinite
+        odd = _delta(5.01)
+        odd.bridged_angle_variance = variance
+        node.on_delta(_payload(odd))
     assert node.loop.state.t == pytest.approx(5.0)
-    assert sum(node.diag.counts.values()) == 2
+    assert sum(node.diag.counts.values()) == 4
+    assert node.diag.counts["increment with a negative or non-finite bridged variance dropped"] \
+        == 2
 
 
 def test_gap_is_bridged_by_held_rates_and_a_long_gap_loses_the_imu(node):

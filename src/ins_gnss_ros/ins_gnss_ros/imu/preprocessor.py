@@ -72,12 +72,18 @@ class Increment(NamedTuple):
         Sculling- and rotation-compensated specific-force velocity increment, m/s.
     dt : float
         Length of the interval, s.
+    angle_var, velocity_var : float
+        Variance per axis of what the interval's bridged samples may miss (rad^2, (m/s)^2;
+        :class:`~ins_gnss_ros.imu.sample_checks.BridgeMiss`, the misses of one gap taken as
+        one): 0 when none was bridged.
     """
 
     t_ns: int
     dtheta: object
     dv: object
     dt: float
+    angle_var: float = 0.0
+    velocity_var: float = 0.0
 
 
 class Processed(NamedTuple):
@@ -243,6 +249,7 @@ class ImuPreprocessor:
         self._origin_ns: int | None = None   # stamps go to the checker relative to the first one
         self._last_ns: int | None = None     # end of the last integrated sample
         self._last_rates = None              # its rates (trapezoid of instant samples)
+        self._miss = [0.0, 0.0]   # the open increment's bridged-sample misses: rad, m/s
         self._last_mag_ns: int | None = None
         self._covariances: dict[bytes, tuple] = {}
 
@@ -364,6 +371,7 @@ class ImuPreprocessor:
         if result.reason == "gap":
             self.integrator.reset()
             self._last_ns = self._last_rates = None
+            self._miss = [0.0, 0.0]
         elif result.reason == "gap_bridged":
             self.synthesised += len(result.fill_stamps)
         increments = []
@@ -371,7 +379,8 @@ class ImuPreprocessor:
         for t, g, a in zip(result.fill_stamps.tolist(), result.fill_gyro.tolist(),
                            result.fill_accel.tolist()):
             self._integrate(self._origin_ns + int(round(t * NS)),
-                            *correct(g, a, self.temperature, self.sensor_errors), increments)
+                            *correct(g, a, self.temperature, self.sensor_errors), increments,
+                            result.fill_miss)
         w_b, f_b = correct(gyro, accel, self.temperature, self.sensor_errors)
         self._integrate(t_ns, w_b, f_b, increments)
         for inc in increments:
@@ -379,8 +388,14 @@ class ImuPreprocessor:
                 events += ("specific_force_judged",)
         return Processed(t_ns, result.reason, (w_b, f_b), increments, events, tag)
 
-    def _integrate(self, t_ns: int, w_b: tuple, f_b: tuple, out: list) -> None:
+    def _integrate(self, t_ns: int, w_b: tuple, f_b: tuple, out: list, miss=None) -> None:
+        """Integrate one sample (``miss``: a bridged one's BridgeMiss sigmas, rad/s and
+        m/s^2: its misses over dt add up with the others of the increment, all of one gap
+        being one error)."""
         dt = self._period if self._last_ns is None else (t_ns - self._last_ns) / NS
+        if miss is not None:
+            self._miss[0] += miss[0] * dt
+            self._miss[1] += miss[1] * dt
         self._last_ns = t_ns
         if self._instant and self._last_rates is not None:
             w_mean = [0.5 * (a + b) for a, b in zip(self._last_rates[0], w_b)]
@@ -390,7 +405,10 @@ class ImuPreprocessor:
         self._last_rates = (w_b, f_b)
         done = self.integrator.add_rates(w_mean, f_mean, dt)
         if done is not None:
-            out.append(Increment(t_ns, *done))
+            angle, velocity = self._miss
+            if angle or velocity:
+                self._miss = [0.0, 0.0]
+            out.append(Increment(t_ns, *done, angle * angle, velocity * velocity))
 
     def add_magnetic(self, stamp_ns: int, field) -> tuple[int, np.ndarray] | str:
         """One magnetometer sample, rotated into base_link with the IMU's mounting (hard and soft

@@ -334,9 +334,12 @@ class Aiding:
         the fixes then stand in for it as for a receiver without one)."""
         return "gnss/vel" in self.inputs and not self._velocity_check.disagrees
 
-    def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray, dt: float) -> str | None:
+    def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray, dt: float,
+                  angle_var: float = 0.0, velocity_var: float = 0.0) -> str | None:
         """An IMU increment over dt (s) ending at t (s), already judged plausible
-        (:func:`~ins_gnss_ros.nav.increments.increment_problem`). After a gap its rates are held
+        (:func:`~ins_gnss_ros.nav.increments.increment_problem`), with the variances per axis
+        of what its samples bridged by the IMU preprocessor may miss (rad^2, (m/s)^2;
+        ImuDelta.bridged_*_variance), carried as process noise. After a gap its rates are held
         over the gap in increments of its length, with the process noise of what holding them
         may miss (free fall otherwise: it covers only its dt); after more than ``max_imu_gap``
         the IMU was lost and the filter aligns again. Returns None, "bridged" or "lost"."""
@@ -354,6 +357,8 @@ class Aiding:
             self.navigator.add_bridged_gap(t - interval, t)
             self.navigator.add_imu(*held_increments(t, dtheta, dv, dt, interval))
             return gap
+        if angle_var or velocity_var:
+            self.navigator.add_bridged_gap(t - dt, t, angle_var, velocity_var)
         self.navigator.add_imu(t, dtheta, dv)
         # Zero-velocity updates stand in for the receiver's speed while the filter aligns; once
         # it navigates they would be a risk, not an aid: a moored vessel heaving slowly in

@@ -170,14 +170,16 @@ class Navigator:
                       self.config.compensated_increments)
         self._advance()
 
-    def add_bridged_gap(self, t_start, t_end):
-        """The IMU samples between t_start and t_end (s) were lost and the caller bridged the gap
-        by holding the rates of the sample after it (in samples of the usual length, added with
-        :meth:`add_imu` after this call): the covariance propagated over the gap gets the process
-        noise of what holding the rates may miss (imu_gaps.py). Measurements with epochs inside
-        the gap are applied there as usual."""
+    def add_bridged_gap(self, t_start, t_end, angle_var=None, velocity_var=None):
+        """The IMU samples between t_start and t_end (s) were lost and bridged: by the caller,
+        holding the rates of the sample after it (in samples of the usual length, added with
+        :meth:`add_imu` after this call), or by the IMU preprocessor, which gives the variances
+        per axis (rad^2, (m/s)^2) its bridge may miss by over the interval. The covariance
+        propagated over the gap gets that process noise (imu_gaps.py). Measurements with epochs
+        inside the gap are applied there as usual."""
         horizon = t_start - self.config.history - self.config.checkpoint_interval
-        self._gaps.add(t_start, t_end, horizon)  # older gaps lie before every checkpoint
+        # older gaps lie before every checkpoint
+        self._gaps.add(t_start, t_end, horizon, angle_var, velocity_var)
 
     def add_measurement(self, m):
         """Add a time-stamped measurement (measurement_types.py); one older than the current

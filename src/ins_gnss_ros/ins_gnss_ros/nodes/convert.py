@@ -7,6 +7,7 @@ built 200 times a second.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -106,7 +107,8 @@ def ins_state_payload(state: NavState, angular_velocity: np.ndarray,
 
 _read_delta = field_reader("ins_gnss_msgs/msg/ImuDelta", (
     "header.stamp.sec", "header.stamp.nanosec", "delta_angle.x", "delta_angle.y",
-    "delta_angle.z", "delta_velocity.x", "delta_velocity.y", "delta_velocity.z", "dt"))
+    "delta_angle.z", "delta_velocity.x", "delta_velocity.y", "delta_velocity.z", "dt",
+    "bridged_angle_variance", "bridged_velocity_variance"))
 
 
 class Increment(NamedTuple):
@@ -118,6 +120,8 @@ class Increment(NamedTuple):
     dtheta: np.ndarray
     dv: np.ndarray
     dt: float
+    angle_var: float      # bridged_angle_variance, rad^2
+    velocity_var: float   # bridged_velocity_variance, (m/s)^2
 
 
 def increment_of(data: bytes) -> Increment:
@@ -128,10 +132,13 @@ def increment_of(data: bytes) -> Increment:
     ins_gnss_ros.io.CdrLayoutError
         Not a payload of that type.
     """
-    sec, nanosec, ax, ay, az, vx, vy, vz, dt = _read_delta(data)
+    sec, nanosec, ax, ay, az, vx, vy, vz, dt, angle_var, velocity_var = _read_delta(data)
     dtheta, dv = (ax, ay, az), (vx, vy, vz)
-    return Increment(increment_problem(dtheta, dv, dt), sec + nanosec * 1e-9, sec * NS + nanosec,
-                     np.array(dtheta), np.array(dv), dt)
+    problem = increment_problem(dtheta, dv, dt)
+    if problem is None and not (0.0 <= angle_var < math.inf and 0.0 <= velocity_var < math.inf):
+        problem = "increment with a negative or non-finite bridged variance dropped"
+    return Increment(problem, sec + nanosec * 1e-9, sec * NS + nanosec, np.array(dtheta),
+                     np.array(dv), dt, angle_var, velocity_var)
 
 
 def heading_of(msg) -> tuple[float, float, float, float | None] | None:

@@ -154,7 +154,8 @@ class EkfNode(EkfServices, NavNode):
         if inc.problem is not None:
             self.diag.count(inc.problem)
             return
-        if self.aiding.increment(inc.t, inc.dtheta, inc.dv, inc.dt) is not None:
+        if self.aiding.increment(inc.t, inc.dtheta, inc.dv, inc.dt, inc.angle_var,
+                                 inc.velocity_var) is not None:
             # The strapdown publishes its state after the gap before this filter has applied
             # the measurements of the gap: nav/fix waits for the next synchronisation.
             self.sync.invalidate()

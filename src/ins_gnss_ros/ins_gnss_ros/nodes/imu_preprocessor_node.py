@@ -115,7 +115,8 @@ class ImuPreprocessorNode(NavNode):
                 self.diag.set_value("imu samples synthesised", self.preprocessor.synthesised)
             for inc in out.increments:
                 self.pub_delta.publish(self._write_delta(
-                    *divmod(inc.t_ns, NS), *inc.dtheta.tolist(), *inc.dv.tolist(), inc.dt))
+                    *divmod(inc.t_ns, NS), *inc.dtheta.tolist(), *inc.dv.tolist(), inc.dt,
+                    inc.angle_var, inc.velocity_var))
             if self.pub_data.wanted():  # the default graph has no imu/data subscriber
                 self._publish_data(out.tag, out.t_ns, *out.rates)
             if self.orientation is not None:

@@ -212,12 +212,12 @@ class _Feeder:
         if handler is not None:
             handler(bagio.decode_message(row, bag_path))
 
-    def increment(self, problem, t, dtheta, dv, dt):
+    def increment(self, problem, t, dtheta, dv, dt, angle_var, velocity_var):
         """An increment with its increment_problem verdict, as the ekf node takes it."""
         if problem is not None:
             self.events[problem] += 1
             return
-        self.aiding.increment(t, dtheta, dv, dt)
+        self.aiding.increment(t, dtheta, dv, dt, angle_var, velocity_var)
 
     def delta(self, row, bag_path):
         """An imu/delta row, read by field as the ekf node reads it."""
@@ -229,7 +229,8 @@ class _Feeder:
         except bagio.CdrLayoutError as err:
             raise bagio.BagError(f"{bag_path}: message on {row.topic} at {row.t_ns} ns does not "
                                  f"decode ({err})") from None
-        self.increment(inc.problem, inc.t, inc.dtheta, inc.dv, inc.dt)
+        self.increment(inc.problem, inc.t, inc.dtheta, inc.dv, inc.dt, inc.angle_var,
+                       inc.velocity_var)
 
     def raw(self, row, bag_path):
         """An imu/data_raw row, its fields read straight from the payload (IMU_FIELDS): a
@@ -255,7 +256,8 @@ class _Feeder:
                                         source="imu/heading")
             for inc in out.increments:
                 problem = increment_problem(tuple(inc.dtheta), tuple(inc.dv), inc.dt)
-                self.increment(problem, inc.t_ns * 1e-9, inc.dtheta, inc.dv, inc.dt)
+                self.increment(problem, inc.t_ns * 1e-9, inc.dtheta, inc.dv, inc.dt,
+                               inc.angle_var, inc.velocity_var)
 
 
 def write_ordered(writer, messages) -> Counter:
