@@ -76,6 +76,8 @@ def test_sync_corrects_against_the_matching_state_and_falls_back_when_out_of_ste
     # GNSS outage that may be its end).
     sync.invalidate()
     assert not sync.current(2) and sync.due(3.0, 2)
+    c, resent = sync.correction(3.0, lambda t: solution, estimates, 2, NAVIGATING)
+    assert resent and c.sequence == 4 and c.t_ns == 1_090_000_000  # the newest state, at once
 
 
 def test_the_filter_is_reported_aligned_only_once_the_strapdown_applied_the_alignment():

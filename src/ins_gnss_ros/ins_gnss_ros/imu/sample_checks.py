@@ -68,7 +68,7 @@ class BridgeMiss:
     before it, held). What the vehicle's vibration and the sensor noise do in between is lost:
     on the real car drive at 100 Hz an interpolated gyro sample misses the real one by 3.9
     deg/s RMS, an accelerometer sample by 0.49 m/s^2, and with 30 % of the samples lost the
-    filter, not told, had a position NEES of 9.5 (7.2 told; docs/results/product_path.md,
+    filter, not told, had a position NEES of 9.5 (7.1 told; docs/results/product_path.md,
     "2026-12-05"). Here the same bridge is applied to real samples of the stream, whose true
     value is known: for a gap of m samples, the miss
     of its worst (middle, or last held) sample, i.e. for interpolation the residual

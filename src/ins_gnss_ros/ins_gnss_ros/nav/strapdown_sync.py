@@ -288,13 +288,14 @@ class StrapdownSync:
 
     def invalidate(self) -> None:
         """The strapdown's states are no longer the filter's solution (it bridged or lost a gap
-        before the filter applied the measurements of the gap): wait for the next correction,
-        and make one due now. No kept state carries the new sequence, so it corrects the
-        newest state once the states have not compared for ``resend_after``: waiting for the
-        filter's next update instead left a drive with a lossy IMU link without nav/odom for
-        the rest of a GNSS outage (15 s) after each gap held in it."""
+        before the filter applied the measurements of the gap): make the next correction due
+        now, against the strapdown's newest state (no kept state carries the new sequence).
+        Waiting for the filter's next update left a drive with a lossy IMU link without
+        nav/odom for the rest of a GNSS outage (15 s) after each gap held in it, and waiting
+        for ``resend_after`` without any for a second after each."""
         self.sequence += 1
         self.synced_revision = -1
+        self.last_match_t = -np.inf
 
     def due(self, t: float, revision: int) -> bool:
         """The filter (at time t, s) has corrected its solution since the last correction (its
