@@ -295,8 +295,8 @@ class Navigator:
         forced measurement kinds (integrity.py) and, on the position, the error common to the
         fixes the filter follows (GnssFix.common_var: the filter's position is relative to
         them) and, until the heading is aligned, UNKNOWN_YAW_VAR on the yaw and what that
-        unknown yaw does to the horizontal velocity and to the path run since the last rest
-        (:func:`unknown_direction_var`)."""
+        unknown yaw does to the horizontal velocity and position (the lever arm and the path
+        run since the last rest: :func:`unknown_direction_var`)."""
         aligned = self._state.heading_known
         if not self._integrity.floors and not any(self._fix_common_var) and aligned:
             return self._no_var  # the usual case, asked at every epoch and update

@@ -62,7 +62,7 @@ def attach_odometry_covariance(estimate: Trajectory, messages, t0_ns: int) -> Tr
     covariance is unknown, and holding or interpolating the covariances around it would judge
     a state no filter vouched for (the strapdown's start-up state before the first correction,
     its states out of step with the filter) against them (a drive with a lossy IMU link: the
-    covariance from before a GNSS outage given to states at its end, position NEES 512)."""
+    covariance from before a GNSS outage given to states at its end, position NEES 478)."""
     if not messages or estimate.q_nb is None:
         return estimate
     t = np.array([(bagio.msg_stamp_ns(m.msg) - t0_ns) * 1e-9 for m in messages])
