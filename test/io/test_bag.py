@@ -230,3 +230,21 @@ def test_hostile_bags_raise_one_line_bag_error(sample_bag, tmp_path, damage):
     with pytest.raises(bagio.BagError) as info:
         bagio.read_bag(path)
     assert "\n" not in str(info.value) and str(path) in str(info.value)
+
+
+def test_an_imu_delta_of_the_layout_before_its_bridged_variances_reads_them_zero(tmp_path):
+    # Recorded before 2026-12-05: the same fields without the two trailing float64 variances.
+    msg = msgs.delta_msg(1_767_225_600_000_000_000, [1e-3, 2e-3, 3e-3], [0.01, 0.02, 0.098],
+                         0.01, "base_link")
+    current = bagio.serialize(msg)
+    with bagio.BagWriter(tmp_path / "bag") as writer:
+        writer.write_raw("imu/delta", "ins_gnss_msgs/msg/ImuDelta", 1, current[:-16])
+        writer.write_raw("imu/delta", "ins_gnss_msgs/msg/ImuDelta", 2, current)
+        writer.write_raw("imu/delta", "ins_gnss_msgs/msg/ImuDelta", 3, current[:-8])  # neither
+    rows = bagio.read_raw(tmp_path / "bag")
+    assert rows[0].data == current and rows[1].data == current
+    assert len(rows[2].data) == len(current) - 8
+    old, new = (bagio.decode_message(r) for r in rows[:2])
+    assert messages_equal(old, new) and old.bridged_angle_variance == 0.0
+    with pytest.raises(bagio.BagError, match="does not decode"):
+        bagio.decode_message(rows[2])

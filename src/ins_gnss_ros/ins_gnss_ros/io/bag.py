@@ -37,7 +37,7 @@ import numpy as np
 import yaml
 
 from ..params_io import ParamsFileError, load_yaml_file
-from .cdr import Unsupported, codec
+from .cdr import CdrLayoutError, Unsupported, codec, field_reader
 from .mcap_reader import McapReader, RawMessage
 from .mcap_writer import CHUNK_SIZE, MESSAGE_HEAD_SIZE, McapWriter
 from .messages import MessageTypeError, msg_class, msgtype_of, template
@@ -378,9 +378,39 @@ def read_raw(path, topics: Iterable[str] | None = None) -> list[RawMessage]:
     return list(iter_raw(path, topics))
 
 
+#: Types given trailing fields after bags were recorded with them: type name -> the bytes
+#: those fields take (aligned where the older layout ends). A payload of the older layout is
+#: read with them zero, so that every reader sees one layout.
+EXTENDED_TYPES = {"ins_gnss_msgs/msg/ImuDelta": 16}  # bridged_*_variance, 2026-12-05
+
+
+def current_layout(raw: RawMessage) -> RawMessage:
+    """``raw`` with the fields its type gained since (:data:`EXTENDED_TYPES`) zero, when its
+    payload is exactly that much short of the current layout; else as it is."""
+    extra = EXTENDED_TYPES.get(raw.msgtype)
+    if extra is None:
+        return raw
+    check = field_reader(raw.msgtype, ())
+
+    def fits(data) -> bool:
+        try:
+            check(data)
+        except CdrLayoutError:
+            return False
+        return True
+
+    data = bytes(raw.data) + bytes(extra)
+    # (the reader ignores bytes after the layout: one byte fewer must not fit)
+    if fits(raw.data) or not fits(data) or fits(data[:-1]):
+        return raw
+    return raw._replace(data=data)
+
+
 def iter_raw(path, topics: Iterable[str] | None = None) -> Iterator[RawMessage]:
     """The messages of a bag (or of ``topics``) undecoded, streamed in stamp order, ties in
-    writing order; memory bounded by a chunk per MCAP file, not by the bag's length.
+    writing order; memory bounded by a chunk per MCAP file, not by the bag's length. A type
+    extended since the bag was recorded is given in its current layout
+    (:func:`current_layout`).
 
     A bag whose MCAP file ends early (a recording that was killed) is read up to where it
     ends; a warning on the ``ins_gnss_ros.io.bag`` logger says how much was read, once the
@@ -397,10 +427,11 @@ def iter_raw(path, topics: Iterable[str] | None = None) -> Iterator[RawMessage]:
     try:
         if info["storage_identifier"] == "mcap" and not info.get("compression_mode"):
             # Files in stamp order each; merged stably (ties in file order, as written).
-            yield from heapq.merge(*(_mcap_rows(path, file, info, listed, wanted)
-                                     for file in _files(path, info)), key=itemgetter(1))
+            rows = heapq.merge(*(_mcap_rows(path, file, info, listed, wanted)
+                                 for file in _files(path, info)), key=itemgetter(1))
         else:
-            yield from _read_with_rosbags(path, wanted)
+            rows = _read_with_rosbags(path, wanted)
+        yield from map(current_layout, rows)
     except BagError:
         raise
     except Exception as err:  # mcap_reader, rosbags and the decompressors raise many types
