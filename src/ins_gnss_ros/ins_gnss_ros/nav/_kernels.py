@@ -206,6 +206,20 @@ def mech_segment(lat, lon, h, v, q, th, dv, cth, cdv, dts, gyro_bias, gyro_scale
 
 
 @njit(cache=True)
+def mech_step_compensated(lat, lon, h, v, q, th, dv, dt, gyro_bias, gyro_scale, accel_bias,
+                          accel_scale, ell_par, out_v, out_q, comp):
+    """One :func:`mech_step` with a free vertical channel of the increments (th, dv) over dt
+    compensated as increments.SensorErrors.compensate does ((measured - bias dt) /
+    (1 + scale)), the compensated increments written into comp (2, 3): the strapdown
+    node's per-increment path in one call. Returns (lat, lon, h)."""
+    for j in range(3):
+        comp[0, j] = (th[j] - gyro_bias[j] * dt) / (1.0 + gyro_scale[j])
+        comp[1, j] = (dv[j] - accel_bias[j] * dt) / (1.0 + accel_scale[j])
+    return mech_step(lat, lon, h, v, q, comp[0], comp[1], dt, ell_par, math.nan, 0.0, 0.0,
+                     out_v, out_q)
+
+
+@njit(cache=True)
 def _cross_acc(out, s, a0, a1, a2, b0, b1, b2):
     """out += s * (a x b) on scalars (no temporary arrays)."""
     out[0] += s * (a1 * b2 - a2 * b1)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -94,6 +95,14 @@ class SensorErrors:
                     total = np.array(e, float) if total is None else total + e
             values.append(np.zeros(3) if total is None else total)
         return cls(*values)
+
+    @cached_property
+    def values(self) -> tuple:
+        """The twelve values as Python floats in field order (gyro bias, accel bias, gyro scale,
+        accel scale): the strapdown writes them into every ins/state, and they change only with
+        a correction."""
+        return tuple(self.gyro_bias.tolist() + self.accel_bias.tolist()
+                     + self.gyro_scale.tolist() + self.accel_scale.tolist())
 
     def __add__(self, other: "SensorErrors") -> "SensorErrors":
         return SensorErrors(self.gyro_bias + other.gyro_bias, self.accel_bias + other.accel_bias,

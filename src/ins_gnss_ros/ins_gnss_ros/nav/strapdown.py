@@ -299,6 +299,22 @@ class Strapdown:
         self.state = strapdown_step(self.state, dtheta, dv, dt, self.ell, h_ref, self.damping)
         return self.state
 
+    def step_compensated(self, dtheta: np.ndarray, dv: np.ndarray, dt: float,
+                         errors) -> np.ndarray:
+        """:meth:`step` with a free vertical channel of the increments (float arrays (3,))
+        compensated for ``errors`` (increments.SensorErrors) as its ``compensate`` does, in
+        one compiled call (the strapdown node runs this per increment). Returns the
+        compensated increments, (2, 3): angle, velocity."""
+        state = self.state
+        v, q, comp = np.empty(3), np.empty(4), np.empty((2, 3))
+        lat, lon, h = _kernels.mech_step_compensated(
+            state.lat, state.lon, state.h, state.v_enu, state.q_nb, _vector(dtheta),
+            _vector(dv), dt,
+            errors.gyro_bias, errors.gyro_scale, errors.accel_bias, errors.accel_scale,
+            self.ell.kernel_params, v, q, comp)
+        self.state = NavState.taking(lat, lon, h, v, q, state.t + dt)
+        return comp
+
     def correct(self, dpos_enu_m, dv_enu, phi_enu) -> NavState:
         """Apply filter feedback (see :func:`apply_correction`)."""
         self.state = apply_correction(self.state, dpos_enu_m, dv_enu, phi_enu, self.ell)

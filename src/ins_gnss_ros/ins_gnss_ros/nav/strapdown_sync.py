@@ -46,6 +46,8 @@ from .strapdown import NavState, Strapdown, correction_to
 
 __all__ = ["Correction", "ClosedLoopStrapdown", "StrapdownSync"]
 
+#: The errors a strapdown leaves to the IMU preprocessor compensates for (none).
+_NO_ERRORS = SensorErrors()
 
 
 @dataclass(frozen=True)
@@ -76,7 +78,7 @@ class Correction:
     mode: str
 
 
-@dataclass
+@dataclass(slots=True)
 class _Step:
     """One mechanised interval: the raw increments and the state they produced."""
 
@@ -117,7 +119,8 @@ class ClosedLoopStrapdown:
         self.correction_sequence = 0
         self.filter_mode = ALIGNING  # the filter's at the last correction applied
         self.lost = False  # the IMU was lost (gap beyond max_gap), no correction since
-        self.last_compensated = None  # (dtheta, dv, dt) of the latest step, sensor-corrected
+        # (angle and velocity increments (2, 3), dt) of the latest step, sensor-corrected
+        self.last_compensated = None
 
     @property
     def state(self) -> NavState:
@@ -152,15 +155,13 @@ class ClosedLoopStrapdown:
         return event
 
     def _step(self, dtheta, dv, dt) -> None:
-        if self.apply_sensor_errors:
-            comp_dtheta, comp_dv = self.sensor.compensate(dtheta, dv, dt)
-        else:
-            comp_dtheta, comp_dv = dtheta, dv
-        self.ins.step(comp_dtheta, comp_dv, dt)
-        self.last_compensated = (comp_dtheta, comp_dv, dt)
-        self.history.append(_Step(dtheta, dv, dt, self.ins.state))
-        while self.history and self.history[-1].state.t - self.history[0].state.t > self.history_s:
-            self.history.popleft()
+        comp = self.ins.step_compensated(dtheta, dv, dt, self.sensor if self.apply_sensor_errors
+                                         else _NO_ERRORS)
+        self.last_compensated = (comp, dt)
+        history, state = self.history, self.ins.state
+        history.append(_Step(dtheta, dv, dt, state))
+        while state.t - history[0].state.t > self.history_s:
+            history.popleft()
 
     def correct(self, c: Correction) -> str | None:
         """Apply a correction at its epoch. Returns None, "older than this run" (ignored: a

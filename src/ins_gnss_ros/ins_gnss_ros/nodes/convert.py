@@ -91,18 +91,16 @@ def ins_state_payloads(stamp_ns, lat, lon, h, v_enu, q_nb, mode, angular_velocit
 _write_ins_state = field_writer("ins_gnss_msgs/msg/InsState", ("map",))
 
 
-def ins_state_payload(state: NavState, angular_velocity: np.ndarray,
-                      specific_force: np.ndarray, errors: SensorErrors, mode: int,
-                      correction_sequence: int) -> bytes:
+def ins_state_payload(state: NavState, angular_velocity, specific_force,
+                      errors: SensorErrors, mode: int, correction_sequence: int) -> bytes:
     """CDR payload of one ins_gnss_msgs/InsState (frame "map"): the fields
-    :func:`fill_ins_state` writes, the rates and the applied sensor errors, ``mode`` an
-    InsState mode; the bytes the message object would encode to."""
+    :func:`fill_ins_state` writes, the rates (three floats each) and the applied sensor
+    errors, ``mode`` an InsState mode; the bytes the message object would encode to."""
     w, x, y, z = state.q_nb.tolist()
     return _write_ins_state(
         *sec_nanosec(state.t), float(state.lat), float(state.lon), float(state.h),
-        *state.v_enu.tolist(), x, y, z, w, *angular_velocity.tolist(),
-        *specific_force.tolist(), *errors.gyro_bias.tolist(), *errors.accel_bias.tolist(),
-        *errors.gyro_scale.tolist(), *errors.accel_scale.tolist(), mode, correction_sequence)
+        *state.v_enu.tolist(), x, y, z, w, *angular_velocity, *specific_force, *errors.values,
+        mode, correction_sequence)
 
 
 _read_delta = field_reader("ins_gnss_msgs/msg/ImuDelta", (

@@ -115,6 +115,9 @@ class EkfNode(EkfServices, NavNode):
         self.sync = StrapdownSync(p["history_s"], p["sync.min_interval_s"],
                                   p["sync.resend_after_s"], self._state_of)
         self.reported_updates = 0
+        # A synchronisation was due but no kept ins/state compared with the filter's epoch:
+        # the next ins/state may (the filter changes only with its own inputs).
+        self.awaiting_state = False
         self.accepted = 0
         self.rejected = 0
         self.last_output_t = -np.inf
@@ -172,7 +175,8 @@ class EkfNode(EkfServices, NavNode):
         stamp = sec * NS + nanosec
         was_applied = self.sync.alignment_applied
         self.sync.add_state(stamp, sequence, data)
-        self.after_filter()
+        if self.awaiting_state:
+            self.after_filter()
         t = stamp * 1e-9
         if self.navigator.started and self.sync.current(sequence) \
                 and t - self.last_output_t >= 1.0 / self.p["output_rate_hz"]:
@@ -219,12 +223,14 @@ class EkfNode(EkfServices, NavNode):
         # counters tell without asking for the updates or the solution.
         if nav.update_count != self.reported_updates:
             self.report_updates()
+        self.awaiting_state = False
         if nav.revision <= self.sync.synced_revision or not nav.started \
                 or not self.sync.due(nav.solution.t, nav.revision):
             return
         result = self.sync.correction(nav.solution.t, nav.state_at, nav.estimates, nav.revision,
                                       nav.mode)
         if result is None:
+            self.awaiting_state = True
             return
         c, resent = result
         if resent:

@@ -117,9 +117,10 @@ class StrapdownNode(NavNode):
 
     def publish_state(self) -> None:
         loop = self.loop
-        dtheta, dv, dt = loop.last_compensated
+        comp, dt = loop.last_compensated
+        angular_velocity, specific_force = (comp / dt).tolist()
         self.pub.publish(ins_state_payload(
-            loop.state, dtheta / dt, dv / dt, loop.sensor,
+            loop.state, angular_velocity, specific_force, loop.sensor,
             MODE_VALUES[loop.mode(self.p["dead_reckoning_after_s"])], loop.correction_sequence))
 
 
