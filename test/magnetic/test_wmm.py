@@ -53,3 +53,24 @@ def test_decimal_year():
     t = datetime.datetime(2027, 7, 1, tzinfo=datetime.timezone.utc)
     assert decimal_year(t) == pytest.approx(2027 + 181 / 365, abs=1e-9)
     assert decimal_year(t.timestamp()) == pytest.approx(decimal_year(t), abs=1e-9)
+
+
+def test_the_field_along_a_track_is_evaluated_again_only_after_its_step():
+    """FieldAlongTrack keeps the last evaluation within FIELD_STEP_M (and FIELD_STEP_YEARS), and
+    what it keeps is within the declination its docstring allows of the exact field (at 60 deg
+    N, where the horizontal intensity is ~15,000 nT)."""
+    from ins_gnss_ros.magnetic.wmm import FIELD_STEP_M, FieldAlongTrack
+    along = FieldAlongTrack()
+    lat, lon, h, year = np.radians(60.0), np.radians(30.0), 50.0, 2026.9
+    first = along(lat, lon, h, year)
+    north = FIELD_STEP_M / 6_378_137.0
+    near = along(lat + 0.9 * north, lon, h, year + 1e-4)
+    assert near is first
+    exact = field_elements(lat + 0.9 * north, lon, h, year + 1e-4)
+    assert abs(np.degrees(exact.declination - near.declination)) < 0.005
+    far = along(lat + 1.1 * north, lon, h, year)
+    assert far is not first
+    assert far == field_elements(lat + 1.1 * north, lon, h, year)
+    assert along(lat + 1.1 * north, lon, h, year + 2e-3) is not far
+    with pytest.raises(ValueError):
+        along(lat, lon, h, 2031.0)

@@ -14,6 +14,7 @@ I positive downward.
 from __future__ import annotations
 
 import datetime
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -96,3 +97,35 @@ def field_elements(lat: float, lon: float, h: float, year: float,
     return FieldElements(declination=np.radians(r.d), inclination=np.radians(r.i),
                          total=r.f * NT, horizontal=r.h * NT,
                          north=r.x * NT, east=r.y * NT, down=r.z * NT)
+
+
+#: How far (m) and how long (years) the main field is taken as the one evaluated last by
+#: :class:`FieldAlongTrack`. The main field's gradient is of the order of a dipole's, 3 F / R
+#: (about 0.03 nT/m): at most ~1.5 nT over 50 m, 0.015 deg of declination where the horizontal
+#: intensity is 6,000 nT (the edge of the WMM's caution zone) and ~0.001 deg at mid-latitudes,
+#: against a magnetometer heading's tenths of a degree; the secular variation (declination
+#: up to a few tenths of a degree a year) moves it by less over 0.001 year (8.8 h).
+FIELD_STEP_M, FIELD_STEP_YEARS = 50.0, 1e-3
+#: Metres per radian of latitude or longitude on the equator, for that distance.
+_EARTH_RADIUS_M = 6_378_137.0
+
+
+class FieldAlongTrack:
+    """:func:`field_elements` of a moving vehicle, evaluated again only once it has moved
+    ``FIELD_STEP_M`` or ``FIELD_STEP_YEARS`` from where it was last: a compass asks at every
+    magnetometer sample (50-100 Hz), and one evaluation of the degree-12 model costs more than
+    the rest of the sample's work (docs/results/live_cost.md)."""
+
+    def __init__(self, coefficients_file: str = "wmm/WMM_2025.COF"):
+        self.coefficients_file = coefficients_file
+        self._at = None        # (lat, lon, h, year) of the last evaluation
+        self._elements = None
+
+    def __call__(self, lat: float, lon: float, h: float, year: float) -> FieldElements:
+        """The field at (lat, lon rad, h m) in ``year``; ValueError as field_elements."""
+        at = self._at
+        if at is None or abs(year - at[3]) > FIELD_STEP_YEARS or _EARTH_RADIUS_M * math.hypot(
+                lat - at[0], math.cos(lat) * (lon - at[1])) + abs(h - at[2]) > FIELD_STEP_M:
+            self._elements = field_elements(lat, lon, h, year, self.coefficients_file)
+            self._at = (lat, lon, h, year)
+        return self._elements

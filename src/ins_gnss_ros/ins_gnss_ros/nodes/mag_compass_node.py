@@ -39,7 +39,7 @@ from ..magnetic.compass import MagneticCompass
 from ..magnetic.disturbance import DisturbanceDetector
 from ..magnetic.ellipsoid_fit import HardSoftIron
 from ..magnetic.field_calibration import FieldCalibration, FieldCalibrationConfig
-from ..magnetic.wmm import decimal_year, field_elements
+from ..magnetic.wmm import FieldAlongTrack, decimal_year
 from ..nav.alignment import level
 from ..nav.rotations import quat_to_euler
 from ..params_io import ParamsFileError, load_yaml_file
@@ -120,6 +120,7 @@ class MagCompassNode(NavNode):
         calibration, heading_bias, heading_sigma, stored = self._calibration()
         self.position = (math.radians(p["position.latitude_deg"]),
                          math.radians(p["position.longitude_deg"]), p["position.altitude_m"])
+        self.field = FieldAlongTrack()  # the WMM at self.position
         self._fix_seen = False
         self.attitude: tuple[float, float, float] | None = None  # (t, roll, pitch)
         self._uncorrected = False  # the latest ins/state: a strapdown never corrected
@@ -262,7 +263,7 @@ class MagCompassNode(NavNode):
             return
         year = self.p["decimal_year"] or decimal_year(t)
         try:
-            wmm = field_elements(*self.position, year)
+            wmm = self.field(*self.position, year)
         except ValueError as err:
             self.diag.count(f"WMM unavailable: heading withheld ({err})")
             return
