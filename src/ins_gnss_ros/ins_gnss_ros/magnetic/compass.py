@@ -18,6 +18,7 @@ azimuth = magnetic azimuth + declination (declination positive east, WMM convent
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -41,8 +42,20 @@ def level_field(mag_b, roll, pitch) -> np.ndarray:
     roll, pitch : float or array_like
         ROS roll and pitch, rad.
     """
-    c_lb = dcm_from_euler(roll, pitch, np.zeros_like(np.asarray(roll, float)))
+    if np.ndim(roll) == 0 and np.ndim(pitch) == 0:
+        c_lb = _level_rotation(float(roll), float(pitch))
+    else:
+        c_lb = dcm_from_euler(roll, pitch, np.zeros_like(np.asarray(roll, float)))
     return np.einsum("...ij,...j->...i", c_lb, np.asarray(mag_b, float))
+
+
+@lru_cache(maxsize=2)
+def _level_rotation(roll: float, pitch: float) -> np.ndarray:
+    """C_Lb of one attitude (read-only): a compass sample is levelled three times (disturbance
+    check, azimuth, its variance), and building the rotation cost more than the rest."""
+    c_lb = dcm_from_euler(roll, pitch, 0.0)
+    c_lb.flags.writeable = False
+    return c_lb
 
 
 def magnetic_azimuth(mag_b, roll, pitch):
