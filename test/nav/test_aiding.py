@@ -404,3 +404,8 @@ def test_what_the_preprocessor_bridged_reaches_the_filter_as_process_noise():
     front.increment(1.02, np.zeros(3), up, 0.01)
     assert nav.samples == [1.00, 1.01, 1.02]
     assert nav.gaps == [(pytest.approx(1.0), 1.01, 4e-8, 9e-6)]
+    # after a gap the filter holds: the held gap's noise, and the increment's own samples'
+    front.increment(1.10, np.zeros(3), up, 0.01, 1e-8, 1e-6)
+    assert nav.gaps[1:] == [(pytest.approx(1.02), 1.10),
+                            (pytest.approx(1.09), 1.10, 1e-8, 1e-6)]
+    assert nav.samples[3] == pytest.approx([1.03 + 0.01 * k for k in range(8)])  # held

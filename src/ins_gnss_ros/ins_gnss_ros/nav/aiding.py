@@ -355,10 +355,12 @@ class Aiding:
         elif gap == BRIDGED:
             self.report("gap in increments: bridged by holding the rates")
             self.navigator.add_bridged_gap(t - interval, t)
+        if angle_var or velocity_var:
+            # (after a held gap too: the increment is its last step)
+            self.navigator.add_bridged_gap(t - dt, t, angle_var, velocity_var)
+        if gap == BRIDGED:
             self.navigator.add_imu(*held_increments(t, dtheta, dv, dt, interval))
             return gap
-        if angle_var or velocity_var:
-            self.navigator.add_bridged_gap(t - dt, t, angle_var, velocity_var)
         self.navigator.add_imu(t, dtheta, dv)
         # Zero-velocity updates stand in for the receiver's speed while the filter aligns; once
         # it navigates they would be a risk, not an aid: a moored vessel heaving slowly in
