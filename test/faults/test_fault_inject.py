@@ -210,6 +210,14 @@ def test_clock_jump_shifts_stamps_from_start_on():
     assert all(msg_stamp_ns(m) == t for t, m in on(out, "/gnss/fix"))
 
 
+def test_clock_drift_stretches_stamps_from_the_window_on():
+    out, _ = run("faults: [{kind: clock_drift, topic: 'imu/*', start: 5, ppm: 200}]")
+    first = T0 + 5 * S  # the window's first stamp
+    for t, m in on(out, "/imu/data_raw"):  # arrival times stay
+        assert msg_stamp_ns(m) - t == (round((t - first) * 200e-6) if t >= first else 0)
+    assert all(msg_stamp_ns(m) == t for t, m in on(out, "/gnss/fix"))
+
+
 def test_loop_plays_the_beginning_again_with_old_stamps():
     out, inj = run("faults: [{kind: loop, topic: '*', start: 6, duration: 3}]")
     imu = on(out, "/imu/data_raw")

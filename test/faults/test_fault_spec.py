@@ -26,6 +26,7 @@ faults:
   - {kind: inf, topic: gnss/observations, start: 9, duration: 1, field: pseudorange}
   - {kind: absurd, topic: gnss/vel, start: 9, duration: 1, field: twist.twist.linear.x}
   - {kind: clock_jump, topic: 'imu/*', start: 10, offset_s: -1.5}
+  - {kind: clock_drift, topic: imu/data_raw, start: 0, ppm: 200}
   - {kind: loop, topic: '*', start: 20, duration: 10}
   - {kind: gnss_outage, start: 30, duration: 60, name: long outage}
   - {kind: satellite_loss, start: 100, duration: 30, ramp_s: 20, remaining: 2}

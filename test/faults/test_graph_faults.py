@@ -41,6 +41,7 @@ REPRESENTATIVE = {
     "inf": (0, "imu sample rejected: non_finite"),
     "absurd": (1, "implausible gnss/fix altitude rejected"),
     "clock_jump": (0, "gnss_pos rejected: gated"),
+    "clock_drift": (0, None),
     "loop": (0, "imu sample rejected: backwards_stamp"),
     "gnss_outage": (1, None),
     "magnetic_disturbance": (0, "magnetic disturbance: heading withheld"),

@@ -9,11 +9,12 @@ from ins_gnss_ros.nav.imu_timing import ImuTimingCheck
 
 
 def _drive(offset, mounting_deg=(0.0, 0.0, 0.0), duration=240.0, seed=0, gyro_unit=1.0,
-           check=None, accel_sign=1.0, fix_noise=0.02):
+           check=None, accel_sign=1.0, fix_noise=0.02, drift=0.0):
     """A car at 8 m/s weaving and turning (yaw rate up to 0.3 rad/s), IMU at 100 Hz in any
-    mounting stamped ``offset`` s early (stamps + offset = GNSS time), 5 Hz fixes with
-    ``fix_noise`` m of noise; the gyro increments in ``gyro_unit`` per rad, the
-    accelerometer's times ``accel_sign``. Returns the check after the drive."""
+    mounting stamped ``offset`` s early (stamps + offset = GNSS time) by a clock running at
+    1 + ``drift`` of GNSS time's, 5 Hz fixes with ``fix_noise`` m of noise; the gyro
+    increments in ``gyro_unit`` per rad, the accelerometer's times ``accel_sign``. Returns the
+    check after the drive."""
     rng = np.random.default_rng(seed)
     dt_imu = 0.01
     t = np.arange(0.0, duration, dt_imu)
@@ -30,7 +31,7 @@ def _drive(offset, mounting_deg=(0.0, 0.0, 0.0), duration=240.0, seed=0, gyro_un
         # the sensor's increment: body z rotation and the specific force of gravity
         dtheta = gyro_unit * c_sb @ np.array([0.0, 0.0, yaw[k] - yaw[k - 1]])
         dv = accel_sign * c_sb @ np.array([0.0, 0.0, 9.81 * dt_imu]) + rng.normal(0.0, 1e-4, 3)
-        check.increment(t[k] - offset, dtheta, dv)
+        check.increment(t[k] * (1.0 + drift) - offset, dtheta, dv)
         if k % fix_every == 0:
             e = east[k] + rng.normal(0.0, fix_noise)
             n = north[k] + rng.normal(0.0, fix_noise)
@@ -99,3 +100,17 @@ def test_course_turns_of_noise_give_no_verdict_on_the_gyros():
     scale fitted to it would pass for wrong gyro units."""
     check = _drive(0.0, fix_noise=1.0)
     assert check.scale() is None and not check.verdict().problem
+
+
+def test_an_imu_clock_drifting_against_gnss_time_is_told():
+    """200 ppm fast (an IMU stamped by counting samples at the nominal rate, its crystal off):
+    the stamps run 160 ms ahead over 800 s, which no constant time_offset_s holds."""
+    check = _drive(0.0, duration=800.0, drift=200e-6)
+    rate, first, latest = check.drift()
+    assert rate == pytest.approx(200e-6, rel=0.1)
+    assert first > latest  # the stamps run ahead: ever more to subtract
+    summary = check.verdict().summary
+    assert f"over the run ({1e6 * rate:+.0f} ppm if the IMU's clock drifts" in summary
+    # a constant offset over as long a drive is no drift
+    steady = _drive(-0.12, duration=800.0)
+    assert steady.drift() is None and "over the run" not in steady.verdict().summary

@@ -261,6 +261,27 @@ class _ClockJump(_Action):
                          if hasattr(m, "header") else None)
 
 
+class _ClockDrift(_Action):
+    """The sensor's clock runs ``ppm`` fast from the window's first message on (an IMU stamped by
+    counting its samples at the nominal rate, its crystal off): each stamp moves by ppm 1e-6
+    times its distance from that message's stamp; arrival times stay."""
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.reference_ns = None
+
+    def apply(self, t_in, topic, items):
+        return self.edit(items, self._drift)
+
+    def _drift(self, msg) -> None:
+        if not hasattr(msg, "header"):
+            return
+        stamp = msg_stamp_ns(msg)
+        if self.reference_ns is None:
+            self.reference_ns = stamp
+        _set_stamp(msg, stamp + round((stamp - self.reference_ns) * self.p["ppm"] * 1e-6))
+
+
 class _Loop(_Action):
     """The stream starts again: in the window, the first ``duration`` s are played once more.
 
@@ -366,7 +387,7 @@ class _CycleSlip(_Action):
 _ACTIONS = {"drop": _Drop, "gnss_outage": _Drop, "delay": _Delay, "duplicate": _Duplicate,
             "reorder": _Reorder, "freeze": _Freeze, "step": _Step, "ramp": _Ramp,
             "nan": _SetValue, "inf": _SetValue, "absurd": _SetValue, "clock_jump": _ClockJump,
-            "loop": _Loop, "satellite_loss": _SatelliteLoss, "position_jump": _PositionJump,
+            "clock_drift": _ClockDrift, "loop": _Loop, "satellite_loss": _SatelliteLoss, "position_jump": _PositionJump,
             "magnetic_disturbance": _MagneticDisturbance, "cycle_slip": _CycleSlip}
 
 

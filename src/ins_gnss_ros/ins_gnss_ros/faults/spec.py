@@ -58,6 +58,8 @@ KINDS: dict[str, tuple[str | None, dict[str, tuple]]] = {
                       "probability": (_NUM, 1.0, lambda v: 0.0 < v <= 1.0, "in (0, 1]")}),
     "clock_jump": (None, {"offset_s": (_NUM, REQUIRED, lambda v: v != 0 and abs(v) <= 1e6,
                                        "non-zero, |offset| <= 1e6 s")}),
+    "clock_drift": (None, {"ppm": (_NUM, REQUIRED, lambda v: v != 0 and abs(v) <= 1e5,
+                                   "non-zero, |ppm| <= 1e5")}),
     "loop": (None, {}),
     "gnss_outage": ("/gnss/*", {}),
     "satellite_loss": ("/gnss/observations", {

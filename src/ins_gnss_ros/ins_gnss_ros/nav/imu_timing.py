@@ -36,7 +36,9 @@ are not right-handed.
 A check, not a correction (the offset is ambiguous between the two clocks, and applying it would
 move the solution onto the other one mid-run): the ekf's /diagnostics names what it finds
 (:class:`Verdict`), and the navigator stops flagging a solution valid on rates it finds wrong
-(``Navigator.note_imu_rates_wrong``). The course is that of the antenna, and a wheeled
+(``Navigator.note_imu_rates_wrong``). Over a long run the check also follows the offset of the
+last DRIFT_WINDOW_S and tells when it has moved (:meth:`ImuTimingCheck.drift`: an IMU clock
+drifting against GNSS time), without judging it. The course is that of the antenna, and a wheeled
 vehicle's antenna ahead of its rear axle slips sideways in proportion to the turn rate, which
 leads the course by about (distance to the axle) / speed; on the car drive the fitted offset
 was the same within 20 ms at 3-5 m/s and at 10-14 m/s. A ship's drift angle in a turn would
@@ -82,6 +84,13 @@ MIN_TURN_SQ = 1.0
 #: fixes noisy against their chords (single-point fixes 1.2 m apart at 5 Hz) make course turns
 #: of noise, and a scale of them (1.46 on such a simulated drive) says nothing of the gyros.
 MIN_CORRELATION = 0.5
+#: Time constant of the recent offset's forgetting, s; the first recent offset and a later one
+#: at least twice that apart can tell a drift: an IMU stamped by counting its samples at the
+#: nominal rate runs its crystal's error against GNSS time (tens to hundreds of ppm, 10-100 ms
+#: over ten minutes), which no constant time_offset_s holds.
+DRIFT_WINDOW_S = 120.0
+#: Least change of the recent offset (besides 3 sigma) reported as a drift, s.
+DRIFT_STEP_S = 0.02
 
 
 @dataclass(frozen=True)
@@ -127,6 +136,12 @@ class ImuTimingCheck:
         self._imu_turn_sq = np.zeros(len(OFFSETS))    # sum of IMU turn^2, rad^2
         self._course_turn_sq = 0.0                    # sum of course turn^2, rad^2
         self.pairs = 0
+        # The same cost and rate sums forgetting over DRIFT_WINDOW_S: (the latest pair's end
+        # s, cost, rate changes, weight, weighted sum of the pairs' ends s), and the first and
+        # the latest offset they gave within REPORT_SIGMA: (their pairs' mean time s, offset
+        # s, sigma s).
+        self._recent = (-math.inf, np.zeros(len(OFFSETS)), np.zeros(len(OFFSETS)), 0.0, 0.0)
+        self._first_recent = self._latest_recent = None
         self._verdict = (-1, None)  # (pairs, Verdict): the sums change with the pairs only
 
     def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray) -> None:
@@ -197,18 +212,34 @@ class ImuTimingCheck:
         w1 = (np.interp(t1 - OFFSETS + RATE_STEP_S, t_imu, y_imu) - y1) / RATE_STEP_S
         self._rate_change_sq += (w1 - w0) ** 2
         self.pairs += 1
+        t_last, cost, rate_change_sq, weight, times = self._recent
+        keep = math.exp(-max(t1 - t_last, 0.0) / DRIFT_WINDOW_S)
+        self._recent = (t1, cost * keep + (turn - (y1 - y0)) ** 2,
+                        rate_change_sq * keep + (w1 - w0) ** 2, weight * keep + 1.0,
+                        times * keep + t1)
+        recent = _fit(*self._recent[1:4])
+        if recent is not None and recent[1] <= REPORT_SIGMA:
+            self._latest_recent = (self._recent[4] / self._recent[3], *recent)
+            if self._first_recent is None:
+                self._first_recent = self._latest_recent
 
     def estimate(self) -> tuple[float, float] | None:
         """(offset s, sigma s): the IMU stamps plus the offset are GNSS time; None before any
         turn was seen."""
-        if self.pairs < 3:
+        return _fit(self._cost, self._rate_change_sq, self.pairs)
+
+    def drift(self) -> tuple[float, float, float] | None:
+        """(rate, first offset s, latest offset s) when the recent offset (over the last
+        DRIFT_WINDOW_S) has moved by more than DRIFT_STEP_S and 3 sigma since the first one,
+        their course changes' mean times at least twice that apart: the IMU's clock runs at
+        1 + rate of GNSS time's, and the whole run's offset is a mean of the two. Else None."""
+        first, latest = self._first_recent, self._latest_recent
+        if first is None or latest[0] - first[0] < 2.0 * DRIFT_WINDOW_S:
             return None
-        k = int(np.argmin(self._cost))
-        if self._rate_change_sq[k] <= 0.0:
+        step = latest[1] - first[1]
+        if abs(step) <= max(DRIFT_STEP_S, 3.0 * math.hypot(first[2], latest[2])):
             return None
-        # Adjacent course changes share a course, so this sigma is somewhat optimistic.
-        residual_var = self._cost[k] / max(self.pairs - 1, 1)
-        return float(OFFSETS[k]), math.sqrt(residual_var / self._rate_change_sq[k])
+        return -step / (latest[0] - first[0]), first[1], latest[1]
 
     def scale(self) -> float | None:
         """The gyros' turn over the course's where the two correlate best (module doc); None
@@ -280,6 +311,29 @@ class ImuTimingCheck:
                        "ekf's time_offset_sigma_s (0.1-0.2), or imu_preprocessor time_offset_s")
         else:
             verdict = "the IMU stamps are off GNSS time: add it to imu_preprocessor time_offset_s"
+        drift = self.drift()
+        if drift is not None:
+            # Told, not judged: a change in how the course leads the heading (an antenna far
+            # ahead of the axle at changing speeds, a ship's drift) would move it too, and on
+            # the bundled car drive (+286 ppm, +10 -> -95 ms) taking it for the clock's did
+            # not help (product_path.md, "2026-12-05 morning").
+            rate, first, latest = drift
+            verdict += (f"; the offset moved from {1e3 * first:+.0f} to {1e3 * latest:+.0f} ms "
+                        f"over the run ({1e6 * rate:+.0f} ppm if the IMU's clock drifts against "
+                        "GNSS time: an IMU stamped by counting its samples at the nominal rate)")
         return Verdict(f"{1e3 * offset:+.0f} +- {1e3 * sigma:.0f} ms from {self.pairs} course "
                        f"changes (gyro turn vs course over ground): {verdict}",
                        stamps_off=off)
+
+
+def _fit(cost: np.ndarray, rate_change_sq: np.ndarray, pairs: float):
+    """(offset s, sigma s) of the least cost over OFFSETS, from the summed squared residuals
+    and rate changes of ``pairs`` course changes; None before 3 of them or any turn."""
+    if pairs < 3:
+        return None
+    k = int(np.argmin(cost))
+    if rate_change_sq[k] <= 0.0:
+        return None
+    # Adjacent course changes share a course, so this sigma is somewhat optimistic.
+    residual_var = cost[k] / max(pairs - 1, 1)
+    return float(OFFSETS[k]), math.sqrt(residual_var / rate_change_sq[k])
