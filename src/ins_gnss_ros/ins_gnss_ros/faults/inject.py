@@ -387,8 +387,9 @@ class _CycleSlip(_Action):
 _ACTIONS = {"drop": _Drop, "gnss_outage": _Drop, "delay": _Delay, "duplicate": _Duplicate,
             "reorder": _Reorder, "freeze": _Freeze, "step": _Step, "ramp": _Ramp,
             "nan": _SetValue, "inf": _SetValue, "absurd": _SetValue, "clock_jump": _ClockJump,
-            "clock_drift": _ClockDrift, "loop": _Loop, "satellite_loss": _SatelliteLoss, "position_jump": _PositionJump,
-            "magnetic_disturbance": _MagneticDisturbance, "cycle_slip": _CycleSlip}
+            "clock_drift": _ClockDrift, "loop": _Loop, "satellite_loss": _SatelliteLoss,
+            "position_jump": _PositionJump, "magnetic_disturbance": _MagneticDisturbance,
+            "cycle_slip": _CycleSlip}
 
 
 class FaultInjector:

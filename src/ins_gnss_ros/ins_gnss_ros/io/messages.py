@@ -26,10 +26,8 @@ def msgtype_of(msg) -> str:
 
 
 @lru_cache(maxsize=None)
-@lru_cache(maxsize=None)
 def msgtype_of_class(cls) -> str:
-    """ROS type name ``pkg/msg/Name`` of an rclpy message class (asked for every message a
-    replay records)."""
+    """ROS type name ``pkg/msg/Name`` of an rclpy message class."""
     return f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"
 
 

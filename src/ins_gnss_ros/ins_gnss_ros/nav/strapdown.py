@@ -308,9 +308,8 @@ class Strapdown:
         state = self.state
         v, q, comp = np.empty(3), np.empty(4), np.empty((2, 3))
         lat, lon, h = _kernels.mech_step_compensated(
-            state.lat, state.lon, state.h, state.v_enu, state.q_nb, _vector(dtheta),
-            _vector(dv), dt,
-            errors.gyro_bias, errors.gyro_scale, errors.accel_bias, errors.accel_scale,
+            state.lat, state.lon, state.h, state.v_enu, state.q_nb, _vector(dtheta), _vector(dv),
+            dt, errors.gyro_bias, errors.gyro_scale, errors.accel_bias, errors.accel_scale,
             self.ell.kernel_params, v, q, comp)
         self.state = NavState.taking(lat, lon, h, v, q, state.t + dt)
         return comp

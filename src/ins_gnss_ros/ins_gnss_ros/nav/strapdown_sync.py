@@ -46,7 +46,7 @@ from .strapdown import NavState, Strapdown, correction_to
 
 __all__ = ["Correction", "ClosedLoopStrapdown", "StrapdownSync"]
 
-#: The errors a strapdown leaves to the IMU preprocessor compensates for (none).
+#: What a strapdown that leaves the sensor errors to the IMU preprocessor compensates: none.
 _NO_ERRORS = SensorErrors()
 
 
@@ -155,8 +155,8 @@ class ClosedLoopStrapdown:
         return event
 
     def _step(self, dtheta, dv, dt) -> None:
-        comp = self.ins.step_compensated(dtheta, dv, dt, self.sensor if self.apply_sensor_errors
-                                         else _NO_ERRORS)
+        errors = self.sensor if self.apply_sensor_errors else _NO_ERRORS
+        comp = self.ins.step_compensated(dtheta, dv, dt, errors)
         self.last_compensated = (comp, dt)
         history, state = self.history, self.ins.state
         history.append(_Step(dtheta, dv, dt, state))
