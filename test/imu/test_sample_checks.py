@@ -159,3 +159,31 @@ def test_recorded_car_stream():
         chk.check(t / 1000.0, np.radians([gx, gy, gz]), 9.80665 * np.array([ax, ay, az]))
     assert chk.counts["gap_bridged"] == 1 and chk.counts["gap"] == 1
     assert chk.counts["ok"] == len(data) - 2
+
+
+def test_the_sensor_clock_drift_against_the_arrival_clock_is_measured_under_load():
+    """100 Hz samples stamped by a clock 150 ppm fast, arriving after 1 ms of transport plus a
+    scheduling delay of up to tens of ms (exponential, 5 ms mean: most samples are late, a few
+    in each 30 s block find the way free): the floors' trend is the clocks' drift."""
+    from ins_gnss_ros.imu.sample_checks import ArrivalDrift
+    rng = np.random.default_rng(4)
+    t = np.arange(0, 600.0, 0.01)
+    # (in order: a queue delivers them first in, first out)
+    arrival = np.maximum.accumulate(((t + 0.001 + rng.exponential(0.005, t.size)) * 1e9)
+                                    .astype(np.int64))
+
+    def measured(stamps):
+        drift = ArrivalDrift()
+        for stamp, arrived in zip(stamps.tolist(), arrival.tolist()):
+            drift.add(stamp, arrived)
+        return drift.rate()
+
+    rate, sigma, span = measured((t * (1 + 150e-6) * 1e9).astype(np.int64))
+    assert rate == pytest.approx(150e-6, abs=2e-6) and sigma < 2e-6 and span > 500
+    rate, sigma, _ = measured((t * 1e9).astype(np.int64))
+    assert abs(rate) < 2e-6
+    # arrivals not paced by the samples (a replay twice as fast as real time): no clock's rate
+    fast = ArrivalDrift()
+    for stamp, arrived in zip((t * 1e9).astype(np.int64).tolist(), (arrival // 2).tolist()):
+        fast.add(stamp, arrived)
+    assert fast.rate() is None

@@ -41,7 +41,7 @@ from ..nav.coning import METHODS, Integrator
 from ..nav.increments import SensorErrors
 from .calibration import ImuCalibration
 from .gravity_check import SpecificForceCheck
-from .sample_checks import ClockJumps, SampleChecker
+from .sample_checks import ArrivalDrift, ClockJumps, SampleChecker
 from .sensor_clock import SensorClock, fit_stamps
 
 __all__ = ["EVENTS", "ImuPreprocessor", "Increment", "Processed", "SettingError",
@@ -119,9 +119,10 @@ class Processed(NamedTuple):
 #: clock; the sample rate measured (this is the first sample processed); the sensor-clock fit
 #: restarted (a step of the driver's clock or an ambiguous gap); two_sample coning impossible
 #: with the measured rate, one_sample used; a stretch of the specific force judged
-#: (:attr:`ImuPreprocessor.gravity`).
+#: (:attr:`ImuPreprocessor.gravity`); a block of the sensor clock's drift against the arrival
+#: clock measured (:attr:`ImuPreprocessor.arrival_drift`).
 EVENTS = ("clock_jump", "rate_measured", "sensor_clock_restart", "coning_fallback",
-          "specific_force_judged")
+          "specific_force_judged", "arrival_drift_measured")
 
 #: Samples and span of the stamps that measure the sample rate (rate_hz 0): a median over 40
 #: intervals shrugs off a few lost samples, and half a second of span makes the rate good to
@@ -218,6 +219,8 @@ class ImuPreprocessor:
         Samples made so far to bridge gaps.
     gravity : SpecificForceCheck
         Whether the increments' specific force is in m/s^2 with gravity in it.
+    arrival_drift : ArrivalDrift
+        The sensor clock's rate against the arrival clock.
     """
 
     def __init__(self, calibration: ImuCalibration, rate_hz: float, nav_rate_hz: float,
@@ -245,6 +248,7 @@ class ImuPreprocessor:
         self.sensor_errors: SensorErrors | None = None
         self.synthesised = 0
         self.gravity = SpecificForceCheck()
+        self.arrival_drift = ArrivalDrift()
         self._instant = bool(instant)
         self._origin_ns: int | None = None   # stamps go to the checker relative to the first one
         self._last_ns: int | None = None     # end of the last integrated sample
@@ -358,6 +362,8 @@ class ImuPreprocessor:
             t_ns = self.clock.correct(t_ns, arrival_ns)
             if self.clock.jumps != jumps:
                 events += ("clock_jump",)
+        if self.arrival_drift.add(t_ns, arrival_ns):
+            events += ("arrival_drift_measured",)
         if self.sensor_clock is not None:
             restarts = self.sensor_clock.resets
             t_ns = self.sensor_clock.stamp(t_ns)

@@ -8,7 +8,8 @@ packets, dropped samples, and a stuck sensor or driver that keeps sending its la
 new stamps. :class:`SampleChecker` classifies every sample and keeps a count per reason; short gaps
 are bridged so that the integrator keeps its nominal step, longer ones are reported so that the
 caller can restart integration. What a bridge may miss is measured on the stream itself
-(:class:`BridgeMiss`): the filter carries it as process noise.
+(:class:`BridgeMiss`): the filter carries it as process noise. The sensor's clock is compared
+with the arrival clock for jumps (:class:`ClockJumps`) and for drift (:class:`ArrivalDrift`).
 """
 from __future__ import annotations
 
@@ -316,3 +317,61 @@ class ClockJumps:
                 self.jumps += 1
             self._regular = self._regular + 1 if regular else 0
         return stamp_ns - self.offset_ns
+
+
+class ArrivalDrift:
+    """The sensor clock's rate against the arrival clock (this computer's, or a bag's log time).
+
+    An IMU stamped by counting its samples at the nominal rate runs its crystal's error against
+    every other clock: tens to hundreds of ppm, 10-100 ms over ten minutes against GNSS fixes
+    stamped on the receiver's or the host's time, which no constant ``time_offset_s`` holds.
+    The delay of a sample (arrival - stamp) is its transport and scheduling delay plus the
+    clocks' difference; its least value over a block of ``block_s`` is the transport floor, a
+    sample that found the way free, so the floors' trend over the blocks is the clocks' drift,
+    whatever the load added to the other samples. Least squares over the last ``blocks`` floors
+    gives the rate r (the stamps advance by 1 + r s per second of arrival) and its sigma from
+    the floors' scatter about the line. Only meaningful while the arrival clock paces the
+    samples: a rate beyond ``max_rate`` is not a clock's (a replay faster than real time) and
+    is not reported.
+    """
+
+    def __init__(self, block_s: float = 30.0, blocks: int = 20, min_span_s: float = 120.0,
+                 max_rate: float = 0.01):
+        self.block_ns, self.min_span_s, self.max_rate = block_s * 1e9, min_span_s, max_rate
+        self._origin = None     # (stamp, arrival) ns of the first sample: offsets keep floats exact
+        self._block = None      # (index, least delay s) of the block being filled
+        self._floors = deque(maxlen=blocks)   # (block mid-time s, least delay s)
+
+    def add(self, stamp_ns: int, arrival_ns: int) -> bool:
+        """One sample; True when it completed a block (:meth:`rate` may have changed)."""
+        if self._origin is None:
+            self._origin = (stamp_ns, arrival_ns)
+        t = arrival_ns - self._origin[1]
+        delay = (t - (stamp_ns - self._origin[0])) * 1e-9
+        index = int(t // self.block_ns)
+        block, completed = self._block, False
+        if block is not None and index > block[0]:
+            self._floors.append(((block[0] + 0.5) * self.block_ns * 1e-9, block[1]))
+            block, completed = None, True
+        if block is None:
+            self._block = (index, delay)
+        elif delay < block[1]:  # (one that arrived out of order counts in the current block)
+            self._block = (block[0], delay)
+        return completed
+
+    def rate(self) -> tuple[float, float, float] | None:
+        """(rate, its sigma, span s) once the floors span ``min_span_s``; None before, or when
+        the rate is beyond ``max_rate``."""
+        if len(self._floors) < 3:
+            return None
+        t, d = np.array(self._floors).T
+        span = t[-1] - t[0]
+        if span < self.min_span_s:
+            return None
+        tc = t - t.mean()
+        slope = float(tc @ (d - d.mean()) / (tc @ tc))
+        residual = d - d.mean() - slope * tc
+        sigma = math.sqrt(float(residual @ residual) / (len(t) - 2) / float(tc @ tc))
+        if abs(slope) > self.max_rate:
+            return None
+        return 0.0 - slope, sigma, span  # (a flat trend is +0, not -0)

@@ -50,6 +50,12 @@ _EVENTS = {"clock_jump": "imu clock jump: stamps corrected by the arrival clock"
                               "one_sample used"}
 
 
+#: A drift of the IMU's stamps against the arrival clock beyond this (and 3 sigma) is told as
+#: one: a crystal's error, 10-100 ms over ten minutes; NTP slews a host's clock by 500 ppm at
+#: most, and by far less once it has settled.
+ARRIVAL_DRIFT_TOLD = 50e-6
+
+
 class ImuPreprocessorNode(NavNode):
     PARAMS = PARAMS + IMU_FRAME_PARAMS
 
@@ -158,6 +164,9 @@ class ImuPreprocessorNode(NavNode):
             if event == "rate_measured":
                 self._report_rates()
                 continue
+            if event == "arrival_drift_measured":
+                self._report_arrival_drift()
+                continue
             if event == "specific_force_judged":
                 problem = self.preprocessor.gravity.problem()
                 self.diag.set_state(DiagnosticStatus.WARN if problem else DiagnosticStatus.OK,
@@ -167,6 +176,18 @@ class ImuPreprocessorNode(NavNode):
             if event == "clock_jump":
                 self.diag.set_value("imu clock correction, s",
                                     -self.preprocessor.clock.offset_ns / NS)
+
+    def _report_arrival_drift(self) -> None:
+        measured = self.preprocessor.arrival_drift.rate()
+        if measured is None:
+            return
+        rate, sigma, span = measured
+        text = f"{1e6 * rate:+.1f} +- {1e6 * sigma:.1f} ppm over {span:.0f} s"
+        if abs(rate) > max(ARRIVAL_DRIFT_TOLD, 3.0 * sigma):
+            text += (": the IMU's stamps drift against this computer's clock (a driver counting "
+                     "samples at the nominal rate?), and against GNSS time where the fixes are "
+                     "stamped on this clock or on GNSS time")
+        self.diag.set_value("imu clock against arrival", text)
 
     def _report_rates(self) -> None:
         pre = self.preprocessor
