@@ -42,17 +42,21 @@ def level_field(mag_b, roll, pitch) -> np.ndarray:
     roll, pitch : float or array_like
         ROS roll and pitch, rad.
     """
+    return np.einsum("...ij,...j->...i", level_rotation(roll, pitch), np.asarray(mag_b, float))
+
+
+def level_rotation(roll, pitch) -> np.ndarray:
+    """C_Lb = Ry(pitch) Rx(roll) of ROS roll and pitch (rad), shape (..., 3, 3); one attitude's
+    is kept (read-only): a compass sample is levelled three or four times (disturbance check,
+    azimuth, its variance, the calibration's share of it), and building the rotation cost more
+    than the rest."""
     if np.ndim(roll) == 0 and np.ndim(pitch) == 0:
-        c_lb = _level_rotation(float(roll), float(pitch))
-    else:
-        c_lb = dcm_from_euler(roll, pitch, np.zeros_like(np.asarray(roll, float)))
-    return np.einsum("...ij,...j->...i", c_lb, np.asarray(mag_b, float))
+        return _level_rotation(float(roll), float(pitch))
+    return dcm_from_euler(roll, pitch, np.zeros_like(np.asarray(roll, float)))
 
 
 @lru_cache(maxsize=2)
 def _level_rotation(roll: float, pitch: float) -> np.ndarray:
-    """C_Lb of one attitude (read-only): a compass sample is levelled three times (disturbance
-    check, azimuth, its variance), and building the rotation cost more than the rest."""
     c_lb = dcm_from_euler(roll, pitch, 0.0)
     c_lb.flags.writeable = False
     return c_lb

@@ -33,8 +33,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ins_gnss_ros.magnetic.ellipsoid_fit import HardSoftIron
-from ins_gnss_ros.magnetic.compass import magnetic_azimuth
-from ins_gnss_ros.nav.rotations import dcm_from_euler
+from ins_gnss_ros.magnetic.compass import level_rotation, magnetic_azimuth
 
 #: The elements of W the fit estimates, each a set of (row, column) sharing one value: all
 #: but the antisymmetric part of the horizontal pair, a rotation about the vertical that no
@@ -131,10 +130,11 @@ def _pack(cal: HardSoftIron, scale: float) -> np.ndarray:
 
 def azimuth_gradient(cal: HardSoftIron, raw, roll, pitch, scale: float) -> np.ndarray:
     """d(magnetic azimuth)/d(c / scale, the elements of W) of readings ``raw`` (n, 3) at
-    ``roll``, ``pitch`` (n,), shape (n, 11). A = atan2(L_y, L_x) with L = C_Lb W (m - c)."""
+    ``roll``, ``pitch`` (n,) (or one reading (3,) at one attitude), shape (n, 11).
+    A = atan2(L_y, L_x) with L = C_Lb W (m - c)."""
     raw = np.atleast_2d(np.asarray(raw, float))
     d = raw - cal.offset
-    c_lb = dcm_from_euler(roll, pitch, np.zeros_like(np.asarray(roll, float)))
+    c_lb = np.broadcast_to(level_rotation(roll, pitch), (len(raw), 3, 3))
     lev = np.einsum("nij,nj->ni", c_lb, d @ cal.matrix.T)
     h2 = lev[:, 0] ** 2 + lev[:, 1] ** 2
     g_l = np.column_stack([-lev[:, 1], lev[:, 0], np.zeros(len(lev))]) / h2[:, None]
@@ -174,7 +174,7 @@ def fit_level_constraints(raw, roll, pitch, horizontal: float, up: float, field_
     raw = np.asarray(raw, float)
     roll, pitch = np.asarray(roll, float), np.asarray(pitch, float)
     scale = float(np.hypot(horizontal, up))
-    c_lb = dcm_from_euler(roll, pitch, np.zeros_like(roll))
+    c_lb = level_rotation(roll, pitch)
     sigma = field_std / scale
 
     def residual(theta):
@@ -301,7 +301,7 @@ class FieldCalibration:
     def azimuth_variance(self, raw, roll: float, pitch: float) -> float:
         """The calibration's contribution to the variance of this reading's azimuth, rad^2."""
         cur = self.current
-        g = azimuth_gradient(cur.calibration, raw, [roll], [pitch], cur.scale)[0]
+        g = azimuth_gradient(cur.calibration, raw, roll, pitch, cur.scale)[0]
         return float(g @ cur.covariance @ g)
 
     def state(self) -> str:

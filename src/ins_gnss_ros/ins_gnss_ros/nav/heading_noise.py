@@ -80,15 +80,19 @@ class _Phase:
         """A break in the error series (its offset may change): no differences across it."""
         self.bin, self.total, self.times, self.count, self.means = None, 0.0, 0.0, 0, []
 
-    def add(self, t: float, x: float) -> None:
+    def add(self, t: float, x: float) -> bool:
+        """A reading; True when it completed a bin (the statistic may have changed)."""
         index = math.floor((t - self.offset) / self.tau)
+        completed = False
         if index != self.bin:
             if self.bin is not None and self.count:
                 self._complete(self.bin, self.total / self.count, self.times / self.count)
+                completed = True
             self.bin, self.total, self.times, self.count = index, 0.0, 0.0, 0
         self.total += x
         self.times += t - self.offset
         self.count += 1
+        return completed
 
     def _complete(self, index: int, mean: float, at: float) -> None:
         means = self.means
@@ -119,9 +123,12 @@ class _Rung:
         for phase in self.phases:
             phase.restart()
 
-    def add(self, t: float, x: float) -> None:
+    def add(self, t: float, x: float) -> bool:
+        """A reading; True when it completed a bin of a phase."""
+        completed = False
         for phase in self.phases:
-            phase.add(t, x)
+            completed |= phase.add(t, x)
+        return completed
 
     @property
     def measured(self) -> bool:
@@ -144,6 +151,8 @@ class HeadingNoise:
         self._rungs = [_Rung(tau) for tau in LADDER]
         self._last_t = math.nan  # stamp of the previous reading, s
         self._offset = math.nan  # the previous error value, rad (for unwrapping)
+        # density() until a bin completes (asked at every reading, it changes with the bins)
+        self._density = None
 
     def restart(self) -> None:
         """The gyro azimuth the errors are taken against starts again (IMU lost, gap)."""
@@ -157,11 +166,17 @@ class HeadingNoise:
             error = self._offset + (error - self._offset + math.pi) % (2.0 * math.pi) - math.pi
         self._offset = error
         for rung in self._rungs:
-            rung.add(t, error)
+            if rung.add(t, error):
+                self._density = None
 
     def density(self) -> float:
         """S, rad^2 s: the largest tau * H(tau) of the measured rungs, the longest measured
         rung's H standing for every longer rung; nan before any rung is measured."""
+        if self._density is None:
+            self._density = self._measure_density()
+        return self._density
+
+    def _measure_density(self) -> float:
         worst, longest = math.nan, None
         for rung in self._rungs:
             if rung.measured:
