@@ -99,8 +99,8 @@ class SensorErrors:
     @cached_property
     def values(self) -> tuple:
         """The twelve values as Python floats in field order (gyro bias, accel bias, gyro scale,
-        accel scale): the strapdown writes them into every ins/state, and they change only with
-        a correction."""
+        accel scale): the strapdown writes them into every ins/state and the IMU preprocessor
+        removes them from every sample, and they change only with a correction."""
         return tuple(self.gyro_bias.tolist() + self.accel_bias.tolist()
                      + self.gyro_scale.tolist() + self.accel_scale.tolist())
 
@@ -130,10 +130,9 @@ class SensorErrors:
         """True rate (rad/s) and specific force (m/s^2) of measured ones, in Python floats (the
         IMU preprocessor's per-sample path: numpy's per-call overhead on 3-vectors costs more
         than the arithmetic). The same formula as :meth:`compensate`."""
-        return (tuple((w - b) / (1.0 + s) for w, b, s in
-                      zip(omega, self.gyro_bias.tolist(), self.gyro_scale.tolist())),
-                tuple((a - b) / (1.0 + s) for a, b, s in
-                      zip(f, self.accel_bias.tolist(), self.accel_scale.tolist())))
+        values = self.values
+        return (tuple((w - b) / (1.0 + s) for w, b, s in zip(omega, values[0:3], values[6:9])),
+                tuple((a - b) / (1.0 + s) for a, b, s in zip(f, values[3:6], values[9:12])))
 
 
 #: :func:`classify_gap` verdicts.
