@@ -63,7 +63,7 @@ def recorded_calls(bag, profile_path):
     from ins_gnss_ros.trial.offline import _Feeder, offline_parameters
     from ins_gnss_ros.trial.profile import load_profile
 
-    pre_p, ekf_p = offline_parameters(load_profile(profile_path))
+    pre_p, ekf_p, _ = offline_parameters(load_profile(profile_path))
     calls, events = _Calls(), Counter()
     feed = _Feeder(calls, preprocessor_from_params(pre_p), pre_p, ekf_p, events)
     for row in input_rows(bag):

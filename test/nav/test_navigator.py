@@ -12,14 +12,16 @@ import pytest
 from ins_gnss_ros.nav.earth import radii
 from ins_gnss_ros.nav.ekf import ExtraState
 from ins_gnss_ros.nav.error_model import nav_error
+from ins_gnss_ros.nav.increments import SensorErrors
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
 from ins_gnss_ros.nav.measurement_types import ZeroVelocity
 from ins_gnss_ros.nav.navigator import unknown_direction_var
 from ins_gnss_ros.nav.recording import published_covariance
+from ins_gnss_ros.nav.rotations import quat_angle_between
 from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, \
     GnssVelocity, Navigator, NavigatorConfig, point_track
 from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405, filter_noise
-from ins_gnss_ros.nav.strapdown import NavState
+from ins_gnss_ros.nav.strapdown import NavState, Strapdown
 from ins_gnss_ros.sim.imu_sim import ImuSpec, simulate_imu
 from ins_gnss_ros.sim.scenarios import car
 from ins_gnss_ros.trial.evaluate import Trajectory, evaluate
@@ -497,3 +499,29 @@ def test_divergence_recovers_through_the_forced_update(sim):
     confirmed = max(u.t for u in nav.updates if u.reason == "forced") + 5.0
     assert np.all(mode[(t > 61.2) & (t < confirmed - 0.1)] == DEAD_RECKONING)
     assert np.all(mode[t > confirmed + 0.3] == NAVIGATING) and ratio[-1] < 3.0
+
+
+def test_attitude_at_turns_the_solution_with_the_imu_since_its_epoch(sim):
+    """attitude_at(t) is the solution's attitude at its epoch and, between epochs, that one
+    turned by the IMU samples since: at every sample of 20 s of driving, what a strapdown
+    started on the solution with the filter's sensor-error estimates has (the strapdown node
+    following the filter), to the earth's rate it leaves out."""
+    traj, imu, meas, _ = sim
+    nav = Navigator(config())
+    for m in meas:
+        nav.add_measurement(m)
+    start = int(60.0 * IMU_RATE)
+    nav.add_imu(imu.t[:start], imu.dtheta[:start], imu.dv[:start])
+    miss, turn = [], []
+    for i in range(start, start + int(20.0 * IMU_RATE)):
+        nav.add_imu(imu.t[i:i + 1], imu.dtheta[i:i + 1], imu.dv[i:i + 1])
+        solution = nav.solution
+        assert np.allclose(nav.attitude_at(solution.t), solution.q_nb, rtol=0, atol=1e-12)
+        follower = Strapdown(solution)
+        errors = SensorErrors.of_estimates(nav.estimates)
+        for k in np.flatnonzero((imu.t > solution.t) & (imu.t <= imu.t[i])):
+            follower.step_compensated(imu.dtheta[k], imu.dv[k], 1.0 / IMU_RATE, errors)
+        turn.append(quat_angle_between(follower.state.q_nb, solution.q_nb))
+        miss.append(quat_angle_between(follower.state.q_nb, nav.attitude_at(imu.t[i])))
+    assert np.degrees(np.max(turn)) > 1.0 and np.max(miss) < 2e-5, \
+        (np.degrees(np.max(turn)), np.max(miss))

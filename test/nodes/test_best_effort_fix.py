@@ -26,5 +26,5 @@ def test_best_effort_fix_reaches_every_user(ros_context, executor, probe):
     fix.status.status = NavSatStatus.STATUS_FIX
     pub.publish(fix)
     spin_until(executor, lambda: "gnss/fix" in ekf.aiding.inputs
-               and compass._fix_seen and phase.pipeline.position is not None,
+               and compass.front.fix_seen and phase.pipeline.position is not None,
                10.0, "the fix at every node")

@@ -317,14 +317,17 @@ def test_bad_input_is_counted_and_no_heading_from_it(graph):
 
 def test_heading_from_every_ins_state_a_filter_has_levelled(graph):
     """The strapdown says the filter's mode: ALIGNING after the first correction (levelled at
-    rest, heading unknown) and DEAD_RECKONING (degraded) both come with a levelled attitude;
-    only a state no filter has corrected (sequence 0) has none."""
-    from ins_gnss_msgs.msg import InsState
+    rest, heading unknown) and DEAD_RECKONING (degraded) both come with a levelled attitude
+    (as level as the filter's tilt sigma on nav/status says); only a state no filter has
+    corrected (sequence 0) has none."""
+    from ins_gnss_msgs.msg import FilterStatus, InsState
 
     from ins_gnss_ros.nodes.convert import to_quaternion
 
     m = _earth_field().enu  # level, yaw 0: body = ENU
     g = graph()
+    g.send("nav/status", FilterStatus(state_names=["att[0]", "att[1]", "att[2]"],
+                                      state_std=[1e-3, 1e-3, 1e-2]))
     for k, (mode, sequence) in enumerate([(InsState.MODE_ALIGNING, 0),
                                           (InsState.MODE_ALIGNING, 1),
                                           (InsState.MODE_DEAD_RECKONING, 2),

@@ -220,6 +220,24 @@ def mech_step_compensated(lat, lon, h, v, q, th, dv, dt, gyro_bias, gyro_scale, 
 
 
 @njit(cache=True)
+def turn_attitude(q, th, cth, dts, gyro_bias, gyro_scale, omega, tail, out_q):
+    """q turned by the body rotations of samples (th, cth over dts) compensated as
+    :func:`mech_segment` compensates them, then by omega (rad/s) over tail (s); the earth's
+    and transport rate left out (navigator.Navigator.attitude_at). Writes out_q."""
+    qw, qx, qy, qz = q[0], q[1], q[2], q[3]
+    for i in range(th.shape[0]):
+        rx = (th[i, 0] - dts[i] * gyro_bias[0]) / (1.0 + gyro_scale[0]) + cth[i, 0]
+        ry = (th[i, 1] - dts[i] * gyro_bias[1]) / (1.0 + gyro_scale[1]) + cth[i, 1]
+        rz = (th[i, 2] - dts[i] * gyro_bias[2]) / (1.0 + gyro_scale[2]) + cth[i, 2]
+        rw, rx, ry, rz = _quat_rotvec(rx, ry, rz)
+        qw, qx, qy, qz = _qmul(qw, qx, qy, qz, rw, rx, ry, rz)
+    rw, rx, ry, rz = _quat_rotvec(omega[0] * tail, omega[1] * tail, omega[2] * tail)
+    qw, qx, qy, qz = _qmul(qw, qx, qy, qz, rw, rx, ry, rz)
+    s = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    out_q[0], out_q[1], out_q[2], out_q[3] = qw * s, qx * s, qy * s, qz * s
+
+
+@njit(cache=True)
 def _cross_acc(out, s, a0, a1, a2, b0, b1, b2):
     """out += s * (a x b) on scalars (no temporary arrays)."""
     out[0] += s * (a1 * b2 - a2 * b1)

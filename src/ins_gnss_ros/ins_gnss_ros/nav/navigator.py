@@ -27,6 +27,7 @@ import bisect
 
 import numpy as np
 
+from . import _kernels
 from . import measurements as meas
 from . import modes
 from .alignment import Levelling, course_error_gain, fixes_with_course, initial_covariance, \
@@ -329,6 +330,26 @@ class Navigator:
         self._catch_up()
         s = self._state
         return None if s.nav is None else extrapolate(s.nav, t - s.nav.t, s.a_enu)
+
+    def attitude_at(self, t):
+        """The attitude q_nb at time t (s), or None before the first fix: the solution's,
+        turned by the IMU samples after it up to t as the time update turns it (compensated
+        with the running estimates, coning terms added; the earth's and transport rate left
+        out, 1e-6 rad over a segment) and on to t at the last segment's rate. What a follower
+        of the solution between filter epochs levels with, as the strapdown node's state
+        serves the graph's compass."""
+        self._catch_up()
+        s, buf = self._state, self._imu
+        if s.nav is None:
+            return None
+        times, th, _, cth, _ = buf.rows(s.next_sample, buf.search(t))
+        last = times[-1] if len(times) else s.nav.t
+        errors = SensorErrors.of_estimates(s.estimates)
+        q = np.empty(4)
+        # One compiled call: per sample, numpy's quaternion products cost 30 us a sample.
+        _kernels.turn_attitude(s.nav.q_nb, th, cth, np.diff(times, prepend=s.nav.t),
+                               errors.gyro_bias, errors.gyro_scale, s.omega, float(t - last), q)
+        return q
 
     def output(self):
         """The forward pass so far, as a :class:`~ins_gnss_ros.nav.recording.NavigatorOutput`."""

@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 from geometry_msgs.msg import Quaternion, Vector3
-from ins_gnss_msgs.msg import InsState
+from ins_gnss_msgs.msg import Heading, InsState
 
 from ..io import NS, encode_columns, field_reader, field_writer, sec_nanosec, set_stamp_sec, \
     stamp_to_sec
@@ -137,6 +137,22 @@ def increment_of(data: bytes) -> Increment:
         problem = "increment with a negative or non-finite bridged variance dropped"
     return Increment(problem, sec + nanosec * 1e-9, sec * NS + nanosec, np.array(dtheta),
                      np.array(dv), dt, angle_var, velocity_var)
+
+
+def compass_heading(reading, stamp, frame_id: str, true_reference: bool) -> Heading:
+    """``mag/heading`` of a :class:`~ins_gnss_ros.magnetic.compass.CompassReading` at
+    ``stamp`` (builtin_interfaces/Time): its true or magnetic azimuth with the declination
+    either way; a compass observes neither pitch nor roll (NaN)."""
+    out = Heading(azimuth=reading.true_azimuth if true_reference else reading.magnetic_azimuth,
+                  pitch=math.nan, roll=math.nan, azimuth_variance=reading.variance,
+                  pitch_variance=math.nan, roll_variance=math.nan,
+                  reference=Heading.REFERENCE_TRUE if true_reference
+                  else Heading.REFERENCE_MAGNETIC,
+                  source=Heading.SOURCE_MAGNETIC, declination=reading.declination,
+                  status=Heading.STATUS_NONE)
+    out.header.stamp = stamp
+    out.header.frame_id = frame_id
+    return out
 
 
 def heading_of(msg) -> tuple[float, float, float, float | None] | None:

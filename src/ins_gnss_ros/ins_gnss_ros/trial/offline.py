@@ -7,7 +7,10 @@ The offline path runs the cores the nodes feed, configured by the same profile s
 section the :class:`~ins_gnss_ros.nav.navigator.Navigator`
 (:func:`~ins_gnss_ros.nav.filter_config.navigator_config`) and the
 :class:`~ins_gnss_ros.nav.aiding.Aiding` front end that judges every input. What differs from
-the graph is only that no strapdown node follows the filter: the outputs are the filter's own
+the graph is only that no strapdown node follows the filter: with a ``mag_compass`` section the
+:class:`~ins_gnss_ros.magnetic.compass_front_end.CompassFrontEnd` levels each magnetometer sample
+with the filter's attitude turned to its time (:meth:`~ins_gnss_ros.nav.navigator.Navigator.attitude_at`)
+and its heading goes to the ekf's ``mag/heading`` handler, and the outputs are the filter's own
 solution at its covariance epochs (10 Hz by default) as ``ins/state``, ``nav/odom``,
 ``nav/fix`` (``STATUS_NO_FIX`` unless NAVIGATING, else ``STATUS_FIX``), ``/tf`` (with
 ``publish_tf``: map -> base_link, and ``/tf_static`` base_link -> imu_link and gnss_0, built as
@@ -31,9 +34,11 @@ from ins_gnss_ros.trial.outages import GNSS_PREFIX, gnss_windows, in_outage
 from ins_gnss_ros.trial.profile import ProfileError, load_profile
 from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_summary
 
-#: The inputs the offline path reads (the ekf's aiding topics and the IMU).
+#: The inputs the offline path reads (the ekf's aiding topics and the IMU), and the
+#: magnetometer's where it runs the compass.
 OFFLINE_TOPICS = ("/imu/delta", "/imu/data_raw", "/gnss/fix", "/gnss/vel", "/gnss/heading",
                   "/mag/heading", "/log/speed", "/wheel/odom", "/gnss/observations")
+MAGNETOMETER_TOPICS = ("/imu/mag_raw", "/imu/mag")
 
 
 #: The imu/data_raw type and the fields of it the offline path reads, in field order.
@@ -43,13 +48,18 @@ IMU_FIELDS = ("header.stamp.sec", "header.stamp.nanosec", "orientation.x", "orie
               "orientation.z", "orientation.w", "orientation_covariance", "angular_velocity.x",
               "angular_velocity.y", "angular_velocity.z", "linear_acceleration.x",
               "linear_acceleration.y", "linear_acceleration.z")
+#: The magnetometer's type (imu/mag_raw, imu/mag) and the fields read of it.
+MAG_TYPE = "sensor_msgs/msg/MagneticField"
+MAG_FIELDS = ("header.stamp.sec", "header.stamp.nanosec", "magnetic_field.x",
+              "magnetic_field.y", "magnetic_field.z")
 
 
-def offline_parameters(profile) -> tuple[dict, dict]:
-    """The profile's ``imu_preprocessor`` and ``ekf`` sections resolved against the nodes'
-    parameter specifications (defaults filled in, values checked); a ProfileError names the
-    section and parameter at fault."""
+def offline_parameters(profile) -> tuple[dict, dict, dict | None]:
+    """The profile's ``imu_preprocessor``, ``ekf`` and ``mag_compass`` (None without one)
+    sections resolved against the nodes' parameter specifications (defaults filled in, values
+    checked); a ProfileError names the section and parameter at fault."""
     from ins_gnss_ros.imu.preprocessor_params import PARAMS as PREPROCESSOR_PARAMS
+    from ins_gnss_ros.magnetic.compass_front_end import PARAMS as COMPASS_PARAMS
     from ins_gnss_ros.nav.filter_config import PARAMS as FILTER_PARAMS
     from ins_gnss_ros.nodes.tf_messages import FRAME_PARAMS, IMU_FRAME_PARAMS
 
@@ -58,7 +68,10 @@ def offline_parameters(profile) -> tuple[dict, dict]:
                            "the profile has none")
     out = []
     for name, specs in (("imu_preprocessor", PREPROCESSOR_PARAMS + IMU_FRAME_PARAMS),
-                        ("ekf", FILTER_PARAMS + FRAME_PARAMS)):
+                        ("ekf", FILTER_PARAMS + FRAME_PARAMS), ("mag_compass", COMPASS_PARAMS)):
+        if name == "mag_compass" and name not in profile.sections:
+            out.append(None)
+            continue
         section = {k: v for k, v in profile.sections.get(name, {}).items() if k != "use_sim_time"}
         try:
             out.append(resolve(specs, section))
@@ -110,6 +123,8 @@ class ForwardPass:
     events : Counter
         What the front end reported, by text.
     frames : OutputFrames
+    graph : tuple of str
+        The cores that ran, as ``replay.json`` names them.
     """
 
     navigator: object
@@ -119,14 +134,13 @@ class ForwardPass:
     counts: MessageCounts
     events: Counter
     frames: OutputFrames
+    graph: tuple
 
-    def summary(self, out, bag_path, outages, mode, graph=("imu_preprocessor",
-                                                           "ekf (filter only)")) -> dict:
-        """Write ``OUT/replay.json`` (run_folder.write_summary) with the front end's events."""
-        summary = write_summary(out, bag_path, self.profile, outages, self.windows, self.counts,
-                                mode, 0.0, graph=list(graph))
-        summary["events"] = dict(sorted(self.events.items()))
-        return summary
+    def summary(self, out, bag_path, outages, mode, graph=None) -> dict:
+        """Write ``OUT/replay.json`` (run_folder.write_summary) with the front end's events;
+        ``graph``: what ran (default: the offline path's cores)."""
+        return write_summary(out, bag_path, self.profile, outages, self.windows, self.counts,
+                             mode, 0.0, graph=list(graph or self.graph), events=self.events)
 
 
 def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
@@ -148,8 +162,9 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
     from ins_gnss_ros.nav.filter_config import navigator_config
 
     profile = load_profile(profile_path)
-    pre_p, ekf_p = offline_parameters(profile)
-    check_inputs(bag_path, OFFLINE_TOPICS, remap)
+    pre_p, ekf_p, compass_p = offline_parameters(profile)
+    runs_compass = compass_p is not None and ekf_p["use_magnetic_heading"]
+    check_inputs(bag_path, OFFLINE_TOPICS + MAGNETOMETER_TOPICS * runs_compass, remap)
     # The GNSS span (outage windows) first, from the GNSS topics alone: the rest is streamed.
     windows = gnss_windows(bag_rows(bag_path, lambda topic: topic.startswith(GNSS_PREFIX),
                                     remap) if outages else (), outages)
@@ -166,7 +181,8 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
         preprocessor = preprocessor_from_params(pre_p)
     except ParameterError as err:
         raise ProfileError(f"{profile.path}: imu_preprocessor: {err}") from None
-    feed = _Feeder(aiding, preprocessor, pre_p, ekf_p, events)
+    feed = _Feeder(aiding, preprocessor, pre_p, ekf_p, events,
+                   compass_p if runs_compass else None)
     counts = MessageCounts()
     for row in tqdm(input_rows(bag_path, remap), disable=not progress, unit="msg",
                     desc="forward", total=input_count(bag_path, remap)):
@@ -176,21 +192,26 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
         counts.played[row.topic] += 1
         feed.row(row, bag_path)
     navigator.flush()
+    graph = ("imu_preprocessor",) + (("mag_compass",) if feed.compass else ()) + \
+        ("ekf (filter only)",)
     return ForwardPass(navigator, aiding.datum, profile, windows, counts, events,
-                       OutputFrames(ekf_p, pre_p, preprocessor.calibration.c_bs))
+                       OutputFrames(ekf_p, pre_p, preprocessor.calibration.c_bs), graph)
 
 
 class _Feeder:
-    """Bag messages -> the front end, as the nodes translate them."""
+    """Bag messages -> the front end, as the nodes translate them; ``compass_p``: the
+    ``mag_compass`` parameters (None: no compass)."""
 
-    def __init__(self, aiding, preprocessor, pre_p, ekf_p, events):
+    def __init__(self, aiding, preprocessor, pre_p, ekf_p, events, compass_p=None):
         # Message modules load with the first offline run, not with the trial package.
         from ins_gnss_ros.imu.preprocessor_params import orientation_headings_from_params
-        from ins_gnss_ros.nodes.convert import increment_of
+        from ins_gnss_ros.magnetic.compass_front_end import CompassFrontEnd
+        from ins_gnss_ros.nodes.convert import compass_heading, increment_of
         from ins_gnss_ros.nodes.ekf_inputs import EkfInputs
 
-        self.increment_of = increment_of
+        self.increment_of, self.compass_heading = increment_of, compass_heading
         self.read_imu = bagio.field_reader(IMU_TYPE, IMU_FIELDS)
+        self.read_mag = bagio.field_reader(MAG_TYPE, MAG_FIELDS)
         # imu/heading: the imu_preprocessor node's, from the raw samples' own orientation
         self.orientation, self.declination = orientation_headings_from_params(
             pre_p, preprocessor.calibration.c_bs) if ekf_p["use_imu_heading"] else (None, None)
@@ -199,6 +220,13 @@ class _Feeder:
         inputs = EkfInputs(aiding, ekf_p, lambda text, log=True: events.update([text]))
         for topic, (_, handler) in inputs.handlers().items():
             self.handlers["/" + topic] = handler
+        # The graph's mag_compass (the ekf takes mag/heading).
+        self.compass = None
+        if compass_p is not None:
+            self.compass = CompassFrontEnd(compass_p, lambda text, log=True: events.update([text]))
+            self.compass_frame = compass_p["frame_id"]
+        self.levels_compass = self.compass is not None and \
+            compass_p["attitude_source"] == "imu_data"
 
     def row(self, row, bag_path):
         """One input row of the bag, as the node it is addressed to takes it."""
@@ -208,9 +236,52 @@ class _Feeder:
         if row.topic == "/imu/delta":
             self.delta(row, bag_path)
             return
+        if row.topic in ("/imu/mag_raw", "/imu/mag"):
+            self.magnetometer(row, bag_path)
+            return
         handler = self.handlers.get(row.topic)
         if handler is not None:
-            handler(bagio.decode_message(row, bag_path))
+            msg = bagio.decode_message(row, bag_path)
+            if row.topic == "/gnss/fix" and self.compass is not None:
+                self.compass.fix(msg.latitude, msg.longitude, msg.altitude,
+                                 msg.status.status >= msg.status.STATUS_FIX)
+            handler(msg)
+
+    def magnetometer(self, row, bag_path):
+        """An imu/mag_raw row (rotated into base_link as the imu_preprocessor does) or an
+        imu/mag row, through the compass levelled with the filter's attitude at its stamp (as
+        the strapdown's latest state serves mag_compass) to the ekf's mag/heading handler."""
+        if self.compass is None:
+            return
+        if row.msgtype != MAG_TYPE:
+            raise bagio.BagError(f"{bag_path}: {row.topic} carries {row.msgtype}, not {MAG_TYPE}")
+        try:
+            sec, nanosec, *field = self.read_mag(row.data)
+        except bagio.CdrLayoutError as err:
+            raise bagio.BagError(f"{bag_path}: message on {row.topic} at {row.t_ns} ns does not "
+                                 f"decode ({err})") from None
+        t_ns = sec * bagio.NS + nanosec
+        if row.topic == "/imu/mag_raw":
+            out = self.preprocessor.add_magnetic(t_ns, field)
+            if isinstance(out, str):
+                self.events[f"magnetometer sample rejected: {out}"] += 1
+                return
+            t_ns, field = out
+        t = t_ns * 1e-9
+        navigator = self.aiding.navigator
+        q = navigator.attitude_at(t)
+        if q is None:  # the strapdown's uncorrected start: its attitude unknown
+            self.compass.ins_state(t, (1.0, 0.0, 0.0, 0.0), (np.nan,) * 3, True, 0)
+        else:  # corrected by the filter, whose tilt sigma nav/status would carry
+            nav, att = navigator.solution, navigator.space["att"].start
+            var = np.diagonal(navigator.covariance())[att:att + 2]
+            self.compass.tilt_std(*np.sqrt(var).tolist())
+            self.compass.ins_state(t, q, (nav.lat, nav.lon, nav.h), False, 1)
+        reading = self.compass.mag(t, field)
+        if reading is not None:
+            self.handlers["/mag/heading"](self.compass_heading(
+                reading, bagio.ns_to_stamp(t_ns), self.compass_frame,
+                self.compass.true_reference))
 
     def increment(self, problem, t, dtheta, dv, dt, angle_var, velocity_var):
         """An increment with its increment_problem verdict, as the ekf node takes it."""
@@ -248,12 +319,15 @@ class _Feeder:
         for out in self.preprocessor.add(stamp, stamp, w, f):
             if out.rates is None:
                 self.events[f"imu sample rejected: {out.reason}"] += 1
-            elif self.orientation is not None:
-                heading = self.orientation.add(out.t_ns, (ow, ox, oy, oz),
-                                               orientation_covariance)
-                if heading is not None:
-                    self.aiding.heading(out.t_ns * 1e-9, *heading, self.declination,
-                                        source="imu/heading")
+            else:
+                if self.levels_compass:  # as imu/data serves mag_compass
+                    self.compass.imu(out.t_ns * 1e-9, out.rates[1])
+                if self.orientation is not None:
+                    heading = self.orientation.add(out.t_ns, (ow, ox, oy, oz),
+                                                   orientation_covariance)
+                    if heading is not None:
+                        self.aiding.heading(out.t_ns * 1e-9, *heading, self.declination,
+                                            source="imu/heading")
             for inc in out.increments:
                 problem = increment_problem(tuple(inc.dtheta), tuple(inc.dv), inc.dt)
                 self.increment(problem, inc.t_ns * 1e-9, inc.dtheta, inc.dv, inc.dt,

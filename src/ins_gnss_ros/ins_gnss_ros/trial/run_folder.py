@@ -66,7 +66,7 @@ def new_run_folder(out) -> Path:
 
 
 def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
-                  graph=None, faults=None, satellites=None) -> dict:
+                  graph=None, faults=None, satellites=None, events=None) -> dict:
     """Write ``OUT/replay.json``, the facts of a replay, and return them.
 
     Parameters
@@ -93,6 +93,9 @@ def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
     satellites : dict, optional
         The reduced-constellation windows (``satellites``, ``satellite_windows_s`` and
         ``_ns``, ``satellites_kept``: the satellites left in each window).
+    events : Counter, optional
+        What the offline path's front end reported (refused inputs, withheld headings), by
+        text: the nodes' /diagnostics counters.
     """
     summary = {
         "input_bag": str(Path(bag_path).resolve()),
@@ -116,6 +119,8 @@ def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
         summary["faults"] = faults
     if satellites is not None:
         summary.update(satellites)
+    if events is not None:
+        summary["events"] = dict(sorted(events.items()))
     (out / "replay.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
 

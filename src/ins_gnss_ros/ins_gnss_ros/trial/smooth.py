@@ -132,7 +132,7 @@ def smooth(bag_path, profile_path, out, outages=None, point=None, exports=(),
             desc="writing")))
     toc_write = time.perf_counter()
     summary = run.summary(out, bag_path, outages, "smooth",
-                          graph=("imu_preprocessor", "ekf (filter only)", "rts smoother"))
+                          graph=run.graph + ("rts smoother",))
     summary["point_m"] = None if lever is None else lever.tolist()
     summary["exports"] = [str(p) for p in export_run(out, formats)] if formats else []
     summary["timing_s"] = {"forward": toc_forward - tic, "smoother": toc_smooth - toc_forward,
