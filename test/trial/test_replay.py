@@ -389,11 +389,9 @@ def test_offline_fuses_the_compass_as_the_graph_does(default_drive, tmp_path):
     """--offline runs mag_compass's front end, levelled with the filter's attitude at each
     sample: on the simulated drive with the magnetometer taken as calibrated (no field fit to
     wait for), it fuses the headings the graph's mag_compass publishes (to 3 %: the offline
-    nav/status, once a second, leaves out the last second's), and both keep the heading within
-    0.5 deg RMS of the truth after the start, within 15 % of each other (measured 0.47 / 0.42
-    deg: once the compass has aligned the heading, the first GNSS update takes the graph's
-    tilt sigma from 1.0 to 0.90 deg and the offline filter's to 0.95, and their roll then
-    parts by up to 0.2 deg; without the compass the two agree to 0.02 deg,
+    nav/status, once a second, leaves out the last second's), and their heading errors after
+    the start agree to 5 % (0.423 / 0.426 deg; 0.470 / 0.416 before the offline path timed its
+    increments as the messages do and the alignment rebuilt the system matrix,
     docs/results/product_path.md)."""
     from ins_gnss_ros.trial.report import evaluate_run
 
@@ -414,7 +412,7 @@ def test_offline_fuses_the_compass_as_the_graph_does(default_drive, tmp_path):
     graph, _ = evaluate_run(tmp_path / "graph", plots=False, skip_s=35.0)
     offline, _ = evaluate_run(tmp_path / "offline", plots=False, skip_s=35.0)
     a, b = graph.stats["heading_deg"].rms, offline.stats["heading_deg"].rms
-    assert max(a, b) < 0.5 and abs(b - a) <= 0.15 * a, (a, b)
+    assert max(a, b) < 0.5 and abs(b - a) <= 0.05 * a, (a, b)
 
 
 def _walk(tree, static, frame, root):

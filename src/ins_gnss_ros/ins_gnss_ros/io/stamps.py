@@ -31,6 +31,15 @@ def stamp_to_sec(stamp: Time) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
+def ns_to_sec(t_ns: int) -> float:
+    """Seconds (float) of integer ns, as :func:`stamp_to_sec` gives them for the stamp of those
+    ns: ``t_ns * 1e-9`` differs from it in the last bit for many stamps, and a path that timed
+    its IMU increments one way and its measurements the other (the offline replay did) applied
+    a measurement stamped at a sample's own time one sample early."""
+    sec, nanosec = divmod(int(t_ns), NS)
+    return sec + nanosec * 1e-9
+
+
 def msg_stamp_ns(msg) -> int:
     """Integer ns of a message's header stamp (``rosgraph_msgs/Clock``: of its clock field;
     ``tf2_msgs/TFMessage``: of its first transform)."""

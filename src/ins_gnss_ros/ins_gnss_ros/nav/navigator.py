@@ -753,4 +753,5 @@ class Navigator:
         s.nav, s.ekf.P = rotate_yaw(s.nav, s.ekf.P, self._space, delta, sigma,
                                     self.config.sigma_yaw_align, s.rest_pos, velocity_gain)
         s.heading_known, s.mode, s.t_last_aid = True, NAVIGATING, s.nav.t
+        s.t_model = -np.inf  # the system matrix holds the attitude: rebuilt at the next step
         self._recorder.correct(s, np.zeros(self._space.size), self._published_var())

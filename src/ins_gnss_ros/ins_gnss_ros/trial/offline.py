@@ -9,8 +9,9 @@ section the :class:`~ins_gnss_ros.nav.navigator.Navigator`
 :class:`~ins_gnss_ros.nav.aiding.Aiding` front end that judges every input. What differs from
 the graph is only that no strapdown node follows the filter: with a ``mag_compass`` section the
 :class:`~ins_gnss_ros.magnetic.compass_front_end.CompassFrontEnd` levels each magnetometer sample
-with the filter's attitude turned to its time (:meth:`~ins_gnss_ros.nav.navigator.Navigator.attitude_at`)
-and its heading goes to the ekf's ``mag/heading`` handler, and the outputs are the filter's own
+with the filter's attitude turned to its time
+(:meth:`~ins_gnss_ros.nav.navigator.Navigator.attitude_at`) and its heading goes to the ekf's
+``mag/heading`` handler, and the outputs are the filter's own
 solution at its covariance epochs (10 Hz by default) as ``ins/state``, ``nav/odom``,
 ``nav/fix`` (``STATUS_NO_FIX`` unless NAVIGATING, else ``STATUS_FIX``), ``/tf`` (with
 ``publish_tf``: map -> base_link, and ``/tf_static`` base_link -> imu_link and gnss_0, built as
@@ -267,7 +268,7 @@ class _Feeder:
                 self.events[f"magnetometer sample rejected: {out}"] += 1
                 return
             t_ns, field = out
-        t = t_ns * 1e-9
+        t = bagio.ns_to_sec(t_ns)
         navigator = self.aiding.navigator
         q = navigator.attitude_at(t)
         if q is None:  # the strapdown's uncorrected start: its attitude unknown
@@ -315,22 +316,23 @@ class _Feeder:
                                  f"decode ({err})") from None
         orientation_covariance, w, f = values[:9], tuple(values[9:12]), tuple(values[12:])
         stamp = sec * bagio.NS + nanosec
-        # A recorded stream arrives as it was stamped: the arrival clock is the stamp.
+        # A recorded stream arrives as it was stamped: the arrival clock is the stamp. Times
+        # in s as the nodes read them from the messages' stamps (io.ns_to_sec).
         for out in self.preprocessor.add(stamp, stamp, w, f):
+            t = bagio.ns_to_sec(out.t_ns)
             if out.rates is None:
                 self.events[f"imu sample rejected: {out.reason}"] += 1
             else:
                 if self.levels_compass:  # as imu/data serves mag_compass
-                    self.compass.imu(out.t_ns * 1e-9, out.rates[1])
+                    self.compass.imu(t, out.rates[1])
                 if self.orientation is not None:
                     heading = self.orientation.add(out.t_ns, (ow, ox, oy, oz),
                                                    orientation_covariance)
                     if heading is not None:
-                        self.aiding.heading(out.t_ns * 1e-9, *heading, self.declination,
-                                            source="imu/heading")
+                        self.aiding.heading(t, *heading, self.declination, source="imu/heading")
             for inc in out.increments:
                 problem = increment_problem(tuple(inc.dtheta), tuple(inc.dv), inc.dt)
-                self.increment(problem, inc.t_ns * 1e-9, inc.dtheta, inc.dv, inc.dt,
+                self.increment(problem, bagio.ns_to_sec(inc.t_ns), inc.dtheta, inc.dv, inc.dt,
                                inc.angle_var, inc.velocity_var)
 
 
