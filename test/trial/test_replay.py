@@ -292,6 +292,17 @@ def test_bad_profiles_are_one_line_errors(tmp_path, car_bag):
         assert "\n" not in str(info.value) and name in str(info.value)
 
 
+def test_offline_compass_errors_are_profile_errors(tmp_path, car_bag):
+    """--offline builds the graph's compass where the ekf fuses its headings: a calibration
+    file that does not read is a one-line error naming the section, as the node's would be."""
+    path = tmp_path / "compass.yaml"
+    path.write_text(PROFILE + "ekf:\n  ros__parameters:\n    use_magnetic_heading: true\n"
+                    "mag_compass:\n  ros__parameters:\n    calibration_file: /nonexistent.yaml\n")
+    with pytest.raises(ProfileError, match="mag_compass: parameter 'calibration_file'") as info:
+        replay_offline(car_bag, path, tmp_path / "out")
+    assert "\n" not in str(info.value)
+
+
 def test_nodes_as_processes_on_dds(car_bag, profile, tmp_path):
     """--rate 2 --processes: the strapdown as a console-script process with use_sim_time, the
     bag played at 2x on DDS. DDS on a loaded 2-core machine may drop increments (a reader's

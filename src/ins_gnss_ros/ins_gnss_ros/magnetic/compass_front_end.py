@@ -208,8 +208,9 @@ class CompassFrontEnd:
         InsState's mode ALIGNING and correction_sequence): a strapdown no filter has corrected
         while aligning integrates from its initial-attitude parameters and has no known roll
         and pitch, however level it looks; one a filter corrects has the roll and pitch error
-        that filter reports (:meth:`tilt_std`), not the parameters' (a 1 deg tilt error taken
-        for 0.05 deg aligned the heading of a simulated car 14 % too confidently)."""
+        that filter reports (:meth:`tilt_std`), not the parameters' (a MEMS filter's tilt
+        sigma after levelling, about 1 deg, makes a reading's variance over ten times that of
+        the parameters' 0.05 deg)."""
         q = np.asarray(q_nb, float)
         if not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1.0) > 1e-3:
             self.count("invalid ins/state ignored")

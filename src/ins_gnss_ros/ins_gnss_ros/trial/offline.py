@@ -182,8 +182,11 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
         preprocessor = preprocessor_from_params(pre_p)
     except ParameterError as err:
         raise ProfileError(f"{profile.path}: imu_preprocessor: {err}") from None
-    feed = _Feeder(aiding, preprocessor, pre_p, ekf_p, events,
-                   compass_p if runs_compass else None)
+    try:
+        feed = _Feeder(aiding, preprocessor, pre_p, ekf_p, events,
+                       compass_p if runs_compass else None)
+    except ParameterError as err:  # the compass's calibration file
+        raise ProfileError(f"{profile.path}: mag_compass: {err}") from None
     counts = MessageCounts()
     for row in tqdm(input_rows(bag_path, remap), disable=not progress, unit="msg",
                     desc="forward", total=input_count(bag_path, remap)):
