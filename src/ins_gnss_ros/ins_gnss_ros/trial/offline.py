@@ -165,7 +165,7 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
     profile = load_profile(profile_path)
     pre_p, ekf_p, compass_p = offline_parameters(profile)
     runs_compass = compass_p is not None and ekf_p["use_magnetic_heading"]
-    check_inputs(bag_path, OFFLINE_TOPICS + MAGNETOMETER_TOPICS * runs_compass, remap)
+    check_inputs(bag_path, OFFLINE_TOPICS + (MAGNETOMETER_TOPICS if runs_compass else ()), remap)
     # The GNSS span (outage windows) first, from the GNSS topics alone: the rest is streamed.
     windows = gnss_windows(bag_rows(bag_path, lambda topic: topic.startswith(GNSS_PREFIX),
                                     remap) if outages else (), outages)
@@ -240,7 +240,7 @@ class _Feeder:
         if row.topic == "/imu/delta":
             self.delta(row, bag_path)
             return
-        if row.topic in ("/imu/mag_raw", "/imu/mag"):
+        if row.topic in MAGNETOMETER_TOPICS:
             self.magnetometer(row, bag_path)
             return
         handler = self.handlers.get(row.topic)
