@@ -441,14 +441,14 @@ def yaw_error_gain(nav, space, run):
     return g
 
 
-def course_error_gain(nav, space, v_enu, rest_pos=None, restarted=False):
+def course_error_gain(nav, space, v_enu, pivot=None, restarted=False):
     """The errors (n, 3) of a solution just aligned on the course of velocity v_enu (ENU, m/s)
     per unit error of that velocity: the yaw takes -c'e_v (c its :func:`course_gradient`; the
-    course errs by c'e_v), and the rest with it by :func:`yaw_error_gain` (rest_pos: lat, lon,
-    h where the distance turned with it began, as for :func:`rotate_yaw`); ``restarted``
+    course errs by c'e_v), and the rest with it by :func:`yaw_error_gain` (pivot: lat, lon, h
+    the solution was turned about, as for :func:`rotate_yaw`); ``restarted``
     (:func:`restart_velocity`): the solution's velocity is v_enu, its error e_v itself."""
-    run = np.zeros(3) if rest_pos is None else \
-        position_residual_enu(nav.lat, nav.lon, nav.h, *rest_pos)
+    run = np.zeros(3) if pivot is None else \
+        position_residual_enu(nav.lat, nav.lon, nav.h, *pivot)
     g = yaw_error_gain(nav, space, run)
     if restarted:
         g[space["vel"]] = 0.0
@@ -537,7 +537,7 @@ def yaw_error_from_heading(azimuth, variance, q_nb):
     return yaw - _yaw_of_x(q_nb), sigma
 
 
-def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, rest_pos=None, velocity_gain=None):
+def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, pivot=None, velocity_gain=None):
     """Turn a solution and its covariance by delta about Up (the heading alignment).
 
     Parameters
@@ -551,8 +551,9 @@ def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, rest_pos=None, velocity
     sigma, sigma_floor : float
         Standard deviation of the error the measured heading (or course) brings into delta,
         and the floor of the yaw standard deviation [rad].
-    rest_pos : tuple of 3 float, optional
-        (lat, lon, h) where the vehicle left its rest: the distance run since went the wrong way
+    pivot : tuple of 3 float, optional
+        (lat, lon, h) where the solution last met the truth (the antenna of the last fix it
+        took): its offset from there (the lever arm, the distance run since) went the wrong way
         too and is turned about that point.
     velocity_gain : (3,) array_like, optional
         For a rotation measured against the INS velocity's direction
@@ -568,8 +569,8 @@ def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, rest_pos=None, velocity
     """
     rz = quat_from_rotvec([0.0, 0.0, delta])
     run = np.zeros(3)  # the distance turned with the yaw, ENU m
-    if rest_pos is not None:
-        d = position_residual_enu(nav.lat, nav.lon, nav.h, *rest_pos)
+    if pivot is not None:
+        d = position_residual_enu(nav.lat, nav.lon, nav.h, *pivot)
         run = quat_rotate(rz, d)
         nav = apply_correction(nav, d - run, np.zeros(3), np.zeros(3))
     nav = replace(nav, q_nb=quat_normalize(quat_mul(rz, nav.q_nb)),

@@ -41,7 +41,7 @@ from .imu_buffer import ImuBuffer
 from .imu_gaps import BridgedGaps
 from .increments import SensorErrors
 from .integrity import Integrity, rejection_start
-from .lever_arm import point_velocity
+from .lever_arm import lever_arm_position, point_velocity
 from .measurement_types import GNSS_TYPES, GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, \
     SatelliteRanges, SpeedLog, StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
@@ -296,8 +296,8 @@ class Navigator:
         forced measurement kinds (integrity.py) and, on the position, the error common to the
         fixes the filter follows (GnssFix.common_var: the filter's position is relative to
         them) and, until the heading is aligned, UNKNOWN_YAW_VAR on the yaw and what that
-        unknown yaw does to the horizontal velocity and position (the lever arm and the path
-        run since the last rest: :func:`unknown_direction_var`)."""
+        unknown yaw does to the horizontal velocity and position (the IMU's offset from the
+        antenna the fixes pinned: :func:`unknown_direction_var`)."""
         aligned = self._state.heading_known
         if not self._integrity.floors and not any(self._fix_common_var) and aligned:
             return self._no_var  # the usual case, asked at every epoch and update
@@ -308,15 +308,14 @@ class Navigator:
         var[east + 2] += vertical
         if not aligned:
             var[self._space["att"].start + 2] += UNKNOWN_YAW_VAR
-            nav, rest = self._state.nav, self._state.rest_pos
+            nav = self._state.nav
             velocity = self._space["vel"].start
             var[velocity:velocity + 2] += unknown_direction_var(np.hypot(*nav.v_enu[:2]))
-            # The fixes pin the antenna: the IMU is off by the unknown turn of the lever arm
-            # and, once moving (fixes refused), of the path run since the last rest.
-            run = 0.0 if rest is None else \
-                np.hypot(*meas.position_residual_enu(nav.lat, nav.lon, nav.h, *rest)[:2])
-            lever = np.hypot(*quat_rotate(nav.q_nb, self._lever)[:2])
-            var[east:east + 2] += unknown_direction_var(run + lever)
+            # The fixes pin the antenna: the IMU is off by the unknown turn of its offset from
+            # there, the lever arm and, once moving (fixes refused), the path run since.
+            offset = meas.position_residual_enu(nav.lat, nav.lon, nav.h,
+                                                *self._state.pinned_antenna)
+            var[east:east + 2] += unknown_direction_var(np.hypot(*offset[:2]))
         return var
 
     def updates_since(self, count):
@@ -424,6 +423,7 @@ class Navigator:
                                     cfg.sigma_tilt0)
             if at_rest or epoch - s.t_still <= REST_HOLD:
                 take_static_gyro_bias(s.levelling, self._space, cfg.noise, P0, s.estimates)
+            s.pinned_antenna = (m.lat, m.lon, m.h)
             self._start(levelled_state(s.levelling, m.lat, m.lon, m.h, self._lever,
                                        s.gnss_speed, cfg.static_speed, float(buf.time(k - 1))),
                         P0)
@@ -544,8 +544,6 @@ class Navigator:
         v_ant = point_velocity(st.v_enu, st.q_nb, s.omega, self._lever, st.lat)
         innov = meas.gnss_position(self._space, st, m.lat, m.lon, m.h, m.cov_enu, self._lever,
                                    dzdt=v_ant)
-        if self._at_rest(epoch) and not s.heading_known:
-            s.rest_pos = (st.lat, st.lon, st.h)
         fix = (m.lat, m.lon, m.h)
         frozen = fix == s.last_fix and np.linalg.norm(v_ant) > self.config.frozen_speed
         s.last_fix = fix
@@ -554,6 +552,13 @@ class Navigator:
             return
         if self._update(innov, epoch).accepted:
             s.t_fix_accepted = m.t
+            if not s.heading_known:
+                # The corrected solution's antenna (a correction turned with the run would err
+                # by up to twice its size); the epoch's record publishes the offset from it.
+                here = extrapolate(s.nav, epoch - s.nav.t, s.a_enu)
+                s.pinned_antenna = lever_arm_position(here.lat, here.lon, here.h, here.q_nb,
+                                                      self._lever)
+                self._recorder.correct(s, self._no_var, self._published_var())
 
     def _gnss_velocity(self, m, st, epoch):
         s, cfg = self._state, self.config
@@ -573,7 +578,7 @@ class Navigator:
                 delta, sigma, aligned_by = yaw_error_from_motion(v, m.cov_enu, s.nav.v_enu,
                                                                  s.nav.q_nb)
             self._rotate_yaw(delta, sigma, aligned_by)
-            gain = course_error_gain(s.nav, self._space, v, s.rest_pos, restart)
+            gain = course_error_gain(s.nav, self._space, v, s.pinned_antenna, restart)
             if restart:
                 s.nav, s.ekf.P = restart_velocity(s.nav, s.ekf.P, self._space, v, m.cov_enu,
                                                   gain)
@@ -751,7 +756,7 @@ class Navigator:
         """The heading alignment (alignment.rotate_yaw): from here on NAVIGATING."""
         s = self._state
         s.nav, s.ekf.P = rotate_yaw(s.nav, s.ekf.P, self._space, delta, sigma,
-                                    self.config.sigma_yaw_align, s.rest_pos, velocity_gain)
+                                    self.config.sigma_yaw_align, s.pinned_antenna, velocity_gain)
         s.heading_known, s.mode, s.t_last_aid = True, NAVIGATING, s.nav.t
         s.t_model = -np.inf  # the system matrix holds the attitude: rebuilt at the next step
         self._recorder.correct(s, np.zeros(self._space.size), self._published_var())

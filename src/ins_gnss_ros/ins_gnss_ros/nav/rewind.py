@@ -68,8 +68,10 @@ class RunState:
     rest_dtheta, rest_time : (3,) ndarray, float
         The gyros' angle increments (as measured, before the running estimates' compensation)
         summed over the segments at rest since the last ZARU, rad, and their length, s.
-    rest_pos : tuple of 3 float or None
-        (lat, lon, h) of the IMU at the last fix at rest while the heading was unknown.
+    pinned_antenna : tuple of 3 float or None
+        (lat, lon, h) of the antenna at the last fix the filter took while the heading was
+        unknown (the first fix included): the solution, run with a yaw that may be anything,
+        meets the truth there, and the heading alignment turns it about that point.
     last_fix : tuple of 3 float or None
         (lat, lon, h) of the last GNSS fix (a frozen receiver repeats it).
     last_velocity : tuple of 3 float or None
@@ -102,7 +104,7 @@ class RunState:
     omega_smooth: np.ndarray = field(default_factory=lambda: np.zeros(3))
     rest_dtheta: np.ndarray = field(default_factory=lambda: np.zeros(3))
     rest_time: float = 0.0
-    rest_pos: tuple | None = None
+    pinned_antenna: tuple | None = None
     last_fix: tuple | None = None
     last_velocity: tuple | None = None
     t_fix_accepted: float = -np.inf
