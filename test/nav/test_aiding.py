@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ins_gnss_ros.nav.aiding import Aiding, AidingPolicy, WheelPolicy
+from ins_gnss_ros.nav.aiding import WHITE_SHARE, Aiding, AidingPolicy, WheelPolicy
 from ins_gnss_ros.nav.earth import earth_rate_enu, normal_gravity
 from ins_gnss_ros.nav.filter_config import PARAMS, navigator_config
 from ins_gnss_ros.nav.imu_timing import Verdict
@@ -266,6 +266,25 @@ def test_fixes_without_covariance_are_weighted_by_their_white_noise_the_rest_kep
     assert weighted[0] + common[0] == pytest.approx(25.0, rel=0.4 if white > 1 else 1e-9)
     assert weighted[0] + common[0] <= 25.0 + 1e-9
     assert weighted[2] == pytest.approx(4.0 * weighted[0]) and weighted[2] + common[1] == 100.0
+
+
+def test_one_fix_reported_smaller_is_split_as_the_receiver_s_others():
+    # A single-point receiver's sigma changes from fix to fix: one reported a tenth smaller than
+    # the others crossed WHITE_SHARE, was taken whole, and published no shared error (a
+    # simulated car: published sigma 3.2 -> 0.07 m for that fix, position NEES 4,270).
+    front, nav, _ = aiding()
+    rng = np.random.default_rng(1)
+    lat0, lon0 = 59.9, 30.3
+    for k in range(60):
+        sigma = 2.7 if k == 59 else 3.0   # m per axis; the fixes' white noise is 2 m
+        e, n = 2.0 * rng.standard_normal(2)
+        front.fix(k / 5.0, lat0 + n / M_PER_DEG, lon0 + e / (M_PER_DEG * np.cos(np.radians(lat0))),
+                  10.0, np.diag([sigma ** 2, sigma ** 2, 4.0 * sigma ** 2]), 0,
+                  covariance_known=True)
+    before, last = [m for m in nav.measurements if isinstance(m, GnssFix)][-2:]
+    white = before.cov_enu[0, 0]                  # measured from the fixes' differences
+    assert WHITE_SHARE * 2.7 ** 2 <= white < WHITE_SHARE * 3.0 ** 2  # the last alone: whole
+    assert last.cov_enu[0, 0] == white and last.common_var[0] == pytest.approx(2.7 ** 2 - white)
 
 
 def still_imu(front, t0, t1, bias, rate=100.0, seed=4):
