@@ -53,7 +53,8 @@ SHARED_ERROR_SIGMA = 0.3
 #: below the truth makes the filter chase the fixes' noise (white fixes as reported: a simulated
 #: SAR flight's smoothed 1 s relative error 0.02 -> 1.6 mm).
 WHITE_SHARE = 0.5
-#: Time over which the fixes' white share is averaged for that decision, s.
+#: Time over which the fixes' white share is averaged for that decision, s: ten fixes at 5 Hz,
+#: so that neither one fix's reported sigma nor one fluke of the measured noise flips it.
 SHARE_TIME_CONSTANT = 2.0
 #: Sigma of a GNSS velocity without covariance (an all-zero one: a driver that fills none, or a
 #: geometry_msgs/TwistStamped converted), m/s horizontal; twice that vertically. The conservative
@@ -231,7 +232,7 @@ class Aiding:
         self.last_accepted_t = -math.inf  # newest accepted update, s
         self.forced: set[str] = set()  # kinds forced in since the filter last NAVIGATED
         self._course = CourseFromFixes()
-        self._white_share = None  # (t, the fixes' white share averaged: fix), s and 0-1
+        self._white_share = None  # (stamp s, the fixes' white share averaged up to it)
         # the IMU's clock and rates against the fixes' course (for diagnostics and the
         # navigator's mode)
         self.timing = ImuTimingCheck(gnss_latency_state="td" in navigator.config.extras)

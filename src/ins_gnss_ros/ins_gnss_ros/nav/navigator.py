@@ -558,7 +558,7 @@ class Navigator:
                 here = extrapolate(s.nav, epoch - s.nav.t, s.a_enu)
                 s.pinned_antenna = lever_arm_position(here.lat, here.lon, here.h, here.q_nb,
                                                       self._lever)
-                self._recorder.correct(s, self._no_var, self._published_var())
+                self._recorder.correct(s, np.zeros(self._space.size), self._published_var())
 
     def _gnss_velocity(self, m, st, epoch):
         s, cfg = self._state, self.config
