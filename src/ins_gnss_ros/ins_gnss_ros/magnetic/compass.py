@@ -47,9 +47,9 @@ def level_field(mag_b, roll, pitch) -> np.ndarray:
 
 def level_rotation(roll, pitch) -> np.ndarray:
     """C_Lb = Ry(pitch) Rx(roll) of ROS roll and pitch (rad), shape (..., 3, 3); one attitude's
-    is kept (read-only): a compass sample is levelled three or four times (disturbance check,
-    azimuth, its variance, the calibration's share of it), and building the rotation cost more
-    than the rest."""
+    is kept (read-only): a compass sample is levelled once for its azimuth and again by the
+    field calibration (its readings, its share of the variance), and building the rotation cost
+    more than the rest."""
     if np.ndim(roll) == 0 and np.ndim(pitch) == 0:
         return _level_rotation(float(roll), float(pitch))
     return dcm_from_euler(roll, pitch, np.zeros_like(np.asarray(roll, float)))
