@@ -176,6 +176,13 @@ def mech_run(lat, lon, h, v0, q0, dths, dvs, dt, ell_par, h_ref, k1, k2):
 
 
 @njit(cache=True)
+def _compensated(measured, dt, bias, scale):
+    """One axis of an increment over dt compensated as increments.SensorErrors.compensate
+    does: (measured - bias dt) / (1 + scale)."""
+    return (measured - dt * bias) / (1.0 + scale)
+
+
+@njit(cache=True)
 def mech_segment(lat, lon, h, v, q, th, dv, cth, cdv, dts, gyro_bias, gyro_scale, accel_bias,
                  accel_scale, dt, ell_par, sums):
     """The navigator's time update of one segment of raw samples on the solution (lat, lon,
@@ -191,8 +198,8 @@ def mech_segment(lat, lon, h, v, q, th, dv, cth, cdv, dts, gyro_bias, gyro_scale
     dvn = np.empty(3)
     for i in range(th.shape[0]):
         for j in range(3):
-            a = (th[i, j] - dts[i] * gyro_bias[j]) / (1.0 + gyro_scale[j])
-            b = (dv[i, j] - dts[i] * accel_bias[j]) / (1.0 + accel_scale[j])
+            a = _compensated(th[i, j], dts[i], gyro_bias[j], gyro_scale[j])
+            b = _compensated(dv[i, j], dts[i], accel_bias[j], accel_scale[j])
             if i == 0:
                 sums[0, j], sums[1, j] = a, b
             else:
@@ -213,8 +220,8 @@ def mech_step_compensated(lat, lon, h, v, q, th, dv, dt, gyro_bias, gyro_scale, 
     (1 + scale)), the compensated increments written into comp (2, 3): the strapdown
     node's per-increment path in one call. Returns (lat, lon, h)."""
     for j in range(3):
-        comp[0, j] = (th[j] - gyro_bias[j] * dt) / (1.0 + gyro_scale[j])
-        comp[1, j] = (dv[j] - accel_bias[j] * dt) / (1.0 + accel_scale[j])
+        comp[0, j] = _compensated(th[j], dt, gyro_bias[j], gyro_scale[j])
+        comp[1, j] = _compensated(dv[j], dt, accel_bias[j], accel_scale[j])
     return mech_step(lat, lon, h, v, q, comp[0], comp[1], dt, ell_par, math.nan, 0.0, 0.0,
                      out_v, out_q)
 
@@ -226,9 +233,9 @@ def turn_attitude(q, th, cth, dts, gyro_bias, gyro_scale, omega, tail, out_q):
     and transport rate left out (navigator.Navigator.attitude_at). Writes out_q."""
     qw, qx, qy, qz = q[0], q[1], q[2], q[3]
     for i in range(th.shape[0]):
-        rx = (th[i, 0] - dts[i] * gyro_bias[0]) / (1.0 + gyro_scale[0]) + cth[i, 0]
-        ry = (th[i, 1] - dts[i] * gyro_bias[1]) / (1.0 + gyro_scale[1]) + cth[i, 1]
-        rz = (th[i, 2] - dts[i] * gyro_bias[2]) / (1.0 + gyro_scale[2]) + cth[i, 2]
+        rx = _compensated(th[i, 0], dts[i], gyro_bias[0], gyro_scale[0]) + cth[i, 0]
+        ry = _compensated(th[i, 1], dts[i], gyro_bias[1], gyro_scale[1]) + cth[i, 1]
+        rz = _compensated(th[i, 2], dts[i], gyro_bias[2], gyro_scale[2]) + cth[i, 2]
         rw, rx, ry, rz = _quat_rotvec(rx, ry, rz)
         qw, qx, qy, qz = _qmul(qw, qx, qy, qz, rw, rx, ry, rz)
     rw, rx, ry, rz = _quat_rotvec(omega[0] * tail, omega[1] * tail, omega[2] * tail)
