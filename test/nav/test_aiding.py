@@ -21,7 +21,8 @@ from ins_gnss_ros.params import ParameterError, resolve
 class Recorder:
     """A navigator that keeps what it is given (levelled and aligned)."""
 
-    config = SimpleNamespace(noise=SimpleNamespace(accel_psd=1e-6, gyro_psd=1e-8), extras={})
+    config = SimpleNamespace(noise=SimpleNamespace(accel_psd=1e-6, gyro_psd=1e-8), extras={},
+                             static_speed=0.1)
     started = True
     solution = None  # (levelled: the gyros' azimuth projects on body z)
 
@@ -392,6 +393,33 @@ def test_the_rate_update_at_rest_averages_all_of_the_rest_to_the_white_noise_lim
     # against the true bias: a chi-square of 8 degrees of freedom, within 0.2 ... 3 of its mean
     # (99.8 %)
     assert 0.2 < np.mean(np.square(normalised)) < 3.0, normalised
+
+
+def test_a_noisy_receiver_s_velocity_at_rest_neither_aligns_nor_holds_the_fixes():
+    """A static start behind a receiver whose velocity scatters 0.3 m/s per axis, as its
+    covariance says (0.5 m/s or more on a quarter of the epochs by noise alone), 0.5 m fixes at
+    5 Hz, a still IMU, config/default.yaml's filter: no heading is taken from the noise's
+    course, and the fixes are used as at rest (the IMU and the fixes tell it: the receiver's
+    speed passes static_speed on 95 % of the epochs)."""
+    nav = Navigator(navigator_config(resolve(PARAMS, {}), record=True))
+    front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
+    rng = np.random.default_rng(7)
+    lat0, lon0, sigma_v = 59.9, 30.3, 0.3
+    for k in range(1, 151):  # 30 s
+        t = k / 5.0
+        still_imu(front, t - 0.2, t, np.radians([0.05, -0.05, 0.02]), seed=k)
+        e, n = 0.5 * rng.standard_normal(2)
+        front.fix(t, lat0 + n / M_PER_DEG, lon0 + e / (M_PER_DEG * np.cos(np.radians(lat0))),
+                  10.0, np.diag([0.25, 0.25, 1.0]), 0, covariance_known=True)
+        front.velocity(t, np.append(sigma_v * rng.standard_normal(2), 0.0),
+                       np.diag([sigma_v ** 2, sigma_v ** 2, 0.5 ** 2]))
+    nav.flush()
+    assert nav.started and not nav.heading_known
+    # from when the fixes have confirmed the rest (3.6 s here), held only where the speed
+    # passes three sigmas of its noise (1 % of the epochs)
+    held = [u.t for u in nav.output().updates if u.name == "GnssFix" and u.t > 5.0]
+    taken = [u.t for u in nav.output().updates if u.name == "gnss_pos" and u.accepted]
+    assert len(taken) > 120 and len(held) <= 3, held
 
 
 def test_diagnostics_say_the_first_fixes_wait_for_the_imu():

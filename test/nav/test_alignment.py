@@ -197,7 +197,7 @@ def test_levelled_start_and_yaw_rotation():
     levelling = al.Levelling().add(np.zeros((100, 3)), np.tile(f_b * 0.01, (100, 1)), 0.01)
     assert levelling.time == pytest.approx(1.0)
     lever = np.zeros(3)
-    st = al.levelled_state(levelling, 0.8, 0.1, 10.0, lever, 2.0, 0.1, 5.0)
+    st = al.levelled_state(levelling, 0.8, 0.1, 10.0, lever, 2.0, 5.0)
     np.testing.assert_allclose(quat_to_euler(st.q_nb), [0.02, -0.01, 0.0], atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(st.v_enu), 2.0)  # moving along body x
     noise = se.filter_noise(se.MEMS_ADIS16405, "rw")

@@ -16,7 +16,8 @@ from ins_gnss_ros.nav.measurement_types import HeadingFix
 class Recorder:
     """A levelled navigator that keeps the measurements it is given."""
 
-    config = SimpleNamespace(noise=SimpleNamespace(accel_psd=1e-6, gyro_psd=1e-8), extras={})
+    config = SimpleNamespace(noise=SimpleNamespace(accel_psd=1e-6, gyro_psd=1e-8), extras={},
+                             static_speed=0.1)
     started, solution = True, None  # (no solution: the gyros' azimuth projects on body z)
 
     def __init__(self):

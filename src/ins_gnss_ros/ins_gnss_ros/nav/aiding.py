@@ -28,8 +28,8 @@ from .imu_timing import ImuTimingCheck
 from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
 from .local_frame import to_map
 from .rotations import quat_to_dcm
-from .measurement_types import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, SpeedLog, \
-    StillImu, WheelOdometry, ZeroVelocity
+from .measurement_types import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, Rest, \
+    SpeedLog, StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .navigator import Navigator
 from .rest_detector import RestDetector
@@ -63,6 +63,18 @@ SHARE_TIME_CONSTANT = 2.0
 #: heading and pull the position beyond its covariance (a simulated car with 0.05 m/s velocities
 #: so published: position NEES 8 -> 33).
 UNKNOWN_VELOCITY_SIGMA = 0.2
+#: A receiver's speed tells rest by the navigator's static_speed when its reported sigma along
+#: the velocity is at most this fraction of static_speed: a standing vehicle's speed then
+#: passes static_speed by noise on at most a third of the epochs (exp(-1 / (2 f^2)) = 1/3). A
+#: noisier one (0.2 m/s per axis passes 0.1 m/s at rest on 88 % of the epochs, and while the
+#: heading was unknown its fixes were held as in motion) leaves rest to the rest detector
+#: (Rest); not a receiver whose speed can tell it: the detector lags a smooth start (taken
+#: beside the simulated RTK car's 0.05 m/s velocities, it held its first 0.2 m/s as rest, and
+#: the first fixes after the heading alignment were 6 sigma off).
+SPEED_TELLS_REST = 1.0 / math.sqrt(2.0 * math.log(3.0))
+#: Behind a noisy receiver, a speed beyond this many sigmas along the velocity is motion,
+#: whatever the rest detector says (noise alone passes it on exp(-4.5) = 1 % of the epochs).
+MOVING_SIGMAS = 3.0
 #: Heights this filter navigates at, m (a fix outside is corrupt; the integrity logic would
 #: otherwise force it in after a while).
 HEIGHT_RANGE = (-1000.0, 1e5)
@@ -242,6 +254,8 @@ class Aiding:
         self._wmm_declination = None  # at the datum, once a magnetic heading needs it
         self._first_held_t = math.nan  # the first fix held for the rest detector, s
         self._start_rest = False  # started in this still run before the fixes confirmed it
+        # the last gnss/vel's horizontal speed and reported sigma along it, m/s (NaN: none)
+        self._speed = (math.nan, math.nan)
         self.last_increment_t = math.inf  # end of the last increment, s
         self.wheel_still_since = math.inf  # stamp of the first of the zero wheel speeds, s
         # The measured error correlation of each heading source with a bias of its own
@@ -374,12 +388,20 @@ class Aiding:
         # updates of that rest once confirmed, also when a heading source aligned it
         # meanwhile: they are the static start's velocity and gyro bias (its levelling took a
         # second of data), which the start could not wait for; they end as the vehicle moves.
-        # Rest stands in for the receiver's speed: once gnss/vel has come, nothing asks the
-        # detector again (here or in fix), so it is no longer fed.
-        if not self._has_velocity():
-            if self._rest.increment(t, dtheta, dv, dt) and \
-                    (not self.navigator.heading_known or self._start_rest):
-                self.navigator.add_measurement(ZeroVelocity(t))
+        # Rest stands in for the receiver's speed, and for a noisy receiver's while the heading
+        # is unknown (SPEED_TELLS_REST); otherwise nothing asks the detector (here or in fix),
+        # so it is not fed.
+        if self._rest_wanted():
+            rest = self._rest.increment(t, dtheta, dv, dt)
+            if not self._has_velocity():
+                if rest and (not self.navigator.heading_known or self._start_rest):
+                    self.navigator.add_measurement(ZeroVelocity(t))
+            elif self._rest.block_end == t and not math.isnan(self._rest.still_since):
+                # A still block behind a noisy receiver: rest once the fixes confirm it and the
+                # speed does not contradict it; before, the IMU's stillness holds the heading
+                # alignment off that receiver's speed (rest, or steady straight motion).
+                moving = self._speed[0] > MOVING_SIGMAS * self._speed[1]
+                self.navigator.add_measurement(Rest(t) if rest and not moving else StillImu(t))
             if math.isnan(self._rest.still_since):
                 self._start_rest = False  # it moved: the start's rest is over
         return None if gap == CONTIGUOUS else gap
@@ -439,7 +461,7 @@ class Aiding:
                               float(cov[2, 2]) - vertical)
                 white[2, 2] = vertical
                 cov = white
-        at_rest = not self._has_velocity() and \
+        at_rest = self._rest_wanted() and \
             self._rest.fix(t, lat, lon, h, self._course.fix_to_fix(cov))
         if self._without_velocity_before_start():
             if at_rest:
@@ -476,6 +498,13 @@ class Aiding:
             self._first_held_t = t
         return self._first_held_t
 
+    def _rest_wanted(self) -> bool:
+        """The rest detector's verdict is used: without a receiver velocity, or behind one too
+        noisy to tell rest (SPEED_TELLS_REST) while the heading is unknown (the filter uses
+        GNSS then only at rest)."""
+        return not self._has_velocity() or (not self.navigator.heading_known and self._speed[1]
+                                            > SPEED_TELLS_REST * self.navigator.config.static_speed)
+
     def _without_velocity_before_start(self) -> bool:
         """No gnss/vel so far and the filter not yet levelled: the first fixes wait for the
         rest detector's IMU verdict, so that a static start takes its gyro bias from the
@@ -511,10 +540,15 @@ class Aiding:
         if check.disagrees:
             self.report("gnss/vel refused: it disagrees with the fixes' displacement")
             return self._seen("gnss/vel", t, False)
+        speed = math.hypot(v_enu[0], v_enu[1])
         if _unknown(cov):
             sigma = UNKNOWN_VELOCITY_SIGMA
             cov = np.diag([sigma ** 2, sigma ** 2, (2.0 * sigma) ** 2])
             self.report(f"gnss/vel without covariance: {sigma:g} m/s assumed", log=False)
+            self._speed = (speed, math.nan)  # its noise unknown: its speed decides rest
+        else:
+            along = np.array([v_enu[0], v_enu[1]]) / speed if speed > 0.0 else np.array([1.0, 0.0])
+            self._speed = (speed, math.sqrt(float(along @ cov[:2, :2] @ along)))
         cov = _floored(cov, self.policy.velocity_sigma_floor)
         self.navigator.add_measurement(
             GnssVelocity(t - self.policy.velocity_delay, v_enu, cov))

@@ -48,6 +48,12 @@ UNIFORM_HEADING_VAR = np.pi ** 2 / 3.0
 #: it, where a heading source or the motion alignment against the INS velocity (no side-slip
 #: assumed) is the better path.
 SIDE_SLIP_SIGMA = np.radians(3.0)
+#: Largest 1 sigma of a course the heading is aligned on while the IMU is still [rad]: a speed
+#: of five standard deviations of the velocity across it. Still, the vehicle stands or moves
+#: steadily straight on; a noisy receiver's speed at rest passes the alignment speed by noise
+#: alone (0.3 m/s per axis: 0.5 m/s on a quarter of the epochs) with a random course, five
+#: sigmas once in exp(12.5) = 270,000 epochs.
+MAX_STILL_COURSE_SIGMA = 0.2
 
 
 def level(f_b):
@@ -202,6 +208,13 @@ def yaw_from_velocity(v_enu, cov_enu):
     return float(np.arctan2(v_enu[1], v_enu[0])), float(np.sqrt(grad @ np.asarray(cov_enu) @ grad))
 
 
+def course_is_known(v_enu, cov_enu):
+    """The course over ground of a GNSS velocity (ENU, m/s; covariance (m/s)^2) is known well
+    enough to align the heading on while the IMU is still: its sigma is at most
+    MAX_STILL_COURSE_SIGMA."""
+    return yaw_from_velocity(v_enu, cov_enu)[1] <= MAX_STILL_COURSE_SIGMA
+
+
 def yaw_from_heading(azimuth, sigma_azimuth, baseline_yaw_b=0.0):
     """Body yaw from a heading (azimuth) measurement, e.g. a dual-antenna GNSS baseline.
 
@@ -286,7 +299,7 @@ def take_static_gyro_bias(levelling, space, noise, P, estimates):
         P[block, block] = np.eye(3) * bias[1]
 
 
-def levelled_state(levelling, lat, lon, h, lever_b, gnss_speed, static_speed, t):
+def levelled_state(levelling, lat, lon, h, lever_b, speed, t):
     """The first solution: levelled with yaw 0 at the IMU below an antenna fix.
 
     Parameters
@@ -296,24 +309,22 @@ def levelled_state(levelling, lat, lon, h, lever_b, gnss_speed, static_speed, t)
         Antenna position [rad, rad, m].
     lever_b : (3,) ndarray
         Antenna relative to the IMU, FLU [m].
-    gnss_speed : float
-        Last GNSS horizontal speed [m/s] (NaN if none yet).
-    static_speed : float
-        Speed below which the vehicle is at rest [m/s].
+    speed : float
+        Horizontal speed [m/s]: 0 at rest, the last GNSS speed in motion (NaN if none yet).
     t : float
         Time of the state [s].
 
     Returns
     -------
     NavState
-        At rest, or moving at gnss_speed along the body x axis (started in motion: no
-        side-slip assumed in the yaw-free frame).
+        At rest, or moving at speed along the body x axis (started in motion: no side-slip
+        assumed in the yaw-free frame).
     """
     q = levelling.attitude()
     lat, lon, h = lever_arm_position(lat, lon, h, q, -lever_b)
     v = np.zeros(3)
-    if np.isfinite(gnss_speed) and gnss_speed > static_speed:
-        v = quat_rotate(q, [gnss_speed, 0.0, 0.0])
+    if np.isfinite(speed) and speed > 0.0:
+        v = quat_rotate(q, [speed, 0.0, 0.0])
     return NavState(lat, lon, h, v, q, t)
 
 

@@ -30,9 +30,9 @@ import numpy as np
 from . import _kernels
 from . import measurements as meas
 from . import modes
-from .alignment import Levelling, course_error_gain, fixes_with_course, initial_covariance, \
-    levelled_state, restart_velocity, rotate_yaw, take_static_gyro_bias, without_cross_track, \
-    yaw_error_from_course, yaw_error_from_heading, yaw_error_from_motion
+from .alignment import Levelling, course_error_gain, course_is_known, fixes_with_course, \
+    initial_covariance, levelled_state, restart_velocity, rotate_yaw, take_static_gyro_bias, \
+    without_cross_track, yaw_error_from_course, yaw_error_from_heading, yaw_error_from_motion
 from .earth import WGS84
 from .ekf import LEVER_ARM_EXTRAS, ErrorStateEKF, StateSpace
 from .error_model import make_layout
@@ -43,7 +43,7 @@ from .increments import SensorErrors
 from .integrity import Integrity, rejection_start
 from .lever_arm import lever_arm_position, point_velocity
 from .measurement_types import GNSS_TYPES, GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, \
-    SatelliteRanges, SpeedLog, StillImu, WheelOdometry, ZeroVelocity
+    Rest, SatelliteRanges, SpeedLog, StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .propagation import extrapolate, propagate
 from .recording import Recorder, published_covariance
@@ -405,7 +405,7 @@ class Navigator:
                 s.next_sample = k
             if isinstance(m, GnssVelocity):
                 s.gnss_speed = float(np.hypot(*m.v_enu[:2]))
-            elif isinstance(m, ZeroVelocity):
+            elif isinstance(m, (ZeroVelocity, Rest)):
                 s.t_rest = epoch
             elif isinstance(m, StillImu):
                 s.t_still = epoch
@@ -425,8 +425,8 @@ class Navigator:
                 take_static_gyro_bias(s.levelling, self._space, cfg.noise, P0, s.estimates)
             s.pinned_antenna = (m.lat, m.lon, m.h)
             self._start(levelled_state(s.levelling, m.lat, m.lon, m.h, self._lever,
-                                       s.gnss_speed, cfg.static_speed, float(buf.time(k - 1))),
-                        P0)
+                                       0.0 if at_rest else s.gnss_speed,
+                                       float(buf.time(k - 1))), P0)
         if s.nav is None and not self._pending and len(buf):
             # Without a measurement to start on, keep only the samples of the last `history`
             # (at least `level_time`) seconds: the first fix is levelled on the samples before
@@ -521,7 +521,8 @@ class Navigator:
         handler(self, m, st, epoch)
 
     def _at_rest(self, epoch):
-        """At rest by the last GNSS speed, or by a zero-velocity update within REST_HOLD s."""
+        """At rest by the last GNSS speed, or by a zero-velocity update (or the rest detector's
+        Rest) within REST_HOLD s."""
         s = self._state
         return s.gnss_speed <= self.config.static_speed or epoch - s.t_rest <= REST_HOLD
 
@@ -563,9 +564,13 @@ class Navigator:
     def _gnss_velocity(self, m, st, epoch):
         s, cfg = self._state, self.config
         s.gnss_speed = float(np.hypot(*np.asarray(m.v_enu)[:2]))
-        self._rest_noise.confirm(epoch, s.gnss_speed <= cfg.static_speed)
+        self._rest_noise.confirm(epoch, self._at_rest(epoch))
         aligned_by = None  # the INS velocity's course gradient where m turned the yaw against it
-        if s.mode == ALIGNING and not s.heading_known and s.gnss_speed >= cfg.align_speed:
+        # (while the IMU is still behind a noisy receiver, only a course beyond its noise: its
+        # speed at rest passes align_speed by noise, with a random course)
+        still = epoch - max(s.t_rest, s.t_still) <= REST_HOLD
+        if s.mode == ALIGNING and not s.heading_known and s.gnss_speed >= cfg.align_speed and \
+                (not still or course_is_known(m.v_enu, m.cov_enu)):
             vel = self._space["vel"].start
             v, sigma_ins = np.asarray(m.v_enu, float), np.sqrt(s.ekf.P[vel, vel])
             # The INS ran unaided too long (a start on the move without a receiver speed) for
@@ -696,8 +701,11 @@ class Navigator:
         self._zero_rate(st, epoch)
         self._update(meas.zero_velocity(self._space, st, m.sigma_v), epoch)
 
+    def _rest(self, m, st, epoch):
+        self._state.t_rest = epoch
+
     def _still_imu(self, m, st, epoch):
-        """Queued before the start, applied after it: the filter already started."""
+        self._state.t_still = epoch
 
     def _satellite_ranges(self, m, st, epoch):
         if self._held_for_alignment(m, epoch):
@@ -714,7 +722,7 @@ class Navigator:
     #: Measurement type -> handler(self, m, st, epoch).
     _HANDLERS = {GnssFix: _gnss_fix, GnssVelocity: _gnss_velocity, HeadingFix: _heading,
                  PhaseDifferences: _phase_differences, SpeedLog: _speed_log,
-                 WheelOdometry: _wheel_odometry, ZeroVelocity: _zero_velocity,
+                 WheelOdometry: _wheel_odometry, ZeroVelocity: _zero_velocity, Rest: _rest,
                  StillImu: _still_imu, SatelliteRanges: _satellite_ranges}
 
     def _update(self, innov, epoch, aiding=True):

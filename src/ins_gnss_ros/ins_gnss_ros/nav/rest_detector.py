@@ -2,8 +2,11 @@
 
 A receiver that outputs no velocity (NMEA GGA, many SBAS units) leaves the filter without the
 speed that tells it the vehicle stands, so it would neither use the fixes of a static start nor
-learn the gyro biases there. An IMU alone cannot tell rest from steady straight motion (the
-specific force and the rate are the same), so rest is declared only when both agree:
+learn the gyro biases there; a receiver whose velocity scatters beyond the speed that tells
+rest (0.2 m/s per axis against 0.1 m/s) leaves it just as uninformed (nav/aiding.py asks the
+detector behind it while the heading is unknown). An IMU alone cannot tell rest from steady
+straight motion (the specific force and the rate are the same), so rest is declared only when
+both agree:
 
 * IMU: in blocks of ``BLOCK_S`` the scatter of the specific force and of the rate about their
   block means stays within what the sensor's white noise and a small vibration explain (the
@@ -63,6 +66,7 @@ class RestDetector:
         self._any_block = False     # a block has been judged
         self.still_since = math.nan  # start of the current run of still blocks, s
         self.at_rest = False         # the fixes of this run confirmed rest
+        self.block_end = math.nan    # end of the last block judged, s
         self._fixes = None           # least-squares sums of the run's fixes
 
     @property
@@ -98,6 +102,7 @@ class RestDetector:
             return False
         self._block = None
         self._any_block = True
+        self.block_end = t
         if self._still(b):
             if math.isnan(self.still_since):
                 self.still_since = b[0]
