@@ -420,7 +420,7 @@ def test_diagnostics_say_what_the_filter_waits_for_and_nav_fix_is_valid_only_nav
     bus.publish("gnss/fix", _fix_msg(5.0, 1.0, 0.5, 2e5, np.zeros(3)))  # corrupt height
     bus.drain()
     feed(5.0, 15.0, ("gnss/fix", "gnss/vel"))  # at rest: levelled, no heading source yet
-    assert ekf.diag._state[1].startswith("aligning: no heading source yet")
+    assert ekf.diag._state[1].startswith("aligning: no heading source yet: waits for motion")
     fix_line = ekf.diag._values["gnss/fix"]  # e.g. "4.10 Hz, last 0.0 s ago, 41 received, 1 refused"
     assert 3.9 < float(fix_line.split()[0]) < 4.2 and fix_line.endswith("1 refused")
     # nothing is published as a fix while aligning (at most a NO_FIX position)

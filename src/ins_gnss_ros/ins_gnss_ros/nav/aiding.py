@@ -173,10 +173,14 @@ REST_DECISION_S = 10.0
 #: Heading inputs -> the extra block of their own bias (None: a true heading, no bias).
 HEADING_SOURCES = {"gnss/heading": None, "mag/heading": "mag", "imu/heading": "ahrs"}
 
-#: What the filter waits for while it has fixes but no heading (ALIGNING).
+#: What the filter waits for while it has fixes but no heading (ALIGNING), without gnss/vel
+#: and with it (a vehicle standing behind a receiver with velocity waits for motion).
 NO_HEADING = ("no heading source yet: needs gnss/vel, movement well beyond the fixes' noise, "
               "an IMU orientation with a valid yaw covariance (imu/heading), mag/heading or "
               "gnss/heading")
+NO_MOTION = ("no heading source yet: waits for motion (gnss/vel above align.speed_mps, beyond "
+             "its noise while the IMU is still), or an IMU orientation with a valid yaw "
+             "covariance (imu/heading), mag/heading or gnss/heading")
 
 
 @dataclass
@@ -331,7 +335,9 @@ class Aiding:
                 return f"aligning: every gnss/fix refused ({fix.refused})"
             if not nav.started and not math.isnan(self._first_held_t):
                 return "aligning: gnss/fix held until the IMU tells rest from motion (levelling)"
-            return "aligning: " + (NO_HEADING if not nav.heading_known else "levelling")
+            if nav.heading_known:
+                return "aligning: levelling"
+            return "aligning: " + (NO_MOTION if self._has_velocity() else NO_HEADING)
         problem = self._problem()
         if problem:
             return f"dead reckoning: {problem}"
