@@ -72,7 +72,9 @@ CELLS += [Cell("fix only 1 Hz", ("--gnss-rate", "1", "--no-gnss-vel")),
           Cell("magnetometer heading, stored calibration of an earlier 300 s drive, fix only 5 Hz",
                ("--mag-iron", "1", "--no-gnss-vel"), previous_drive=300.0),
           Cell("fix + velocity of a noisy receiver (0.3 m/s per axis)",
-               ("--gnss-sigma-vel", "0.3"))]
+               ("--gnss-sigma-vel", "0.3")),
+          Cell("fix + velocity of a noisy receiver (0.3 m/s per axis), no covariance",
+               ("--gnss-sigma-vel", "0.3", "--no-gnss-cov"))]
 SHORT = [CELLS[0], CELLS[3], CELLS[10]]
 
 

@@ -61,7 +61,10 @@ SHARE_TIME_CONSTANT = 2.0
 #: end of receivers' Doppler velocities (0.05-0.2 m/s; an NMEA course and speed, 0.1-0.2): a
 #: floor-level sigma (velocity_sigma_floor_mps) would let a noisier receiver's velocity tilt the
 #: heading and pull the position beyond its covariance (a simulated car with 0.05 m/s velocities
-#: so published: position NEES 8 -> 33).
+#: so published: position NEES 8 -> 33). A receiver noisier than that shows it while the IMU is
+#: still (the velocity constant: rest, or steady straight motion), and its scatter there is
+#: taken instead (RestDetector.velocity_noise): taken at 0.2 m/s, a receiver scattering 0.3
+#: m/s at rest aligned the heading on its noise in three of five simulated standstills.
 UNKNOWN_VELOCITY_SIGMA = 0.2
 #: A receiver's speed tells rest by the navigator's static_speed when its reported sigma along
 #: the velocity is at most this fraction of static_speed: a standing vehicle's speed then
@@ -546,15 +549,16 @@ class Aiding:
         if check.disagrees:
             self.report("gnss/vel refused: it disagrees with the fixes' displacement")
             return self._seen("gnss/vel", t, False)
-        speed = math.hypot(v_enu[0], v_enu[1])
         if _unknown(cov):
-            sigma = UNKNOWN_VELOCITY_SIGMA
+            if self._rest_wanted():
+                self._rest.velocity(float(v_enu[0]), float(v_enu[1]))
+            sigma = max(UNKNOWN_VELOCITY_SIGMA, self._rest.velocity_noise())  # (NaN: not yet)
             cov = np.diag([sigma ** 2, sigma ** 2, (2.0 * sigma) ** 2])
-            self.report(f"gnss/vel without covariance: {sigma:g} m/s assumed", log=False)
-            self._speed = (speed, math.nan)  # its noise unknown: its speed decides rest
-        else:
-            along = np.array([v_enu[0], v_enu[1]]) / speed if speed > 0.0 else np.array([1.0, 0.0])
-            self._speed = (speed, math.sqrt(float(along @ cov[:2, :2] @ along)))
+            self.report(f"gnss/vel without covariance: {UNKNOWN_VELOCITY_SIGMA:g} m/s assumed, "
+                        "or its scatter while the IMU is still", log=False)
+        speed = math.hypot(v_enu[0], v_enu[1])
+        along = np.array([v_enu[0], v_enu[1]]) / speed if speed > 0.0 else np.array([1.0, 0.0])
+        self._speed = (speed, math.sqrt(float(along @ cov[:2, :2] @ along)))
         cov = _floored(cov, self.policy.velocity_sigma_floor)
         self.navigator.add_measurement(
             GnssVelocity(t - self.policy.velocity_delay, v_enu, cov))

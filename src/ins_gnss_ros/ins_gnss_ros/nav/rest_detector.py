@@ -42,6 +42,8 @@ VIBRATION_RATE = math.radians(0.2)
 SCATTER_MARGIN = 2.0
 #: Horizontal speed the fixes must rule out (at three sigmas) to declare rest, m/s.
 REST_SPEED = 0.5
+#: Degrees of freedom of a receiver velocity's scatter in still runs before it is its noise.
+MIN_VELOCITY_DOF = 10
 
 
 def _sum3(values) -> float:
@@ -68,6 +70,8 @@ class RestDetector:
         self.at_rest = False         # the fixes of this run confirmed rest
         self.block_end = math.nan    # end of the last block judged, s
         self._fixes = None           # least-squares sums of the run's fixes
+        self._velocities = None      # [n, sums (east, north), sums of squares] of the run's
+        self._velocity_scatter = [0.0, 0]  # squared deviations and dof of the ended runs
 
     @property
     def undecided(self) -> bool:
@@ -134,6 +138,40 @@ class RestDetector:
     def _end_run(self) -> None:
         self.still_since, self.at_rest, self._fixes = math.nan, False, None
         self._reference = None
+        ss, dof = self._run_scatter()
+        self._velocity_scatter[0] += ss
+        self._velocity_scatter[1] += dof
+        self._velocities = None
+
+    def velocity(self, v_east: float, v_north: float) -> None:
+        """A receiver velocity (m/s): within a still run the velocity is constant (rest, or
+        steady straight motion), so its scatter there is the receiver's noise."""
+        if math.isnan(self.still_since):
+            return
+        if self._velocities is None:
+            self._velocities = [0, 0.0, 0.0, 0.0, 0.0]
+        v = self._velocities
+        v[0] += 1
+        v[1] += v_east
+        v[2] += v_north
+        v[3] += v_east * v_east
+        v[4] += v_north * v_north
+
+    def velocity_noise(self) -> float:
+        """The receiver velocity's noise per horizontal axis (m/s) from its scatter in still
+        runs, NaN before ``MIN_VELOCITY_DOF`` degrees of freedom."""
+        ss, dof = self._run_scatter()
+        ss, dof = ss + self._velocity_scatter[0], dof + self._velocity_scatter[1]
+        return math.sqrt(ss / dof) if dof >= MIN_VELOCITY_DOF else math.nan
+
+    def _run_scatter(self) -> tuple[float, int]:
+        """Squared deviations of the current run's velocities about their mean, and their
+        degrees of freedom (both axes)."""
+        v = self._velocities
+        if v is None or v[0] < 2:
+            return 0.0, 0
+        n = v[0]
+        return v[3] - v[1] * v[1] / n + v[4] - v[2] * v[2] / n, 2 * (n - 1)
 
     def fix(self, t: float, lat: float, lon: float, h: float, cov_enu: np.ndarray) -> bool:
         """Add a fix at t (s; rad, rad, m, ENU covariance m^2 of its fix-to-fix noise, which

@@ -82,7 +82,8 @@ class SimOptions:
     gnss_velocity : bool
         Write ``gnss/vel`` (False: fixes only, as an SBAS/NMEA GGA receiver gives).
     gnss_covariance : bool
-        Give ``gnss/fix`` its covariance (False: COVARIANCE_TYPE_UNKNOWN).
+        Give ``gnss/fix`` and ``gnss/vel`` their covariances (False: COVARIANCE_TYPE_UNKNOWN,
+        and an all-zero velocity covariance).
     gnss_sigma_h, gnss_sigma_v : float
         White position noise per horizontal axis and vertical, m.
     gnss_sigma_vel : float
@@ -303,7 +304,8 @@ def _write_gnss(writer, traj, options, rng, latency_rng):
                                                var if options.gnss_covariance else None),
                      arrival[i])
         if options.gnss_velocity:
-            writer.write("gnss/vel", msgs.twist_msg(t, vel[i], var_v, "gnss"), arrival[i])
+            writer.write("gnss/vel", msgs.twist_msg(t, vel[i], var_v if options.gnss_covariance
+                                                    else [0.0] * 3, "gnss"), arrival[i])
 
 
 def array_antennas(n: int, length: float, width: float, centre=(0.0, 0.0, 0.0)) -> tuple:
