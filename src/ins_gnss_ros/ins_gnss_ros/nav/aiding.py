@@ -64,7 +64,7 @@ SHARE_TIME_CONSTANT = 2.0
 #: so published: position NEES 8 -> 33). A receiver noisier than that shows it while the IMU is
 #: still (the velocity constant: rest, or steady straight motion), and its scatter there is
 #: taken instead (RestDetector.velocity_noise): taken at 0.2 m/s, a receiver scattering 0.3
-#: m/s at rest aligned the heading on its noise in three of five simulated standstills.
+#: m/s at rest aligned the heading on its noise in two of five simulated standstills.
 UNKNOWN_VELOCITY_SIGMA = 0.2
 #: A receiver's speed tells rest by the navigator's static_speed when its reported sigma along
 #: the velocity is at most this fraction of static_speed: a standing vehicle's speed then
@@ -261,7 +261,8 @@ class Aiding:
         self._wmm_declination = None  # at the datum, once a magnetic heading needs it
         self._first_held_t = math.nan  # the first fix held for the rest detector, s
         self._start_rest = False  # started in this still run before the fixes confirmed it
-        # the last gnss/vel's horizontal speed and reported sigma along it, m/s (NaN: none)
+        # the last gnss/vel's horizontal speed and its sigma along it (reported, or taken when
+        # it has none), m/s (NaN: none yet)
         self._speed = (math.nan, math.nan)
         self.last_increment_t = math.inf  # end of the last increment, s
         self.wheel_still_since = math.inf  # stamp of the first of the zero wheel speeds, s

@@ -70,7 +70,8 @@ class RestDetector:
         self.at_rest = False         # the fixes of this run confirmed rest
         self.block_end = math.nan    # end of the last block judged, s
         self._fixes = None           # least-squares sums of the run's fixes
-        self._velocities = None      # [n, sums (east, north), sums of squares] of the run's
+        self._velocities = None      # the run's receiver velocities: [n, sum east, sum north,
+        #                              sum of squares east, north]
         self._velocity_scatter = [0.0, 0]  # squared deviations and dof of the ended runs
 
     @property
