@@ -74,7 +74,9 @@ CELLS += [Cell("fix only 1 Hz", ("--gnss-rate", "1", "--no-gnss-vel")),
           Cell("fix + velocity of a noisy receiver (0.3 m/s per axis)",
                ("--gnss-sigma-vel", "0.3")),
           Cell("fix + velocity of a noisy receiver (0.3 m/s per axis), no covariance",
-               ("--gnss-sigma-vel", "0.3", "--no-gnss-cov"))]
+               ("--gnss-sigma-vel", "0.3", "--no-gnss-cov")),
+          Cell("fix + velocity of a noisy receiver (0.3 m/s per axis) reported as 0.03 m/s",
+               ("--gnss-sigma-vel", "0.3", "--gnss-sigma-vel-reported", "0.03"))]
 SHORT = [CELLS[0], CELLS[3], CELLS[10]]
 
 

@@ -22,6 +22,7 @@ from typing import Callable
 import numpy as np
 
 from ..magnetic.wmm import decimal_year, field_elements
+from .alignment import course_is_known
 from .course import CourseFromFixes
 from .heading_noise import HeadingNoise
 from .imu_timing import ImuTimingCheck
@@ -31,7 +32,7 @@ from .rotations import quat_to_dcm
 from .measurement_types import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, Rest, \
     SpeedLog, StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
-from .navigator import Navigator
+from .navigator import REST_HOLD, Navigator
 from .rest_detector import RestDetector
 from .velocity_check import VelocityAgreement
 
@@ -78,6 +79,11 @@ SPEED_TELLS_REST = 1.0 / math.sqrt(2.0 * math.log(3.0))
 #: Behind a noisy receiver, a speed beyond this many sigmas along the velocity is motion,
 #: whatever the rest detector says (noise alone passes it on exp(-4.5) = 1 % of the epochs).
 MOVING_SIGMAS = 3.0
+#: A receiver's velocity covariance is refuted when its velocities scatter more than this many
+#: times its sigma while the IMU is still (an honest one's does so with 10 degrees of freedom
+#: with probability P(chi2_10 > 40) = 2e-5): a driver's placeholder covariance, taken as it
+#: was, let 0.3 m/s of noise reported as 0.03 align the heading in the standstill 20 sigma off.
+COVARIANCE_REFUTED = 2.0
 #: Heights this filter navigates at, m (a fix outside is corrupt; the integrity logic would
 #: otherwise force it in after a while).
 HEIGHT_RANGE = (-1000.0, 1e5)
@@ -398,20 +404,20 @@ class Aiding:
         # updates of that rest once confirmed, also when a heading source aligned it
         # meanwhile: they are the static start's velocity and gyro bias (its levelling took a
         # second of data), which the start could not wait for; they end as the vehicle moves.
-        # Rest stands in for the receiver's speed, and for a noisy receiver's while the heading
-        # is unknown (SPEED_TELLS_REST); otherwise nothing asks the detector (here or in fix),
-        # so it is not fed.
+        # The rest detector runs without a receiver velocity, and with one while the heading
+        # is unknown: its rest stands in for a noisy receiver's speed (SPEED_TELLS_REST), and
+        # its still runs measure the velocities' scatter (velocity); otherwise nothing asks it
+        # (here or in fix), so it is not fed.
         if self._rest_wanted():
             rest = self._rest.increment(t, dtheta, dv, dt)
             if not self._has_velocity():
                 if rest and (not self.navigator.heading_known or self._start_rest):
                     self.navigator.add_measurement(ZeroVelocity(t))
-            elif self._rest.block_end == t and not math.isnan(self._rest.still_since):
-                # A still block behind a noisy receiver: rest once the fixes confirm it and the
-                # speed does not contradict it; before, the IMU's stillness holds the heading
-                # alignment off that receiver's speed (rest, or steady straight motion).
-                moving = self._speed[0] > MOVING_SIGMAS * self._speed[1]
-                self.navigator.add_measurement(Rest(t) if rest and not moving else StillImu(t))
+            elif rest and not self._speed_tells_rest() and \
+                    not self._speed[0] > MOVING_SIGMAS * self._speed[1]:
+                # a still block the fixes confirm as rest, behind a noisy receiver whose speed
+                # does not contradict it
+                self.navigator.add_measurement(Rest(t))
             if math.isnan(self._rest.still_since):
                 self._start_rest = False  # it moved: the start's rest is over
         return None if gap == CONTIGUOUS else gap
@@ -509,11 +515,14 @@ class Aiding:
         return self._first_held_t
 
     def _rest_wanted(self) -> bool:
-        """The rest detector's verdict is used: without a receiver velocity, or behind one too
-        noisy to tell rest (SPEED_TELLS_REST) while the heading is unknown (the filter uses
-        GNSS then only at rest)."""
-        return not self._has_velocity() or (not self.navigator.heading_known and self._speed[1]
-                                            > SPEED_TELLS_REST * self.navigator.config.static_speed)
+        """The rest detector is fed: without a receiver velocity, or while the heading is
+        unknown (the filter uses GNSS then only at rest, and a receiver too noisy to tell it
+        leaves rest to the detector)."""
+        return not self._has_velocity() or not self.navigator.heading_known
+
+    def _speed_tells_rest(self) -> bool:
+        """The last receiver speed's sigma lets static_speed tell rest (SPEED_TELLS_REST)."""
+        return not self._speed[1] > SPEED_TELLS_REST * self.navigator.config.static_speed
 
     def _without_velocity_before_start(self) -> bool:
         """No gnss/vel so far and the filter not yet levelled: the first fixes wait for the
@@ -550,19 +559,30 @@ class Aiding:
         if check.disagrees:
             self.report("gnss/vel refused: it disagrees with the fixes' displacement")
             return self._seen("gnss/vel", t, False)
+        if self._rest_wanted():
+            self._rest.velocity(float(v_enu[0]), float(v_enu[1]))
+        scatter = self._rest.velocity_noise()  # NaN until measured
         if _unknown(cov):
-            if self._rest_wanted():
-                self._rest.velocity(float(v_enu[0]), float(v_enu[1]))
-            sigma = max(UNKNOWN_VELOCITY_SIGMA, self._rest.velocity_noise())  # (NaN: not yet)
+            sigma = max(UNKNOWN_VELOCITY_SIGMA, scatter)
             cov = np.diag([sigma ** 2, sigma ** 2, (2.0 * sigma) ** 2])
             self.report(f"gnss/vel without covariance: {UNKNOWN_VELOCITY_SIGMA:g} m/s assumed, "
                         "or its scatter while the IMU is still", log=False)
+        elif scatter > COVARIANCE_REFUTED * math.sqrt(0.5 * float(cov[0, 0] + cov[1, 1])):
+            cov = cov * (scatter ** 2 / (0.5 * float(cov[0, 0] + cov[1, 1])))
+            self.report("gnss/vel covariance refuted by its scatter while the IMU is still: "
+                        "scaled to it", log=False)
         speed = math.hypot(v_enu[0], v_enu[1])
         along = np.array([v_enu[0], v_enu[1]]) / speed if speed > 0.0 else np.array([1.0, 0.0])
         self._speed = (speed, math.sqrt(float(along @ cov[:2, :2] @ along)))
+        # While the IMU is still (rest, or steady straight motion; its still runs restart as
+        # the block means drift, hence the hold) a speed may be noise with a random course:
+        # the heading is aligned on it only once the receiver's noise is measured there and
+        # the course is known beyond it.
+        aligns = t - self._rest.still_until > REST_HOLD or \
+            (not math.isnan(scatter) and course_is_known(v_enu, cov))
         cov = _floored(cov, self.policy.velocity_sigma_floor)
         self.navigator.add_measurement(
-            GnssVelocity(t - self.policy.velocity_delay, v_enu, cov))
+            GnssVelocity(t - self.policy.velocity_delay, v_enu, cov, aligns=aligns))
         return self._seen("gnss/vel", t, True)
 
     def heading(self, t: float, azimuth: float, variance: float, declination: float | None,

@@ -35,12 +35,15 @@ class GnssVelocity:
 
     ``fixes``: for a velocity made of successive fixes (nav/course.py), those fixes, each as
     (GnssFix, X) with X (3, 3) the covariance of this velocity's error with the fix's error
-    ((m^2)/s): the alignment on it uses them with that correlation, and the filter not again."""
+    ((m^2)/s): the alignment on it uses them with that correlation, and the filter not again.
+    ``aligns``: its course may align the heading (the front end says no while the IMU is still
+    and the course is not known beyond the receiver's noise: nav/aiding.py)."""
 
     t: float
     v_enu: np.ndarray
     cov_enu: np.ndarray
     fixes: tuple = ()
+    aligns: bool = True
 
 
 @dataclass(frozen=True)
@@ -118,9 +121,7 @@ class StillImu:
     """The IMU alone was still up to time t (nav/rest_detector.py): the vehicle stands, or moves
     steadily straight on. In both the specific force is gravity and the rate the Earth's, so a
     start on it levels and takes the gyro bias of the stationary mean, but its velocity is
-    unknown until the fixes confirm rest (then ZeroVelocity). Before the start; and while the
-    heading is unknown behind a receiver too noisy to tell rest by its speed, which passes the
-    alignment speed by noise with a random course: the heading alignment waits."""
+    unknown until the fixes confirm rest (then ZeroVelocity). Used only before the start."""
 
     t: float
 

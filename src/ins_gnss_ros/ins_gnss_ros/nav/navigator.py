@@ -30,9 +30,9 @@ import numpy as np
 from . import _kernels
 from . import measurements as meas
 from . import modes
-from .alignment import Levelling, course_error_gain, course_is_known, fixes_with_course, \
-    initial_covariance, levelled_state, restart_velocity, rotate_yaw, take_static_gyro_bias, \
-    without_cross_track, yaw_error_from_course, yaw_error_from_heading, yaw_error_from_motion
+from .alignment import Levelling, course_error_gain, fixes_with_course, initial_covariance, \
+    levelled_state, restart_velocity, rotate_yaw, take_static_gyro_bias, without_cross_track, \
+    yaw_error_from_course, yaw_error_from_heading, yaw_error_from_motion
 from .earth import WGS84
 from .ekf import LEVER_ARM_EXTRAS, ErrorStateEKF, StateSpace
 from .error_model import make_layout
@@ -566,11 +566,8 @@ class Navigator:
         s.gnss_speed = float(np.hypot(*np.asarray(m.v_enu)[:2]))
         self._rest_noise.confirm(epoch, self._at_rest(epoch))
         aligned_by = None  # the INS velocity's course gradient where m turned the yaw against it
-        # (while the IMU is still behind a noisy receiver, only a course beyond its noise: its
-        # speed at rest passes align_speed by noise, with a random course)
-        still = epoch - max(s.t_rest, s.t_still) <= REST_HOLD
-        if s.mode == ALIGNING and not s.heading_known and s.gnss_speed >= cfg.align_speed and \
-                (not still or course_is_known(m.v_enu, m.cov_enu)):
+        if s.mode == ALIGNING and not s.heading_known and s.gnss_speed >= cfg.align_speed \
+                and m.aligns:
             vel = self._space["vel"].start
             v, sigma_ins = np.asarray(m.v_enu, float), np.sqrt(s.ekf.P[vel, vel])
             # The INS ran unaided too long (a start on the move without a receiver speed) for
@@ -705,7 +702,7 @@ class Navigator:
         self._state.t_rest = epoch
 
     def _still_imu(self, m, st, epoch):
-        self._state.t_still = epoch
+        """Queued before the start, applied after it: the filter already started."""
 
     def _satellite_ranges(self, m, st, epoch):
         if self._held_for_alignment(m, epoch):

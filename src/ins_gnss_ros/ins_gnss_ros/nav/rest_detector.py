@@ -68,7 +68,7 @@ class RestDetector:
         self._any_block = False     # a block has been judged
         self.still_since = math.nan  # start of the current run of still blocks, s
         self.at_rest = False         # the fixes of this run confirmed rest
-        self.block_end = math.nan    # end of the last block judged, s
+        self.still_until = -math.inf  # end of the last still block, s
         self._fixes = None           # least-squares sums of the run's fixes
         self._velocities = None      # the run's receiver velocities: [n, sum east, sum north,
         #                              sum of squares east, north]
@@ -107,8 +107,8 @@ class RestDetector:
             return False
         self._block = None
         self._any_block = True
-        self.block_end = t
         if self._still(b):
+            self.still_until = t
             if math.isnan(self.still_since):
                 self.still_since = b[0]
             return self.at_rest

@@ -41,7 +41,7 @@ class RunState:
     t_rest : float
         Epoch of the last zero-velocity update.
     t_still : float
-        Epoch of the last StillImu.
+        Epoch of the last StillImu before the start.
     nav : NavState or None
         The solution (None until the first fix).
     ekf : ErrorStateEKF or None

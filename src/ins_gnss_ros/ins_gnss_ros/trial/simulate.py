@@ -88,6 +88,9 @@ class SimOptions:
         White position noise per horizontal axis and vertical, m.
     gnss_sigma_vel : float
         White velocity noise per axis, m/s.
+    gnss_sigma_vel_reported : float or None
+        The velocity sigma per axis ``gnss/vel`` reports, m/s (None: the true one; a driver's
+        placeholder covariance otherwise).
     gnss_latency : float
         Mean delay of ``gnss/*`` after their stamps (log time = stamp + delay), s: the
         receiver's output latency; each epoch's delay is drawn uniformly from 0.5 to 1.5 times
@@ -143,6 +146,7 @@ class SimOptions:
     gnss_sigma_h: float = 0.5
     gnss_sigma_v: float = 1.0
     gnss_sigma_vel: float = 0.05
+    gnss_sigma_vel_reported: float | None = None
     gnss_latency: float = 0.0
     antenna_lever_arm: tuple = (0.0, 0.0, 1.5)
     antennas: int = 0
@@ -294,7 +298,9 @@ def _write_gnss(writer, traj, options, rng, latency_rng):
     h = h + d_enu[:, 2]
     vel = vel + options.gnss_sigma_vel * rng.standard_normal(vel.shape)
     t_ns = bag.sec_to_ns(traj.t[k], SIM_EPOCH_NS)
-    var, var_v = sigma ** 2, [options.gnss_sigma_vel ** 2] * 3
+    reported = options.gnss_sigma_vel if options.gnss_sigma_vel_reported is None \
+        else options.gnss_sigma_vel_reported
+    var, var_v = sigma ** 2, [reported ** 2] * 3
     arrival = t_ns
     if options.gnss_latency > 0.0:
         arrival = t_ns + bag.sec_to_ns(options.gnss_latency
