@@ -63,3 +63,28 @@ def test_a_smooth_start_ends_rest_at_once():
     # 0.3 m/s^2 from rest at 20 s: no scatter within a block, but the specific force changes
     _, cues = run(30.0, accel=0.3, start=20.0)
     assert cues and 19.5 < cues[-1] <= 20.5
+
+
+def test_the_velocities_scatter_in_still_runs_is_the_receiver_s_noise():
+    """A receiver's velocities, 0.3 m/s white per axis about a constant velocity (steady straight
+    motion at 12 m/s: the IMU reads as at rest), count only within still runs: their scatter
+    about the run's mean is the noise, NaN before 10 degrees of freedom; an acceleration to
+    14 m/s (the IMU moving) ends the run, and its velocities do not count (one of them in the
+    run would add up to (2 m/s)^2 / 390 to the variance: +11 %)."""
+    rng = np.random.default_rng(3)
+    det = RestDetector(ACCEL_PSD, GYRO_PSD)
+    sigma, noises = 0.3, []
+    for k in range(1, round(40.0 / DT) + 1):
+        t = k * DT
+        moving = 20.0 < t < 21.0  # 2 m/s^2 forward: not still
+        f = np.array([2.0 * moving, 0.0, 9.81]) + math.sqrt(ACCEL_PSD / DT) * rng.standard_normal(3)
+        w = math.sqrt(GYRO_PSD / DT) * rng.standard_normal(3)
+        det.increment(t, w * DT, f * DT, DT)
+        if k % 40 == 0:  # 5 Hz
+            v = np.array([12.0 + 2.0 * max(min(t - 20.0, 1.0), 0.0), 0.0])  # 12 -> 14 m/s
+            det.velocity(*(v + sigma * rng.standard_normal(2)))
+            noises.append((t, det.velocity_noise()))
+    first = next(t for t, n in noises if not math.isnan(n))
+    assert first <= 2.0  # 6 velocities of a still run: 10 degrees of freedom
+    # ~390 degrees of freedom over the two runs: within 10 % (3.9 sigma of the estimate)
+    assert abs(noises[-1][1] / sigma - 1.0) < 0.1

@@ -72,6 +72,7 @@ class RestDetector:
         self._fixes = None           # least-squares sums of the run's fixes
         self._velocities = None      # the run's receiver velocities: [n, sum east, sum north,
         #                              sum of squares east, north]
+        self._velocities_pending = []  # those of the open block, counted if it closes still
         self._velocity_scatter = [0.0, 0]  # squared deviations and dof of the ended runs
 
     @property
@@ -107,10 +108,13 @@ class RestDetector:
             return False
         self._block = None
         self._any_block = True
+        pending, self._velocities_pending = self._velocities_pending, []
         if self._still(b):
             self.still_until = t
             if math.isnan(self.still_since):
                 self.still_since = b[0]
+            for v_east, v_north in pending:
+                self._add_velocity(v_east, v_north)
             return self.at_rest
         self._end_run()
         return False
@@ -146,9 +150,11 @@ class RestDetector:
 
     def velocity(self, v_east: float, v_north: float) -> None:
         """A receiver velocity (m/s): within a still run the velocity is constant (rest, or
-        steady straight motion), so its scatter there is the receiver's noise."""
-        if math.isnan(self.still_since):
-            return
+        steady straight motion), so its scatter there is the receiver's noise. It counts once
+        the IMU block it falls in closes still (the first block of a motion ends the run)."""
+        self._velocities_pending.append((v_east, v_north))
+
+    def _add_velocity(self, v_east: float, v_north: float) -> None:
         if self._velocities is None:
             self._velocities = [0, 0.0, 0.0, 0.0, 0.0]
         v = self._velocities
