@@ -77,7 +77,8 @@ def _simulate_args(p):
                    help="car: standstill before the drive, s (0: rolling start; default 30)")
     p.add_argument("--gnss-rate", type=float, default=SimOptions.gnss_rate, help="Hz")
     p.add_argument("--no-gnss-vel", action="store_true", help="fixes only, no gnss/vel")
-    p.add_argument("--no-gnss-cov", action="store_true", help="fixes and velocities without covariance")
+    p.add_argument("--no-gnss-cov", action="store_true",
+                   help="fixes and velocities without covariance")
     p.add_argument("--gnss-sigma-h", type=float, default=SimOptions.gnss_sigma_h,
                    help="horizontal position noise per axis, m")
     p.add_argument("--gnss-sigma-v", type=float, default=SimOptions.gnss_sigma_v,
