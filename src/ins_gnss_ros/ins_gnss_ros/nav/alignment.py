@@ -211,8 +211,9 @@ def yaw_from_velocity(v_enu, cov_enu):
 def course_is_known(v_enu, cov_enu):
     """The course over ground of a GNSS velocity (ENU, m/s; covariance (m/s)^2) is known well
     enough to align the heading on while the IMU is still: its sigma is at most
-    MAX_STILL_COURSE_SIGMA."""
-    return yaw_from_velocity(v_enu, cov_enu)[1] <= MAX_STILL_COURSE_SIGMA
+    MAX_STILL_COURSE_SIGMA (a zero velocity has no course)."""
+    return bool(v_enu[0] or v_enu[1]) and \
+        yaw_from_velocity(v_enu, cov_enu)[1] <= MAX_STILL_COURSE_SIGMA
 
 
 def yaw_from_heading(azimuth, sigma_azimuth, baseline_yaw_b=0.0):
