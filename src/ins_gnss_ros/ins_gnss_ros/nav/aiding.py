@@ -184,12 +184,12 @@ HEADING_SOURCES = {"gnss/heading": None, "mag/heading": "mag", "imu/heading": "a
 
 #: What the filter waits for while it has fixes but no heading (ALIGNING), without gnss/vel
 #: and with it (a vehicle standing behind a receiver with velocity waits for motion).
-NO_HEADING = ("no heading source yet: needs gnss/vel, movement well beyond the fixes' noise, "
-              "an IMU orientation with a valid yaw covariance (imu/heading), mag/heading or "
-              "gnss/heading")
-NO_MOTION = ("no heading source yet: waits for motion (gnss/vel above align.speed_mps, beyond "
-             "its noise while the IMU is still), or an IMU orientation with a valid yaw "
-             "covariance (imu/heading), mag/heading or gnss/heading")
+_HEADING_INPUTS = ("an IMU orientation with a valid yaw covariance (imu/heading), mag/heading or "
+                   "gnss/heading")
+NO_HEADING = "no heading source yet: needs gnss/vel, movement well beyond the fixes' noise, " \
+    + _HEADING_INPUTS
+NO_MOTION = "no heading source yet: waits for motion (gnss/vel above align.speed_mps, beyond " \
+    "its noise while the IMU is still), or " + _HEADING_INPUTS
 
 
 @dataclass
