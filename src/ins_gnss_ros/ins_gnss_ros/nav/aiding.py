@@ -67,8 +67,8 @@ SHARE_TIME_CONSTANT = 2.0
 #: taken instead (RestDetector.velocity_noise): taken at 0.2 m/s, a receiver scattering 0.3
 #: m/s at rest aligned the heading on its noise in two of five simulated standstills.
 UNKNOWN_VELOCITY_SIGMA = 0.2
-#: A receiver's speed tells rest by the navigator's static_speed when its reported sigma along
-#: the velocity is at most this fraction of static_speed: a standing vehicle's speed then
+#: A receiver's speed tells rest by the navigator's static_speed when its reported sigma per
+#: horizontal axis is at most this fraction of static_speed: a standing vehicle's speed then
 #: passes static_speed by noise on at most a third of the epochs (exp(-1 / (2 f^2)) = 1/3). A
 #: noisier one (0.2 m/s per axis passes 0.1 m/s at rest on 88 % of the epochs, and while the
 #: heading was unknown its fixes were held as in motion) leaves rest to the rest detector
@@ -76,7 +76,7 @@ UNKNOWN_VELOCITY_SIGMA = 0.2
 #: beside the simulated RTK car's 0.05 m/s velocities, it held its first 0.2 m/s as rest, and
 #: the first fixes after the heading alignment were 6 sigma off).
 SPEED_TELLS_REST = 1.0 / math.sqrt(2.0 * math.log(3.0))
-#: Behind a noisy receiver, a speed beyond this many sigmas along the velocity is motion,
+#: Behind a noisy receiver, a speed beyond this many sigmas (per horizontal axis) is motion,
 #: whatever the rest detector says (noise alone passes it on exp(-4.5) = 1 % of the epochs).
 MOVING_SIGMAS = 3.0
 #: A receiver's velocity covariance is refuted when its velocities scatter more than this many
@@ -267,8 +267,8 @@ class Aiding:
         self._wmm_declination = None  # at the datum, once a magnetic heading needs it
         self._first_held_t = math.nan  # the first fix held for the rest detector, s
         self._start_rest = False  # started in this still run before the fixes confirmed it
-        # the last gnss/vel's horizontal speed and its sigma along it (reported, or taken when
-        # it has none), m/s (NaN: none yet)
+        # the last gnss/vel's horizontal speed and its sigma per horizontal axis (reported, or
+        # taken when it has none), m/s (NaN: none yet)
         self._speed = (math.nan, math.nan)
         self.last_increment_t = math.inf  # end of the last increment, s
         self.wheel_still_since = math.inf  # stamp of the first of the zero wheel speeds, s
@@ -567,13 +567,12 @@ class Aiding:
             cov = np.diag([sigma ** 2, sigma ** 2, (2.0 * sigma) ** 2])
             self.report(f"gnss/vel without covariance: {UNKNOWN_VELOCITY_SIGMA:g} m/s assumed, "
                         "or its scatter while the IMU is still", log=False)
-        elif scatter > COVARIANCE_REFUTED * math.sqrt(0.5 * float(cov[0, 0] + cov[1, 1])):
-            cov = cov * (scatter ** 2 / (0.5 * float(cov[0, 0] + cov[1, 1])))
+        sigma = math.sqrt(0.5 * float(cov[0, 0] + cov[1, 1]))  # per horizontal axis
+        if scatter > COVARIANCE_REFUTED * sigma:
+            cov, sigma = cov * (scatter / sigma) ** 2, scatter
             self.report("gnss/vel covariance refuted by its scatter while the IMU is still: "
                         "scaled to it", log=False)
-        speed = math.hypot(v_enu[0], v_enu[1])
-        along = np.array([v_enu[0], v_enu[1]]) / speed if speed > 0.0 else np.array([1.0, 0.0])
-        self._speed = (speed, math.sqrt(float(along @ cov[:2, :2] @ along)))
+        self._speed = (math.hypot(v_enu[0], v_enu[1]), sigma)
         # While the IMU is still (rest, or steady straight motion; its still runs restart as
         # the block means drift, hence the hold) a speed may be noise with a random course:
         # the heading is aligned on it only once the receiver's noise is measured there and
