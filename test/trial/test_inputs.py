@@ -38,9 +38,9 @@ def test_relative_topic_names_read_as_absolute(bags):
 
 
 def test_a_bag_matching_no_input_is_one_line_naming_both(bags):
-    check_inputs(bags[1], {"/imu/delta", "/ins/correction"})  # relative names match
-    with pytest.raises(InputTopicsError) as info:
-        check_inputs(bags[1], {"/imu/data_raw", "/ins/correction"})
+    assert check_inputs(bags[1], dict.fromkeys(["/imu/delta", "/ins/correction"])) == []
+    with pytest.raises(InputTopicsError) as info:  # relative names matched as absolute ones
+        check_inputs(bags[1], dict.fromkeys(["/imu/data_raw", "/ins/correction"]))
     text = str(info.value)
     assert "\n" not in text and isinstance(info.value, ValueError)
     for name in ("imu/delta", "gnss/fix", "truth/state", "/imu/data_raw", "/ins/correction"):
@@ -54,12 +54,24 @@ def test_a_bag_under_other_names_reads_with_a_remapping(tmp_path):
         for k in range(1, 4):
             writer.write("imu", msgs.delta_msg(T0 + k * 10**8, [0, 0, 0], [0, 0, 0.981], 0.1))
         writer.write("/fix", msgs.fix_msg(T0 + 2 * 10**8, 0.1, 0.2, 3.0, [1, 1, 1]))
-    bag, inputs = tmp_path / "other", {"/imu/delta", "/gnss/fix"}
+    bag = tmp_path / "other"
+    inputs = {"/imu/delta": "ins_gnss_msgs/msg/ImuDelta",
+              "/gnss/fix": "sensor_msgs/msg/NavSatFix"}
     with pytest.raises(InputTopicsError, match="--remap FROM:=TO"):
+        check_inputs(bag, dict.fromkeys(inputs))  # the inputs' types not known
+    with pytest.raises(InputTopicsError, match="names: --remap /fix:=/gnss/fix "
+                                               "--remap /imu:=/imu/delta\\)$"):
         check_inputs(bag, inputs)
     remap = parse_remap(["/fix:=gnss/fix", "imu:=/imu/delta"])
     assert remap == {"/fix": "/gnss/fix", "/imu": "/imu/delta"}
-    check_inputs(bag, inputs, remap)
+    assert check_inputs(bag, inputs, remap) == []
+    # The IMU read, the fixes not: said, with the remapping (the graph would run without GNSS)
+    assert check_inputs(bag, inputs, parse_remap(["imu:=/imu/delta"])) == [
+        "/fix (sensor_msgs/msg/NavSatFix) is read by no node: --remap /fix:=/gnss/fix"]
+    # ... unless the graph publishes that input itself, or no input of the type is lacking
+    assert check_inputs(bag, inputs, parse_remap(["imu:=/imu/delta"]), {"/gnss/fix"}) == []
+    assert check_inputs(bag, {**inputs, "/fix": "sensor_msgs/msg/NavSatFix"},
+                        parse_remap(["imu:=/imu/delta"])) == []
     assert [m.topic for m in read_inputs(bag, remap)] == ["/imu/delta", "/imu/delta", "/gnss/fix",
                                                           "/imu/delta"]
     for rule in ("/fix", "/fix:=", ":=/gnss/fix"):

@@ -222,6 +222,8 @@ def test_a_bag_under_other_names_replays_with_remap(first_run, car_bag, profile,
         for m in bagio.read_bag(car_bag):
             writer.write("/imu_driver/delta" if m.topic == "/imu/delta" else m.topic, m.msg,
                          m.t_ns)
+    with pytest.raises(InputTopicsError, match="names: --remap /imu_driver/delta:=/imu/delta"):
+        replay(bag, profile, tmp_path / "n")
     assert main(["replay", str(bag), "--config", str(profile), "--out", str(tmp_path / "r"),
                  "--init-from-truth", "--remap", "/imu_driver/delta:=/imu/delta"]) == 0
     out, _ = first_run
@@ -229,6 +231,23 @@ def test_a_bag_under_other_names_replays_with_remap(first_run, car_bag, profile,
     assert len(a) == len(b) > 0
     assert all(x.topic == y.topic and x.t_ns == y.t_ns and messages_equal(x.msg, y.msg)
                for x, y in zip(a, b))
+
+
+def test_a_bag_topic_no_node_reads_is_named_with_its_remap(car_bag, tmp_path, capsys):
+    """The trial's fixes recorded as a driver's ``/fix`` beside its increments: the replay
+    runs on the increments and says which topic no node read, and the remapping that feeds it
+    (the filter would otherwise only say that no gnss/fix arrives)."""
+    bag = tmp_path / "fix"
+    with bagio.BagWriter(bag) as writer:
+        for m in bagio.read_bag(car_bag):
+            writer.write("/fix" if m.topic == "/gnss/fix" else m.topic, m.msg, m.t_ns)
+    offline = tmp_path / "offline.yaml"
+    offline.write_text(PROFILE + "ekf:\n  ros__parameters:\n    imu_grade: navigation\n")
+    note = "/fix (sensor_msgs/msg/NavSatFix) is read by no node: --remap /fix:=/gnss/fix"
+    assert main(["replay", str(bag), "--config", str(offline), "--offline", "--out",
+                 str(tmp_path / "o")]) == 0
+    assert f"warning: {note}" in capsys.readouterr().err.splitlines()
+    assert json.loads((tmp_path / "o" / "replay.json").read_text())["unread_topics"] == [note]
 
 
 @pytest.fixture

@@ -178,6 +178,7 @@ class InProcessBus:
         self._services: dict[str, tuple[Any, Callable[[Any, Any], Any]]] = {}
         # topic -> the message class published or taken on it (one per topic)
         self._types: dict[str, Any] = {}
+        self.published: set[str] = set()  # topics a node has a publisher on
         self._queue: deque[tuple[str, Any, bool]] = deque()
         self.recorders: list[Callable[[str, Any], None]] = []
         self.raw_recorders: list[Callable[[str, Any, Any], None]] = []
@@ -257,6 +258,7 @@ class _BusPublisher:
     def __init__(self, bus: InProcessBus, msg_type, topic: str):
         self._bus, self.topic = bus, bus.resolve(topic)
         bus.advertise(topic, msg_type)
+        bus.published.add(self.topic)
 
     def publish(self, msg: Any) -> None:
         self._bus.publish(self.topic, msg)

@@ -304,7 +304,6 @@ def cmd_import(args) -> int:
 
 def cmd_replay(args) -> int:
     from ins_gnss_ros.trial.inputs import parse_remap
-    from ins_gnss_ros.trial.run_folder import counts_table
 
     if args.processes and args.rate is None:
         raise ValueError("--processes needs --rate (e.g. --rate 1)")
@@ -334,14 +333,22 @@ def cmd_replay(args) -> int:
                       progress=_progress(args), init_from_truth=args.init_from_truth,
                       remap=parse_remap(args.remap), **kwargs)
     print(f"replayed {args.bag} ({summary['mode']}, {', '.join(summary['graph'])}):")
-    print("\n".join("  " + line for line in counts_table(summary["messages"])))
+    _print_counts(summary)
     print(f"recorded {', '.join(summary['topics'])} into {args.out}")
     return 0
 
 
+def _print_counts(summary) -> None:
+    """A run's messages per topic (replay.json), and a warning per bag topic no node read."""
+    from ins_gnss_ros.trial.run_folder import counts_table
+
+    print("\n".join("  " + line for line in counts_table(summary["messages"])))
+    for note in summary["unread_topics"]:
+        print(f"warning: {note}", file=sys.stderr)
+
+
 def cmd_smooth(args) -> int:
     from ins_gnss_ros.trial.inputs import parse_remap
-    from ins_gnss_ros.trial.run_folder import counts_table
     from ins_gnss_ros.trial.smooth import smooth
 
     point = None
@@ -356,7 +363,7 @@ def cmd_smooth(args) -> int:
                      exports=args.export, progress=_progress(args),
                      remap=parse_remap(args.remap))
     print(f"smoothed {args.bag} ({', '.join(summary['graph'])}):")
-    print("\n".join("  " + line for line in counts_table(summary["messages"])))
+    _print_counts(summary)
     print("  " + ", ".join(f"{k} {v:.1f} s" for k, v in summary["timing_s"].items()))
     print(f"recorded {', '.join(summary['topics'])} into {args.out}")
     for path in summary["exports"]:

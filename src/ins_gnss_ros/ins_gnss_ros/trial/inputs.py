@@ -8,11 +8,12 @@ qualified. Truth (``truth/*``) never reaches the nodes; it is not even decoded.
 
 A bag recorded under other names (a driver's ``/fix``, ``/imu/data``) replays with a remapping,
 ``{bag topic: graph topic}`` (``trial replay --remap /fix:=/gnss/fix``, as ``ros2 bag play
---remap`` does), applied to the absolute names.
+--remap`` does), applied to the absolute names. :func:`check_inputs` names the remapping: a
+bag topic no node reads whose type is that of a sensor input the bag lacks.
 """
 from __future__ import annotations
 
-from typing import Callable, Iterator
+from typing import Callable, Iterator, Mapping
 
 from ins_gnss_ros import io as bagio
 
@@ -159,19 +160,49 @@ def _decoded(bag_path, rows) -> Iterator:
         yield bagio.BagMessage(row.topic, row.t_ns, bagio.decode_message(row, bag_path))
 
 
-def check_inputs(bag_path, inputs, remap=None) -> None:
-    """Refuse a bag none of whose topics (after ``remap``) is among ``inputs`` (absolute names).
+def check_inputs(bag_path, inputs: Mapping[str, str | None], remap=None,
+                 published=frozenset()) -> list[str]:
+    """Refuse a bag none of whose topics (after ``remap``) is among ``inputs``; name the bag's
+    topics no node reads that could feed an input the bag lacks.
+
+    Parameters
+    ----------
+    inputs : mapping
+        {absolute name: type name} of the topics the graph's nodes subscribe to (type None
+        where it is not known).
+    published : set of str
+        Topics the graph publishes itself (``/imu/delta`` beside the imu_preprocessor): a bag
+        may feed them, but none is proposed as the place of a bag topic no node reads.
+
+    Returns
+    -------
+    list of str
+        One note per bag topic (not truth) that no node reads and whose type is that of inputs
+        the bag lacks (a driver's ``/fix`` beside the bag's ``/imu/data_raw``: the graph would
+        run without GNSS and say only that none arrives), with the remapping that feeds it.
 
     Raises
     ------
     InputTopicsError
-        One line listing the bag's topics and the inputs.
+        One line listing the bag's topics, the inputs and the remappings that would feed them.
     """
-    names = _names(bag_path, remap)
+    names, types = _names(bag_path, remap), bagio.bag_topics(bag_path)
+    lacking = {}
+    for topic, msgtype in inputs.items():
+        if msgtype is not None and topic not in published and topic not in names.values():
+            lacking.setdefault(msgtype, []).append(topic)
+    rules = {topic: " or ".join(f"--remap {topic}:={target}"
+                                for target in sorted(lacking[types[topic]]))
+             for topic, name in names.items()
+             if name not in inputs and not name.startswith(TRUTH_PREFIX)
+             and types[topic] in lacking}
     if not set(names.values()) & set(inputs):
         shown = [t if bagio.resolve(t) == name else f"{t} (as {name})"
                  for t, name in names.items()]
         raise InputTopicsError(
             f"{bag_path}: none of the bag's topics ({', '.join(shown) or 'none'}) is an input "
             f"of the graph, whose nodes subscribe to {', '.join(sorted(inputs)) or 'nothing'} "
-            "(a bag recorded under other names: --remap FROM:=TO)")
+            f"(a bag recorded under other names: "
+            f"{' '.join(rules.values()) if rules else '--remap FROM:=TO'})")
+    return [f"{topic} ({types[topic]}) is read by no node: {rule}"
+            for topic, rule in rules.items()]

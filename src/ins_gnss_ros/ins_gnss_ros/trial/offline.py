@@ -35,13 +35,6 @@ from ins_gnss_ros.trial.outages import GNSS_PREFIX, gnss_windows, in_outage
 from ins_gnss_ros.trial.profile import ProfileError, load_profile
 from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_summary
 
-#: The inputs the offline path reads (the ekf's aiding topics and the IMU), and the
-#: magnetometer's where it runs the compass.
-OFFLINE_TOPICS = ("/imu/delta", "/imu/data_raw", "/gnss/fix", "/gnss/vel", "/gnss/heading",
-                  "/mag/heading", "/log/speed", "/wheel/odom", "/gnss/observations")
-MAGNETOMETER_TOPICS = ("/imu/mag_raw", "/imu/mag")
-
-
 #: The imu/data_raw type and the fields of it the offline path reads, in field order.
 IMU_TYPE = "sensor_msgs/msg/Imu"
 DELTA_TYPE = "ins_gnss_msgs/msg/ImuDelta"
@@ -53,6 +46,18 @@ IMU_FIELDS = ("header.stamp.sec", "header.stamp.nanosec", "orientation.x", "orie
 MAG_TYPE = "sensor_msgs/msg/MagneticField"
 MAG_FIELDS = ("header.stamp.sec", "header.stamp.nanosec", "magnetic_field.x",
               "magnetic_field.y", "magnetic_field.z")
+
+#: The inputs the offline path reads (the ekf's aiding topics and the IMU) and their types,
+#: and the magnetometer's where it runs the compass.
+OFFLINE_TOPICS = {"/imu/delta": DELTA_TYPE, "/imu/data_raw": IMU_TYPE,
+                  "/gnss/fix": "sensor_msgs/msg/NavSatFix",
+                  "/gnss/vel": "geometry_msgs/msg/TwistWithCovarianceStamped",
+                  "/gnss/heading": "ins_gnss_msgs/msg/Heading",
+                  "/mag/heading": "ins_gnss_msgs/msg/Heading",
+                  "/log/speed": "geometry_msgs/msg/TwistWithCovarianceStamped",
+                  "/wheel/odom": "nav_msgs/msg/Odometry",
+                  "/gnss/observations": "ins_gnss_msgs/msg/GnssObservations"}
+MAGNETOMETER_TOPICS = ("/imu/mag_raw", "/imu/mag")
 
 
 def offline_parameters(profile) -> tuple[dict, dict, dict | None]:
@@ -126,6 +131,8 @@ class ForwardPass:
     frames : OutputFrames
     graph : tuple of str
         The cores that ran, as ``replay.json`` names them.
+    unread : list of str
+        The bag's topics no input took that one of their type could (check_inputs).
     """
 
     navigator: object
@@ -136,12 +143,14 @@ class ForwardPass:
     events: Counter
     frames: OutputFrames
     graph: tuple
+    unread: list
 
     def summary(self, out, bag_path, outages, mode, graph=None) -> dict:
         """Write ``OUT/replay.json`` (run_folder.write_summary) with the front end's events;
         ``graph``: what ran (default: the offline path's cores)."""
         return write_summary(out, bag_path, self.profile, outages, self.windows, self.counts,
-                             mode, 0.0, graph=list(graph or self.graph), events=self.events)
+                             mode, 0.0, graph=list(graph or self.graph), events=self.events,
+                             unread=self.unread)
 
 
 def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
@@ -165,7 +174,8 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
     profile = load_profile(profile_path)
     pre_p, ekf_p, compass_p = offline_parameters(profile)
     runs_compass = compass_p is not None and ekf_p["use_magnetic_heading"]
-    check_inputs(bag_path, OFFLINE_TOPICS + (MAGNETOMETER_TOPICS if runs_compass else ()), remap)
+    unread = check_inputs(bag_path, {**OFFLINE_TOPICS, **dict.fromkeys(
+        MAGNETOMETER_TOPICS if runs_compass else (), MAG_TYPE)}, remap)
     # The GNSS span (outage windows) first, from the GNSS topics alone: the rest is streamed.
     windows = gnss_windows(bag_rows(bag_path, lambda topic: topic.startswith(GNSS_PREFIX),
                                     remap) if outages else (), outages)
@@ -199,7 +209,7 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
     graph = ("imu_preprocessor",) + (("mag_compass",) if feed.compass else ()) + \
         ("ekf (filter only)",)
     return ForwardPass(navigator, aiding.datum, profile, windows, counts, events,
-                       OutputFrames(ekf_p, pre_p, preprocessor.calibration.c_bs), graph)
+                       OutputFrames(ekf_p, pre_p, preprocessor.calibration.c_bs), graph, unread)
 
 
 class _Feeder:

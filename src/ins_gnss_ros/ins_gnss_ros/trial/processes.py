@@ -102,7 +102,9 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
                 for topic, msgtype in sorted(outputs.items())]
         node_inputs = _subscribed_topics(node, profile.replay_graph)
         # /clock comes from the player, the default topics from rclpy: not the bag's to feed.
-        check_inputs(bag_path, node_inputs - {"/clock", *_DEFAULT_TOPICS}, remap)
+        unread = check_inputs(bag_path, {topic: msgtype for topic, msgtype in node_inputs.items()
+                                         if topic not in {"/clock", *_DEFAULT_TOPICS}},
+                              remap, set(outputs))
         _spin_until(executor, procs, lambda: all(
             p.get_subscription_count() > 0 for t, p in pubs.items() if t in node_inputs)
             and all(s.get_publisher_count() > 0 for s in subs), timeout, "matched endpoints")
@@ -130,7 +132,7 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
     with lock:
         writer.close()
     return write_summary(out, bag_path, profile, outages, windows, counts,
-                         "processes", float(rate))
+                         "processes", float(rate), unread=unread)
 
 
 #: Topics every rclpy node publishes: not outputs of the graph.
@@ -193,9 +195,10 @@ def _clock_handshake(clock_pub, first, n_nodes, procs, timeout) -> None:
             raise TimeoutError(f"timed out after {timeout} s waiting for the nodes' /clock")
 
 
-def _subscribed_topics(node, names) -> set:
-    return {topic for name in names
-            for topic, _ in node.get_subscriber_names_and_types_by_node(name, "/")}
+def _subscribed_topics(node, names) -> dict:
+    """{topic: type name} of the subscriptions of the nodes ``names``."""
+    return {topic: types[0] for name in names
+            for topic, types in node.get_subscriber_names_and_types_by_node(name, "/")}
 
 
 def _spin_until(executor, procs, condition, timeout, what) -> None:

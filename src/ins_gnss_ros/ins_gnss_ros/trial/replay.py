@@ -155,7 +155,7 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
             except Exception as err:  # rcl's own params-file parser
                 raise ProfileError(f"{profile.path}: node {name}: "
                                    f"{bagio.first_line(err)}") from None
-        check_inputs(bag_path, bus.inputs, remap)
+        unread = check_inputs(bag_path, bus.inputs, remap, bus.published)
         # The bag's type on each topic the nodes take: theirs, or one clear error now
         # rather than a traceback from a node (and the type the bus decodes payloads as).
         for topic, msgtype in input_types(bag_path, remap).items():
@@ -188,7 +188,7 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
     writer.close()
     return write_summary(out, bag_path, profile, outages, windows, counts, "in-process", 0.0,
                          faults=None if injector is None else injector.summary(),
-                         satellites=reduced)
+                         satellites=reduced, unread=unread)
 
 
 def _bus():
@@ -196,14 +196,16 @@ def _bus():
     from ins_gnss_ros.nodes.base import InProcessBus
 
     class Bus(InProcessBus):
-        """The bus, keeping the topics the nodes subscribe to: the graph's inputs."""
+        """The bus, keeping the topics the nodes subscribe to and their types: the graph's
+        inputs."""
 
         def __init__(self):
             super().__init__()
-            self.inputs = set()
+            self.inputs = {}
 
         def subscribe(self, topic, callback, form=InProcessBus.OBJECT, msg_type=None):
-            self.inputs.add(self.resolve(topic))
+            self.inputs[self.resolve(topic)] = None if msg_type is None \
+                else bagio.msgtype_of_class(msg_type)
             super().subscribe(topic, callback, form, msg_type)
 
     return Bus()

@@ -66,7 +66,7 @@ def new_run_folder(out) -> Path:
 
 
 def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
-                  graph=None, faults=None, satellites=None, events=None) -> dict:
+                  graph=None, faults=None, satellites=None, events=None, unread=()) -> dict:
     """Write ``OUT/replay.json``, the facts of a replay, and return them.
 
     Parameters
@@ -96,6 +96,9 @@ def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
     events : Counter, optional
         What the offline path's front end reported (refused inputs, withheld headings), by
         text: the nodes' /diagnostics counters.
+    unread : list of str
+        The bag's topics no node read that an input of their type could take, with the
+        remapping (:func:`~ins_gnss_ros.trial.inputs.check_inputs`).
     """
     summary = {
         "input_bag": str(Path(bag_path).resolve()),
@@ -114,6 +117,7 @@ def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
         "output_bag": "bag",
         "topics": bagio.bag_topics(out / "bag") if (out / "bag").exists() else {},
         "messages": counts.per_topic(),
+        "unread_topics": list(unread),
     }
     if faults is not None:
         summary["faults"] = faults
