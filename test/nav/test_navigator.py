@@ -257,6 +257,20 @@ def test_delayed_measurement_equals_on_time(sim):
     np.testing.assert_allclose(delayed.lat, on_time.lat, rtol=0, atol=1e-12)
     np.testing.assert_allclose(delayed.v_enu, on_time.v_enu, atol=1e-9)
     np.testing.assert_allclose(delayed.P, on_time.P, rtol=1e-9, atol=1e-15)
+    # The states at the IMU samples: the re-run's replace those it re-ran.
+    a, b = delayed.samples, on_time.samples
+    assert np.array_equal(a.t, b.t) and np.array_equal(a.epoch, b.epoch)
+    np.testing.assert_allclose(a.lat, b.lat, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.v_enu, b.v_enu, atol=1e-9)
+    # Every IMU sample after the start once, in order, between the epochs it follows and ends
+    # at; at an epoch with updates, the state before them.
+    start, end = on_time.t[0], on_time.t[-1]
+    assert np.array_equal(b.t, imu.t[(imu.t > start) & (imu.t <= end)])
+    assert np.all(b.t > on_time.t[b.epoch - 1]) and np.all(b.t <= on_time.t[b.epoch])
+    updated = np.flatnonzero(np.any(on_time.dx != 0.0, axis=1))
+    ends = np.flatnonzero(np.isin(b.t, on_time.t[updated]))
+    assert len(ends) > 50
+    assert np.all(b.lat[ends] != on_time.lat[b.epoch[ends]])
 
 
 def test_late_measurements_arriving_together_rewind_once_to_the_same_result(sim):

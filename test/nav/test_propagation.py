@@ -37,11 +37,18 @@ def test_the_compiled_segment_equals_compensation_then_mechanisation():
     ref = run(start, c_th + cth, c_dv + cdv, dt)
 
     v, q, sums = start.v_enu.copy(), start.q_nb.copy(), np.empty((2, 3))
+    track = np.full((n - 1, 10), np.nan)  # the solution after each sample but the last
     lat, lon, h = _kernels.mech_segment(start.lat, start.lon, start.h, v, q, th, dv, cth, cdv,
                                         dts, errors.gyro_bias, errors.gyro_scale,
                                         errors.accel_bias, errors.accel_scale, dt,
-                                        WGS84.kernel_params, sums)
+                                        WGS84.kernel_params, sums, track)
     np.testing.assert_allclose([lat, lon], [ref["lat"][-1], ref["lon"][-1]], rtol=0, atol=1e-14)
+    assert len(ref["lat"]) == n + 1  # the start, then after each sample
+    np.testing.assert_allclose(track[:, :2], np.column_stack([ref["lat"], ref["lon"]])[1:n],
+                               rtol=0, atol=1e-14)
+    np.testing.assert_allclose(track[:, 2], ref["h"][1:n], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(track[:, 3:6], ref["v_enu"][1:n], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(track[:, 6:], ref["q_nb"][1:n], rtol=0, atol=1e-14)
     np.testing.assert_allclose(h, ref["h"][-1], rtol=0, atol=1e-9)
     np.testing.assert_allclose(v, ref["v_enu"][-1], rtol=0, atol=1e-12)
     np.testing.assert_allclose(q, ref["q_nb"][-1], rtol=0, atol=1e-14)
@@ -76,16 +83,18 @@ def test_the_compiled_time_update_is_the_segment_loop_then_the_filter_prediction
                  "sg": np.array([1e-3, -5e-4, 2e-3]), "sa": np.array([-1e-3, 2e-3, 5e-4])}
 
     s = RunState(nav=start, ekf=ErrorStateEKF(space, noise, P0), estimates=dict(estimates))
-    phi = propagate(s, (t, th, dv, cth, cdv), noise, 0.1, BridgedGaps(1.0, 0.1), space)
+    track = np.empty((n - 1, 10))
+    phi = propagate(s, (t, th, dv, cth, cdv), noise, 0.1, BridgedGaps(1.0, 0.1), space, track)
 
     errors = SensorErrors.of_estimates(estimates)
     dts = np.diff(t, prepend=0.0)
     T = float(dts.sum())
     v, q, sums = start.v_enu.copy(), start.q_nb.copy(), np.empty((2, 3))
+    track_ref = np.empty((n - 1, 10))
     lat, lon, h = _kernels.mech_segment(start.lat, start.lon, start.h, v, q, th, dv, cth, cdv,
                                         dts, errors.gyro_bias, errors.gyro_scale,
                                         errors.accel_bias, errors.accel_scale, T / n,
-                                        WGS84.kernel_params, sums)
+                                        WGS84.kernel_params, sums, track_ref)
     ekf = ErrorStateEKF(space, noise, P0)
     phi_ref = ekf.predict(start, sums[1] / T, sums[0] / T, T)
     assert (s.nav.lat, s.nav.lon, s.nav.h, s.nav.t) == (lat, lon, h, t[-1])
@@ -93,6 +102,7 @@ def test_the_compiled_time_update_is_the_segment_loop_then_the_filter_prediction
     assert np.array_equal(s.a_enu, (v - start.v_enu) / T)
     assert np.array_equal(s.omega, sums[0] / T)
     assert np.array_equal(phi, phi_ref) and np.array_equal(s.ekf.P, ekf.P)
+    assert np.array_equal(track, track_ref)
 
 
 def test_a_bridged_gap_adds_its_variance_over_the_time_spent_in_it():

@@ -184,7 +184,7 @@ def _compensated(measured, dt, bias, scale):
 
 @njit(cache=True)
 def mech_segment(lat, lon, h, v, q, th, dv, cth, cdv, dts, gyro_bias, gyro_scale, accel_bias,
-                 accel_scale, dt, ell_par, sums):
+                 accel_scale, dt, ell_par, sums, track):
     """The navigator's time update of one segment of raw samples on the solution (lat, lon,
     h, v, q): each increment compensated as increments.SensorErrors.compensate does
     ((measured - bias dts) / (1 + scale)), its coning/sculling terms cth, cdv added, and
@@ -192,7 +192,8 @@ def mech_segment(lat, lon, h, v, q, th, dv, cth, cdv, dts, gyro_bias, gyro_scale
 
     v and q are updated in place (mech_step reads them before it writes); sums gets the sums
     of the compensated gyro and accelerometer increments (2, 3), in numpy's order (row after
-    row, from the first). Returns (lat, lon, h).
+    row, from the first); track (m, 10) the solution (lat, lon, h, v, q) after each of the
+    first m samples (m = 0: none kept). Returns (lat, lon, h).
     """
     rot = np.empty(3)
     dvn = np.empty(3)
@@ -209,6 +210,10 @@ def mech_segment(lat, lon, h, v, q, th, dv, cth, cdv, dts, gyro_bias, gyro_scale
             dvn[j] = b + cdv[i, j]
         lat, lon, h = mech_step(lat, lon, h, v, q, rot, dvn, dt, ell_par, math.nan, 0.0, 0.0,
                                 v, q)
+        if i < track.shape[0]:
+            track[i, 0], track[i, 1], track[i, 2] = lat, lon, h
+            track[i, 3:6] = v
+            track[i, 6:10] = q
     return lat, lon, h
 
 
@@ -551,11 +556,12 @@ def _block_sum(a, lo, n):
 @njit(cache=True)
 def time_update(lat, lon, h, v, q, t0, t, th, dv, cth, cdv, gyro_bias, gyro_scale, accel_bias,
                 accel_scale, ell_par, out_v, out_q, a_enu, omega, F, refresh, sensors,
-                misalign_index, P, Q, order):
+                misalign_index, P, Q, order, track):
     """The navigator's time update of one segment (propagation.propagate): the samples' steps
     from their end times t (N,) after the solution's time t0 (at least 1 us each) and their
     sum T; the solution (lat, lon, h, v, q) mechanised over the samples by
-    :func:`mech_segment` at their mean step T / N into (returned lat, lon, h) out_v, out_q;
+    :func:`mech_segment` at their mean step T / N into (returned lat, lon, h) out_v, out_q
+    (and the solution after each of the first m samples into track, (m, 10));
     the segment's mean acceleration (ENU) and compensated rate into a_enu, omega; the
     covariance by :func:`covariance_step` with the model at the segment's start and its mean
     specific force. Returns (lat, lon, h, T, phi, P).
@@ -572,7 +578,7 @@ def time_update(lat, lon, h, v, q, t0, t, th, dv, cth, cdv, gyro_bias, gyro_scal
     out_q[:] = q
     lat1, lon1, h1 = mech_segment(lat, lon, h, out_v, out_q, th, dv, cth, cdv, dts, gyro_bias,
                                   gyro_scale, accel_bias, accel_scale, T / th.shape[0], ell_par,
-                                  sums)
+                                  sums, track)
     f_b = np.empty(3)
     for j in range(3):
         a_enu[j] = (out_v[j] - v[j]) / T

@@ -457,7 +457,9 @@ class Navigator:
             self._rest_noise.moved()
             s.rest_dtheta, s.rest_time = np.zeros(3), 0.0
         s.ekf.set_noise(self._rest_noise.noise)
-        phi = propagate(s, rows, s.ekf.noise, cfg.cov_interval, self._gaps, self._space)
+        track = self._recorder.sample_buffer(len(rows[0]))
+        phi = propagate(s, rows, s.ekf.noise, cfg.cov_interval, self._gaps, self._space, track)
+        self._recorder.samples(rows[0], track)
         if self._lever_columns:
             s.omega_smooth = s.omega_smooth - np.expm1(-s.omega_time / LEVER_RATE_TAU) * (
                 s.omega - s.omega_smooth)

@@ -24,7 +24,7 @@ def extrapolate(state, dt, a_enu):
     return NavState.taking(lat, lon, h, v, state.q_nb.copy(), state.t + dt)
 
 
-def propagate(s, rows, noise, cov_interval, gaps, space):
+def propagate(s, rows, noise, cov_interval, gaps, space, track):
     """Mechanise one segment of IMU samples and propagate the covariance to its end.
 
     Parameters
@@ -41,6 +41,9 @@ def propagate(s, rows, noise, cov_interval, gaps, space):
         s.
     gaps : BridgedGaps
     space : StateSpace
+    track : (m, 10) ndarray
+        Gets the solution (lat, lon, h, v_enu, q_nb) after each of the segment's first m
+        samples (the recorded states between epochs; m = 0: none).
 
     Returns
     -------
@@ -66,7 +69,7 @@ def propagate(s, rows, noise, cov_interval, gaps, space):
         float(start.t), t, th, dv, cth, cdv, errors.gyro_bias, errors.gyro_scale,
         errors.accel_bias, errors.accel_scale, WGS84.kernel_params, v, q, s.a_enu, s.omega, F,
         rebuild, ekf.space.layout.sensor_plan, MISALIGN_COLUMNS,
-        np.ascontiguousarray(ekf.P, float), Q, int(ekf.order))
+        np.ascontiguousarray(ekf.P, float), Q, int(ekf.order), track)
     ekf.predicted(F, phi, P)
     s.nav = NavState.taking(lat, lon, h, v, q, float(t[-1]))
     s.omega_time = T

@@ -13,6 +13,21 @@ from .track import Track
 
 
 @dataclass
+class SampleTrack(Track):
+    """The forward pass's solution at its IMU samples (m samples): each mechanised from the
+    epoch before it with that epoch's sensor error estimates, as the strapdown node publishes
+    it (at a sample that ends an epoch: before that epoch's updates).
+
+    Attributes
+    ----------
+    epoch : (m,) int
+        Index of the epoch each sample precedes (its solution follows epoch ``epoch - 1``).
+    """
+
+    epoch: np.ndarray
+
+
+@dataclass
 class NavigatorOutput(Track):
     """Per-epoch record of a forward pass (k epochs, n states).
 
@@ -39,6 +54,8 @@ class NavigatorOutput(Track):
         Running sensor / clock / extra estimates after the epoch.
     space : StateSpace
     updates : list of UpdateResult
+    samples : SampleTrack or None
+        The solution at the IMU samples (what the strapdown node publishes as ins/state).
     """
 
     mode: np.ndarray
@@ -50,6 +67,7 @@ class NavigatorOutput(Track):
     estimates: dict
     space: StateSpace
     updates: list
+    samples: SampleTrack | None = None
 
     def sigma(self, block):
         """Standard deviations of a block per epoch, (k, size)."""
@@ -87,6 +105,10 @@ def estimate_sizes(space):
         yield name, (BLOCK_SIZES[name] if name in BLOCK_SIZES else space.extras[name].size)
 
 
+#: The sample buffer of a run without a record (nothing written).
+_NO_SAMPLES = np.empty((0, 10))
+
+
 class _Columns:
     """Per-epoch values in numpy columns that grow by doubling, so that a long run costs no
     Python object per value and the record's output is a view of them. A doubled column is
@@ -105,17 +127,18 @@ class _Columns:
         self._capacity = 0
         self.data: dict[str, np.ndarray] = {}
 
-    def new_row(self) -> int:
-        """Add an epoch (its values to be written into :attr:`data`); returns its row."""
+    def new_rows(self, m: int = 1) -> int:
+        """Add m epochs (their values to be written into :attr:`data`); returns the first
+        one's row."""
         n, data = self.n, self.data
-        if n == self._capacity:
-            self._capacity = max(1024, 2 * n)
+        if n + m > self._capacity:
+            self._capacity = max(1024, 2 * n, n + m)
             for k, (shape, dtype) in self._schema.items():
                 grown = np.empty((self._capacity,) + shape, dtype)
                 if n:
                     grown[:n] = data[k][:n]
                 data[k] = grown
-        self.n = n + 1
+        self.n = n + m
         return n
 
     def set_last(self, values: dict) -> None:
@@ -125,7 +148,10 @@ class _Columns:
             data[name][k] = value
 
     def view(self, name) -> np.ndarray:
-        return self.data[name][:self.n] if self.data else np.empty(0)
+        if not self.data:  # nothing recorded: an empty column of its shape and type
+            shape, dtype = self._schema[name]
+            return np.empty((0,) + shape, dtype)
+        return self.data[name][:self.n]
 
     def last_values(self) -> dict:
         """A copy of the current epoch's values (an element of a column of scalars is one)."""
@@ -161,6 +187,7 @@ class Recorder:
         if store_covariance:
             schema.update(P=((n, n), f), Pp=((n, n), f), phi=((n, n), f))
         self._out = _Columns(schema)
+        self._samples = _Columns({"t": ((), f), "nav": ((10,), f), "epoch": ((), np.int64)})
         self._updates = []
         self._updates_dropped = 0   # update results forgotten in streaming use (record=False)
 
@@ -176,7 +203,7 @@ class Recorder:
         if not self._record:
             return
         o = self._out
-        k = o.new_row()
+        k = o.new_rows()
         d = o.data
         d["t"][k] = state.nav.t
         d["dx"][k] = 0.0
@@ -184,6 +211,25 @@ class Recorder:
             d["Pp"][k] = P_prior
             d["phi"][k] = phi
         self._write(d, k, state, published_var)
+
+    def sample_buffer(self, n):
+        """Where a segment of n samples is to write the solution after each of them (the
+        last before the updates of the epoch it ends at): (n, 10), or (0, 10) without a
+        record."""
+        return np.empty((n, 10)) if self._record else _NO_SAMPLES
+
+    def samples(self, t, states):
+        """Record the solution at the samples (times t, s) of the segment whose epoch is
+        recorded next: states as :meth:`sample_buffer` gave them, filled (nothing without a
+        record)."""
+        if not len(states):
+            return
+        o = self._samples
+        k = o.new_rows(len(states))
+        rows = slice(k, o.n)
+        o.data["t"][rows] = t
+        o.data["nav"][rows] = states
+        o.data["epoch"][rows] = self._out.n
 
     def correct(self, state, dx, published_var):
         """Replace the current epoch's record by the corrected state (after an update) and
@@ -261,6 +307,8 @@ class Recorder:
         from: the updates re-applied there would otherwise add their corrections (dx) twice,
         which the smoother reads."""
         self._out.n = min(self._out.n, epochs)
+        if self._samples.n:
+            self._samples.n = int(np.searchsorted(self._samples.view("epoch"), epochs))
         del self._updates[update_count - self._updates_dropped:]
         if last_epoch is not None and epochs > 0:
             self._out.set_last(last_epoch)
@@ -280,4 +328,14 @@ class Recorder:
             P_prior=o.view("Pp") if full else None, phi=o.view("phi") if full else None,
             dx=o.view("dx").reshape(n, self.space.size),
             published_var=o.view("published_var").reshape(n, self.space.size), estimates=est,
-            space=self.space, updates=list(self._updates))
+            space=self.space, updates=list(self._updates), samples=self._sample_track())
+
+    def _sample_track(self):
+        """The recorded samples between the epochs as a SampleTrack of views (None without
+        a record)."""
+        if not self._record:
+            return None
+        o = self._samples
+        nav = o.view("nav")
+        return SampleTrack(t=o.view("t"), lat=nav[:, 0], lon=nav[:, 1], h=nav[:, 2],
+                           v_enu=nav[:, 3:6], q_nb=nav[:, 6:10], epoch=o.view("epoch"))

@@ -11,11 +11,13 @@ the graph is only that no strapdown node follows the filter: with a ``mag_compas
 :class:`~ins_gnss_ros.magnetic.compass_front_end.CompassFrontEnd` levels each magnetometer sample
 with the filter's attitude turned to its time
 (:meth:`~ins_gnss_ros.nav.navigator.Navigator.attitude_at`) and its heading goes to the ekf's
-``mag/heading`` handler, and the outputs are the filter's own
-solution at its covariance epochs (10 Hz by default) as ``ins/state``, ``nav/odom``,
-``nav/fix`` (``STATUS_NO_FIX`` unless NAVIGATING, else ``STATUS_FIX``), ``/tf`` (with
-``publish_tf``: map -> base_link, and ``/tf_static`` base_link -> imu_link and gnss_0, built as
-the nodes build them) and ``nav/status`` once a second with the updates since the last. Deterministic like :func:`ins_gnss_ros.trial.replay.replay`.
+``mag/heading`` handler, and the outputs are the filter's own solution as the nodes publish
+it: ``ins/state`` at every IMU increment (the filter's mechanisation between its epochs, as
+the strapdown's), ``nav/odom``, ``nav/fix`` (``STATUS_NO_FIX`` unless NAVIGATING, else
+``STATUS_FIX``) and ``/tf`` (with ``publish_tf``: map -> base_link, and ``/tf_static``
+base_link -> imu_link and gnss_0, built as the nodes build them) at the ekf's
+``output_rate_hz``, and ``nav/status`` once a second with the updates since the last.
+Deterministic like :func:`ins_gnss_ros.trial.replay.replay`.
 """
 from __future__ import annotations
 
@@ -359,16 +361,47 @@ def write_ordered(writer, messages) -> Counter:
     return counts
 
 
-#: Epochs whose messages are encoded at once: the payloads of a block are a few MB.
+#: Rows (samples or epochs) whose messages are encoded at once: the payloads of a block are a
+#: few MB.
 OUTPUT_BLOCK = 4096
 
 
-def output_messages(result, config, datum, frames, prefix="") -> Iterator:
-    """ins/state, nav/odom, nav/fix, /tf at every epoch of a recorded pass, nav/status once a
-    second and /tf_static at the first, as (t_ns, topic, type name, CDR payload) in stamp
-    order: the messages the nodes would publish for the solution.
+@dataclass(frozen=True)
+class _OutputRows:
+    """What the nodes' outputs of a recorded pass are taken from: a state per row, the epoch
+    each row takes its covariance, mode and sensor errors from, and the rows at which nav/fix,
+    nav/odom and /tf are published (ins/state is at every row)."""
 
-    The per-epoch messages are encoded for a block of epochs at once
+    states: object       # Track
+    epoch: np.ndarray    # (r,) int
+    outputs: np.ndarray  # (r,) bool
+
+    @classmethod
+    def of(cls, result, output_rate_hz):
+        """Of a forward pass with its samples, as the nodes publish it: ins/state at every
+        IMU sample (the strapdown's, mechanised from the epoch before it: at a sample ending
+        an epoch, before that epoch's updates), nav/fix, nav/odom and /tf at
+        ``output_rate_hz`` from those states, each with the covariance of the epoch before it
+        (the filter's when that sample arrives). Of a solution without samples (the smoothed
+        one): everything at every epoch."""
+        samples = getattr(result, "samples", None)
+        if samples is None:
+            n = len(result.t)
+            return cls(result, np.arange(n), np.ones(n, bool))
+        outputs = np.zeros(len(samples.t), bool)
+        last, period = -np.inf, 1.0 / output_rate_hz
+        for i, t in enumerate(samples.t.tolist()):
+            if t - last >= period:  # as the ekf node's on_ins_state
+                outputs[i], last = True, t
+        return cls(samples, samples.epoch - 1, outputs)
+
+
+def output_messages(result, config, datum, frames, prefix="") -> Iterator:
+    """The messages the nodes would publish for a recorded pass (:class:`_OutputRows`):
+    ins/state, nav/fix, nav/odom, /tf, nav/status once a second and /tf_static at the first
+    row, as (t_ns, topic, type name, CDR payload) in stamp order.
+
+    The per-row messages are encoded for a block of rows at once
     (:func:`~ins_gnss_ros.io.cdr.encode_columns`), not built as message objects: a long run
     has hundreds of thousands of them, and an rclpy object with its CDR cost about 100 us
     each. /tf and nav/status (sequences) are built as objects.
@@ -376,9 +409,9 @@ def output_messages(result, config, datum, frames, prefix="") -> Iterator:
     Parameters
     ----------
     result : NavigatorOutput
-        The forward pass (``navigator.output()``) or another solution at its epochs with its
-        covariance (the smoothed one, trial/smooth.py); its update results since the last
-        nav/status go into each nav/status.
+        The forward pass (``navigator.output()``, with its samples) or another solution at its
+        epochs with its covariance (the smoothed one, trial/smooth.py); its update results
+        since the last nav/status go into each nav/status.
     config : NavigatorConfig
         The filter's (the variance of the angular rate in nav/odom).
     datum : tuple or None
@@ -400,7 +433,10 @@ def output_messages(result, config, datum, frames, prefix="") -> Iterator:
     from ins_gnss_ros.nodes.nav_messages import fix_payloads, fix_status, odom_payloads, status_msg
     from ins_gnss_ros.nodes.tf_messages import solution_tf, static_tf
 
-    if len(result.t) == 0:
+    ekf_p, pre_p = frames.ekf_p, frames.pre_p
+    rows = _OutputRows.of(result, ekf_p["output_rate_hz"])
+    st = rows.states
+    if len(st.t) == 0:
         return
     space, updates = result.space, result.updates
     rate_var = config.noise.gyro_psd / config.cov_interval
@@ -410,57 +446,68 @@ def output_messages(result, config, datum, frames, prefix="") -> Iterator:
     topic = {name: prefix + name for name in ("ins/state", "nav/fix", "nav/odom", "nav/status")}
     types = {"ins/state": "ins_gnss_msgs/msg/InsState", "nav/fix": "sensor_msgs/msg/NavSatFix",
              "nav/odom": "nav_msgs/msg/Odometry"}
-    ekf_p, pre_p = frames.ekf_p, frames.pre_p
     names = (ekf_p["map_frame"], ekf_p["base_link_frame"])
     publish_tf = ekf_p["publish_tf"] and not prefix
     odom = (ekf_p["odom_frame"], OdomTrack()) if ekf_p["use_wheel_odometry"] else None
-    # The messages carry the stamp set_stamp_sec gives the epoch's time; /tf is logged at the
-    # epoch's ns (the two roundings differ by up to a few hundred ns at epoch scale).
-    stamps_ns, epochs_ns = sec_to_stamp_ns(result.t), sec_to_ns(result.t)
+    # The messages carry the stamp set_stamp_sec gives the row's time; /tf is logged at the
+    # row's ns (the two roundings differ by up to a few hundred ns at epoch scale).
+    stamps_ns, rows_ns = sec_to_stamp_ns(st.t), sec_to_ns(st.t)
     # As the imu_preprocessor and ekf nodes publish them: each its own, once (with the first
-    # epoch's messages).
+    # row's messages).
     statics = []
     for parent, publish, child in (
             (pre_p["frame_id"], pre_p["publish_tf"],
              (pre_p["imu_frame"], (0.0, 0.0, 0.0), frames.c_bs)),
             (names[1], ekf_p["publish_tf"], (ekf_p["gnss_frame"], ekf_p["lever_arm"], np.eye(3)))):
         if publish and not prefix:
-            msg = static_tf(ns_to_stamp(epochs_ns[0]), parent, [child])
-            statics.append((int(epochs_ns[0]), "/tf_static", msgtype_of(msg), serialize(msg)))
+            msg = static_tf(ns_to_stamp(rows_ns[0]), parent, [child])
+            statics.append((int(rows_ns[0]), "/tf_static", msgtype_of(msg), serialize(msg)))
     navigating = fix_status(True, NavSatStatus.STATUS_FIX)
     not_navigating = fix_status(False, NavSatStatus.STATUS_FIX)
-    for first in range(0, len(result.t), OUTPUT_BLOCK):
+    for first in range(0, len(st.t), OUTPUT_BLOCK):
         k = slice(first, first + OUTPUT_BLOCK)
-        lat, lon, h, v, q = (result.lat[k], result.lon[k], result.h[k], result.v_enu[k],
-                             result.q_nb[k])
-        # As the ekf node publishes it (Navigator.covariance).
-        P = published_covariance(result.P[k], result.published_var[k])
-        mode = result.mode[k]
+        epoch = rows.epoch[k]
+        mode = result.mode[epoch]
         stamp = stamps_ns[k]
         # The sensor errors the solution was compensated with, as the strapdown's ins/state
         # carries its applied ones.
-        errors = SensorErrors.of_estimates({name: values[k] for name, values in
+        errors = SensorErrors.of_estimates({name: values[epoch] for name, values in
                                             result.estimates.items()})
-        # The input's augmentation is not kept per epoch: a NAVIGATING solution is a FIX here.
         payloads = [(topic["ins/state"], types["ins/state"], ins_state_payloads(
-                        stamp, lat, lon, h, v, q, [MODE_VALUES[m] for m in mode], errors=errors)),
-                    (topic["nav/fix"], types["nav/fix"], fix_payloads(
-                        stamp, lat, lon, h, P[:, space["pos"], space["pos"]],
-                        np.where(mode == NAVIGATING, navigating, not_navigating), names[1]))]
-        if datum is not None:
-            payloads.append((topic["nav/odom"], types["nav/odom"], odom_payloads(
-                stamp, lat, lon, h, v, q, P, space, datum, rate_var, names)))
-        for i in range(len(lat)):
-            e = first + i
-            stamp_ns = int(stamps_ns[e])
+            stamp, st.lat[k], st.lon[k], st.h[k], st.v_enu[k], st.q_nb[k],
+            [MODE_VALUES[m] for m in mode], errors=errors), None)]
+        out = np.flatnonzero(rows.outputs[k])  # the block's rows with a solution published
+        o = first + out
+        if len(out):
+            # As the ekf node publishes it (Navigator.covariance).
+            P = published_covariance(result.P[epoch[out]], result.published_var[epoch[out]])
+            # The input's augmentation is not kept per epoch: a NAVIGATING solution is a FIX.
+            payloads.append((topic["nav/fix"], types["nav/fix"], fix_payloads(
+                stamp[out], st.lat[o], st.lon[o], st.h[o], P[:, space["pos"], space["pos"]],
+                np.where(mode[out] == NAVIGATING, navigating, not_navigating), names[1]), out))
+            if datum is not None:
+                payloads.append((topic["nav/odom"], types["nav/odom"], odom_payloads(
+                    stamp[out], st.lat[o], st.lon[o], st.h[o], st.v_enu[o], st.q_nb[o], P,
+                    space, datum, rate_var, names), out))
+        # each row's place among the block's rows with a solution published
+        published = np.cumsum(rows.outputs[k]) - 1
+        states = payloads[0][2]
+        for i in range(len(epoch)):
+            r = first + i
+            stamp_ns = int(stamps_ns[r])
+            solution = bool(rows.outputs[r])
+            t = float(st.t[r])
+            if not (solution or r == 0 or t >= next_status):  # most samples: ins/state alone
+                yield stamp_ns, topic["ins/state"], types["ins/state"], states[i]
+                continue
             # Each at its log time, ties in this order (sorted below).
-            logged = statics if e == 0 else []
-            logged += [(stamp_ns, name, msgtype, data[i]) for name, msgtype, data in payloads]
-            t = float(result.t[e])
-            if publish_tf and datum is not None:
-                st = NavState(lat[i], lon[i], h[i], v[i], q[i], t)
-                msg = solution_tf(ns_to_stamp(stamp_ns), st, datum, *names, odom)
-                logged.append((int(epochs_ns[e]), "/tf", "tf2_msgs/msg/TFMessage",
+            logged = statics if r == 0 else []
+            logged += [(stamp_ns, name, msgtype, data[i if at is None else published[i]])
+                       for name, msgtype, data, at in payloads if at is None or solution]
+            if solution and publish_tf and datum is not None:
+                state = NavState(st.lat[r], st.lon[r], st.h[r], st.v_enu[r], st.q_nb[r], t)
+                msg = solution_tf(ns_to_stamp(stamp_ns), state, datum, *names, odom)
+                logged.append((int(rows_ns[r]), "/tf", "tf2_msgs/msg/TFMessage",
                                serialize(msg)))
             if t >= next_status:
                 next_status = t + 1.0
@@ -470,7 +517,9 @@ def output_messages(result, config, datum, frames, prefix="") -> Iterator:
                     u += 1
                 accepted += sum(x.accepted for x in since)
                 rejected += sum(not x.accepted for x in since)
-                status = status_msg(t, MODE_VALUES[mode[i]], False, since, (space, P[i]),
+                e = int(epoch[i])
+                P_e = published_covariance(result.P[e], result.published_var[e])
+                status = status_msg(t, MODE_VALUES[mode[i]], False, since, (space, P_e),
                                     accepted, rejected)
                 logged.append((stamp_ns, topic["nav/status"], "ins_gnss_msgs/msg/FilterStatus",
                                serialize(status)))

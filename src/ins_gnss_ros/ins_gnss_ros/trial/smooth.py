@@ -116,8 +116,9 @@ def smooth(bag_path, profile_path, out, outages=None, point=None, exports=(),
         raise ValueError(f"{bag_path}: the filter never started (no GNSS fix to level on): "
                          "nothing to smooth")
     sm = rts_smooth(forward)
+    # At the epochs: the forward pass's states between them are not smoothed.
     smoothed = dataclasses.replace(forward, lat=sm.lat, lon=sm.lon, h=sm.h, v_enu=sm.v_enu,
-                                   q_nb=sm.q_nb, P=sm.P, estimates=sm.estimates)
+                                   q_nb=sm.q_nb, P=sm.P, estimates=sm.estimates, samples=None)
     del sm
     toc_smooth = time.perf_counter()
     # Both solutions (and their points) merged in stamp order, written as they are made.
