@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -17,28 +16,12 @@ from ins_gnss_ros.nav.navigator import Navigator
 from ins_gnss_ros.nav.recording import published_covariance
 from ins_gnss_ros.params import ParameterError, resolve
 
-
-class Recorder:
-    """A navigator that keeps what it is given (levelled and aligned)."""
-
-    config = SimpleNamespace(noise=SimpleNamespace(accel_psd=1e-6, gyro_psd=1e-8), extras={},
-                             static_speed=0.1)
-    started = True
-    solution = None  # (levelled: the gyros' azimuth projects on body z)
-
-    def __init__(self):
-        self.measurements, self.heading_known = [], True
-
-    def add_measurement(self, m):
-        self.measurements.append(m)
-
-    def note_imu_rates_wrong(self, wrong):
-        self.imu_rates_wrong = wrong
+from fake_navigator import RecordingNavigator
 
 
 def aiding(**policy):
     events = []
-    nav = Recorder()
+    nav = RecordingNavigator()
     return Aiding(nav, AidingPolicy(**policy), lambda text, log=True: events.append(text)), nav, events
 
 
@@ -435,7 +418,7 @@ def test_diagnostics_say_the_first_fixes_wait_for_the_imu():
 
 
 def test_what_the_preprocessor_bridged_reaches_the_filter_as_process_noise():
-    class Bridges(Recorder):
+    class Bridges(RecordingNavigator):
         def __init__(self):
             super().__init__()
             self.gaps, self.samples = [], []

@@ -3,7 +3,6 @@ they are fused with (nav/heading_noise.py, Aiding.heading)."""
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -12,22 +11,8 @@ from ins_gnss_ros.nav.aiding import Aiding, AidingPolicy
 from ins_gnss_ros.nav.heading_noise import HeadingNoise
 from ins_gnss_ros.nav.measurement_types import HeadingFix
 
+from fake_navigator import RecordingNavigator
 
-class Recorder:
-    """A levelled navigator that keeps the measurements it is given."""
-
-    config = SimpleNamespace(noise=SimpleNamespace(accel_psd=1e-6, gyro_psd=1e-8), extras={},
-                             static_speed=0.1)
-    started, solution = True, None  # (no solution: the gyros' azimuth projects on body z)
-
-    def __init__(self):
-        self.measurements, self.heading_known = [], False
-
-    def add_measurement(self, m):
-        self.measurements.append(m)
-
-    def add_imu(self, *args):
-        pass
 
 R = math.radians(0.5) ** 2  # the readings' reported variance, rad^2
 DT = 0.02  # 50 Hz
@@ -75,7 +60,7 @@ def test_the_front_end_differences_the_readings_against_the_gyros():
     # is taken out by the gyros' azimuth (it is not an error), the correlation raises the
     # variance the compass is fused with; a source without a bias block (a true heading) and
     # the reading that aligns the heading keep their reported variance.
-    nav = Recorder()
+    nav = RecordingNavigator(heading_known=False)
     front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
     front.velocity(0.0, np.zeros(3), np.eye(3) * 0.01)  # a receiver with velocity: no rest test
     rate = math.radians(10.0)  # counter-clockwise: the azimuth falls

@@ -1,0 +1,25 @@
+"""A stand-in for the navigator that the aiding front end (nav/aiding.py) feeds: levelled, it
+keeps the measurements it is given."""
+from types import SimpleNamespace
+
+
+class RecordingNavigator:
+    """Keeps what it is given; ``heading_known`` as the test sets it."""
+
+    config = SimpleNamespace(noise=SimpleNamespace(accel_psd=1e-6, gyro_psd=1e-8), extras={},
+                             static_speed=0.1)
+    started = True
+    solution = None  # (levelled: the gyros' azimuth projects on body z)
+
+    def __init__(self, heading_known: bool = True):
+        self.measurements, self.heading_known = [], heading_known
+        self.imu_rates_wrong = False
+
+    def add_measurement(self, m):
+        self.measurements.append(m)
+
+    def add_imu(self, *args):
+        pass
+
+    def note_imu_rates_wrong(self, wrong):
+        self.imu_rates_wrong = wrong
