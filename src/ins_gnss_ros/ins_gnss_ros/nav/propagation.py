@@ -43,7 +43,7 @@ def propagate(s, rows, noise, cov_interval, gaps, space, track):
     space : StateSpace
     track : (m, 10) ndarray
         Gets the solution (lat, lon, h, v_enu, q_nb) after each of the segment's first m
-        samples (the recorded states between epochs; m = 0: none).
+        samples (the record's states at the samples, Recorder.samples; m = 0: none).
 
     Returns
     -------

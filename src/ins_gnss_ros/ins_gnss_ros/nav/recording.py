@@ -110,7 +110,7 @@ _NO_SAMPLES = np.empty((0, 10))
 
 
 class _Columns:
-    """Per-epoch values in numpy columns that grow by doubling, so that a long run costs no
+    """Per-epoch (or per-sample) values in numpy columns that grow by doubling, so that a long run costs no
     Python object per value and the record's output is a view of them. A doubled column is
     only resident as far as it is written (the pages beyond are address space), and the old
     one is freed at once: the copy is the only transient.
@@ -128,8 +128,8 @@ class _Columns:
         self.data: dict[str, np.ndarray] = {}
 
     def new_rows(self, m: int = 1) -> int:
-        """Add m epochs (their values to be written into :attr:`data`); returns the first
-        one's row."""
+        """Add m rows (epochs, or samples; their values to be written into :attr:`data`);
+        returns the first one's index."""
         n, data = self.n, self.data
         if n + m > self._capacity:
             self._capacity = max(1024, 2 * n, n + m)
