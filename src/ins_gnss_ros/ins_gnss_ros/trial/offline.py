@@ -475,7 +475,7 @@ def output_messages(result, config, datum, frames, prefix="") -> Iterator:
                                             result.estimates.items()})
         payloads = [(topic["ins/state"], types["ins/state"], ins_state_payloads(
             stamp, st.lat[k], st.lon[k], st.h[k], st.v_enu[k], st.q_nb[k],
-            [MODE_VALUES[m] for m in mode], errors=errors), None)]
+            [MODE_VALUES[m] for m in mode], errors=errors), False)]
         out = np.flatnonzero(rows.outputs[k])  # the block's rows with a solution published
         o = first + out
         if len(out):
@@ -484,12 +484,13 @@ def output_messages(result, config, datum, frames, prefix="") -> Iterator:
             # The input's augmentation is not kept per epoch: a NAVIGATING solution is a FIX.
             payloads.append((topic["nav/fix"], types["nav/fix"], fix_payloads(
                 stamp[out], st.lat[o], st.lon[o], st.h[o], P[:, space["pos"], space["pos"]],
-                np.where(mode[out] == NAVIGATING, navigating, not_navigating), names[1]), out))
+                np.where(mode[out] == NAVIGATING, navigating, not_navigating), names[1]), True))
             if datum is not None:
                 payloads.append((topic["nav/odom"], types["nav/odom"], odom_payloads(
                     stamp[out], st.lat[o], st.lon[o], st.h[o], st.v_enu[o], st.q_nb[o], P,
-                    space, datum, rate_var, names), out))
-        # each row's place among the block's rows with a solution published
+                    space, datum, rate_var, names), True))
+        # each row's place among the block's rows with a solution published (the payloads
+        # marked True are of those rows only)
         published = np.cumsum(rows.outputs[k]) - 1
         states = payloads[0][2]
         for i in range(len(epoch)):
@@ -502,8 +503,9 @@ def output_messages(result, config, datum, frames, prefix="") -> Iterator:
                 continue
             # Each at its log time, ties in this order (sorted below).
             logged = statics if r == 0 else []
-            logged += [(stamp_ns, name, msgtype, data[i if at is None else published[i]])
-                       for name, msgtype, data, at in payloads if at is None or solution]
+            logged += [(stamp_ns, name, msgtype, data[published[i] if of_solution else i])
+                       for name, msgtype, data, of_solution in payloads
+                       if solution or not of_solution]
             if solution and publish_tf and datum is not None:
                 state = NavState(st.lat[r], st.lon[r], st.h[r], st.v_enu[r], st.q_nb[r], t)
                 msg = solution_tf(ns_to_stamp(stamp_ns), state, datum, *names, odom)
