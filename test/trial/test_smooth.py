@@ -71,6 +71,33 @@ def test_the_point_is_recorded_at_the_imu_rate(runs):
     assert np.all(np.abs(nearest - stamps) < 1000)
 
 
+def test_the_forward_point_is_the_forward_solution_at_the_lever_arm(runs):
+    """forward/point/state is forward/ins/state (the pass's own, causal states at the samples)
+    moved to the point: position by the lever arm, velocity by the body rate about it."""
+    from ins_gnss_ros.nav.lever_arm import lever_arm_position
+
+    _, smoothed, _, _ = runs
+    msgs = bagio.read_bag(smoothed / "bag", ["/forward/ins/state", "/forward/point/state"])
+    ins = [m.msg for m in msgs if m.topic == "/forward/ins/state"]
+    point = [m.msg for m in msgs if m.topic == "/forward/point/state"]
+    assert len(point) == len(ins) > 1000
+    # the same samples (stamps rounded from the same seconds in two ways: within 1 us)
+    assert np.max(np.abs(np.subtract([bagio.msg_stamp_ns(m) for m in point],
+                                     [bagio.msg_stamp_ns(m) for m in ins]))) < 1000
+    q = np.array([[m.orientation.w, m.orientation.x, m.orientation.y, m.orientation.z]
+                  for m in ins])
+    lat, lon, h = lever_arm_position(np.array([m.latitude for m in ins]),
+                                     np.array([m.longitude for m in ins]),
+                                     np.array([m.altitude for m in ins]), q,
+                                     np.array(POINT, float))
+    np.testing.assert_allclose([p.latitude for p in point], lat, rtol=0, atol=1e-12)
+    np.testing.assert_allclose([p.longitude for p in point], lon, rtol=0, atol=1e-12)
+    np.testing.assert_allclose([p.altitude for p in point], h, rtol=0, atol=1e-6)
+    rate = np.array([[p.angular_velocity.x, p.angular_velocity.y, p.angular_velocity.z]
+                     for p in point])
+    assert np.all(np.isfinite(rate)) and np.max(np.abs(rate)) < 1.0  # rad/s of a flight
+
+
 def _bag_solution(smoothed, topic="/ins/state"):
     msgs = bagio.read_bag(smoothed / "bag", [topic])
     return (np.array([bagio.msg_stamp_ns(m.msg) * 1e-9 for m in msgs]),

@@ -23,6 +23,9 @@ Between the epochs (the filter's covariance interval, 0.1 s by default) :func:`i
 gives a solution at every IMU sample from the increments: each interval is mechanised from the
 smoothed state of its first epoch, and the closure to the smoothed state of the next is removed
 in proportion to the time elapsed (the usual way post-processors densify a smoothed solution).
+The forward pass has its own states at the samples (the navigator's record,
+:class:`~ins_gnss_ros.nav.recording.SampleTrack`): :func:`sample_rate_track` gives them with
+their rates.
 """
 from __future__ import annotations
 
@@ -159,3 +162,35 @@ def imu_rate_track(track, estimates, t, dtheta, dv):
                             np.zeros((0, 4)), empty)
     tt, lla, v, q, w_b = (np.concatenate(c) for c in zip(*parts))
     return ImuRateTrack(tt, lla[:, 0], lla[:, 1], lla[:, 2], v, q, w_b)
+
+
+def sample_rate_track(samples, estimates, t, dtheta):
+    """A forward pass's own solution at its IMU samples with each sample's compensated body
+    rate: causal, as the strapdown publishes it (:func:`imu_rate_track` closes each interval
+    onto the next epoch instead).
+
+    Parameters
+    ----------
+    samples : SampleTrack
+        The pass's states at its samples (``NavigatorOutput.samples``).
+    estimates : dict of str to (k, size)
+        The pass's sensor-error estimates per epoch: each sample is compensated with those of
+        the epoch before it, as the navigator mechanised it.
+    t : (N,) s
+        End times of the IMU samples the pass was given, increasing (the samples' among them).
+    dtheta : (N, 3)
+        Their angle increments, rad, sensor errors not removed.
+
+    Returns
+    -------
+    ImuRateTrack
+    """
+    t = np.asarray(t, float)
+    i = np.searchsorted(t, samples.t)
+    # Each increment's interval; the first one's is taken as the second's.
+    dts = np.diff(t, prepend=2.0 * t[0] - t[1] if len(t) > 1 else t[0] - 1.0)[i]
+    errors = SensorErrors.of_estimates({name: v[samples.epoch - 1]
+                                        for name, v in estimates.items()})
+    omega = (np.asarray(dtheta)[i] / dts[:, None] - errors.gyro_bias) / (1.0 + errors.gyro_scale)
+    return ImuRateTrack(samples.t, samples.lat, samples.lon, samples.h, samples.v_enu,
+                        samples.q_nb, omega)

@@ -12,7 +12,9 @@ holds
   forward pass, message for message what ``trial replay --offline`` records;
 * with a ``point`` (base_link FLU lever arm): ``point/state`` and ``forward/point/state``,
   InsState of that body point (position, velocity, attitude, compensated rates) at every IMU
-  sample (:func:`~ins_gnss_ros.nav.smoother.imu_rate_track`).
+  sample (the smoothed: :func:`~ins_gnss_ros.nav.smoother.imu_rate_track`; the forward: its
+  own states there, :func:`~ins_gnss_ros.nav.smoother.sample_rate_track`, those of
+  ``forward/ins/state``).
 
 The forward record is what bounds the memory: P, P- and Phi per epoch (3 n^2 doubles, 10 Hz or
 faster), kept once (the navigator's output is a view of its record); the bag is read and the
@@ -151,11 +153,14 @@ def _point_messages(topic, result, lever, t, dtheta, dv) -> Iterator:
     from ins_gnss_msgs.msg import InsState
 
     from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
-    from ins_gnss_ros.nav.smoother import imu_rate_track
+    from ins_gnss_ros.nav.smoother import imu_rate_track, sample_rate_track
     from ins_gnss_ros.nodes.convert import ins_state_payloads
     from ins_gnss_ros.trial.offline import OUTPUT_BLOCK
 
-    dense = imu_rate_track(result, result.estimates, t, dtheta, dv)
+    # The forward pass's own (causal) states at the samples; the smoothed solution's between
+    # its epochs
+    dense = imu_rate_track(result, result.estimates, t, dtheta, dv) if result.samples is None \
+        else sample_rate_track(result.samples, result.estimates, t, dtheta)
     lat, lon, h = lever_arm_position(dense.lat, dense.lon, dense.h, dense.q_nb, lever)
     v = lever_arm_velocity(dense.v_enu, dense.q_nb, dense.omega_b, lever, dense.lat)
     stamps = bagio.sec_to_ns(dense.t)
