@@ -418,8 +418,8 @@ def test_offline_agrees_with_the_graph(default_drive):
 def test_offline_publishes_what_the_graph_does(default_drive):
     """--offline writes the nodes' outputs at their rates: ins/state at every IMU increment
     from the filter's start (the strapdown's; at an increment with updates, the state before
-    them), nav/fix and nav/odom at the ekf's output_rate_hz (10 Hz) from states carrying the
-    last correction. Its velocity maxima and NEES agree with the graph's to 2 % (with the
+    them), nav/fix and nav/odom at the ekf's output_rate_hz (10 Hz) with the covariance of
+    the epoch before. Its velocity maxima and NEES agree with the graph's to 2 % (with the
     states of its epochs alone: velocity maxima 0.90, NEES 0.94 of the graph's on the 600 s
     drive, docs/results/product_path.md "2026-12-05 (session 23)")."""
     from ins_gnss_ros.trial.report import evaluate_run
