@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ins_gnss_ros.nav.aiding import WHITE_SHARE, Aiding, AidingPolicy, WheelPolicy
+from ins_gnss_ros.nav.aiding import WHITE_SHARE, Aiding, AidingPolicy, WheelPolicy, \
+    velocity_latency_summary
 from ins_gnss_ros.nav.earth import earth_rate_enu, normal_gravity
 from ins_gnss_ros.nav.filter_config import PARAMS, navigator_config
 from ins_gnss_ros.nav.imu_timing import Verdict
@@ -442,3 +443,14 @@ def test_what_the_preprocessor_bridged_reaches_the_filter_as_process_noise():
     assert nav.gaps[1:] == [(pytest.approx(1.02), 1.10),
                             (pytest.approx(1.09), 1.10, 1e-8, 1e-6)]
     assert nav.samples[3] == pytest.approx([1.03 + 0.01 * k for k in range(8)])  # held
+
+
+def test_a_clear_velocity_lag_is_explained_with_both_of_its_causes():
+    # 100 ms late stamps on the simulated car: the estimate 49 +- 4 ms (product_path.md); an
+    # honest receiver's: a few ms, or within 3 sigma.
+    late = velocity_latency_summary(0.049, 0.004)
+    assert late.startswith("49 +- 4 ms: the velocity lags") and "stamped on arrival" in late \
+        and "time_offset_sigma_s" in late
+    for latency, sigma in ((0.004, 0.001), (0.05, 0.02), (-0.06, 0.005)):
+        assert velocity_latency_summary(latency, sigma) == \
+            f"{1e3 * latency:.0f} +- {1e3 * sigma:.0f} ms"

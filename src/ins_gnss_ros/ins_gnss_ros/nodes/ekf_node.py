@@ -62,7 +62,7 @@ from tf2_msgs.msg import TFMessage
 
 from ..io import NS, codec, field_reader, new, ns_to_stamp, stamp_to_ns
 from ..nav import ALIGNING, NAVIGATING, Navigator
-from ..nav.aiding import Aiding, AidingPolicy
+from ..nav.aiding import Aiding, AidingPolicy, velocity_latency_summary
 from ..nav.error_model import LAYOUTS
 from ..nav.filter_config import PARAMS, navigator_config
 from ..nav.odom_frame import OdomTrack
@@ -301,8 +301,7 @@ class EkfNode(EkfServices, NavNode):
             self.diag.set_value("non-holonomic constraint", nav.learned_constraint)
         latency = nav.velocity_latency()
         if latency is not None:
-            self.diag.set_value("gnss/vel latency estimate",
-                                f"{1e3 * latency[0]:.0f} +- {1e3 * latency[1]:.0f} ms")
+            self.diag.set_value("gnss/vel latency estimate", velocity_latency_summary(*latency))
         self.pub_status.publish(status_msg(
             t, MODE_VALUES[mode], self.aiding.use_ranges, updates,
             (nav.space, nav.covariance()) if nav.started else None,
