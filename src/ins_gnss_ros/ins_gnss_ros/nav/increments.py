@@ -117,12 +117,13 @@ class SensorErrors:
         dtheta, dv : (3,) or (n, 3)
             Measured angle (rad) and velocity (m/s) increments.
         dt : float or (n,)
-            Their intervals, s.
+            Their intervals, s. The sensor errors are one for all (3,) or one per row (n, 3).
         """
         dt = np.asarray(dt, float)
         if dt.ndim:
-            return ((dtheta - np.multiply.outer(dt, self.gyro_bias)) / (1.0 + self.gyro_scale),
-                    (dv - np.multiply.outer(dt, self.accel_bias)) / (1.0 + self.accel_scale))
+            dt = dt[:, None]
+            return ((dtheta - dt * self.gyro_bias) / (1.0 + self.gyro_scale),
+                    (dv - dt * self.accel_bias) / (1.0 + self.accel_scale))
         return ((dtheta - self.gyro_bias * dt) / (1.0 + self.gyro_scale),
                 (dv - self.accel_bias * dt) / (1.0 + self.accel_scale))
 

@@ -164,7 +164,7 @@ def imu_rate_track(track, estimates, t, dtheta, dv):
     return ImuRateTrack(tt, lla[:, 0], lla[:, 1], lla[:, 2], v, q, w_b)
 
 
-def sample_rate_track(samples, estimates, t, dtheta):
+def sample_rate_track(samples, estimates, t, dtheta, dv):
     """A forward pass's own solution at its IMU samples with each sample's compensated body
     rate: causal, as the strapdown publishes it (:func:`imu_rate_track` closes each interval
     onto the next epoch instead).
@@ -178,8 +178,8 @@ def sample_rate_track(samples, estimates, t, dtheta):
         the epoch before it, as the navigator mechanised it.
     t : (N,) s
         End times of the IMU samples the pass was given, increasing (the samples' among them).
-    dtheta : (N, 3)
-        Their angle increments, rad, sensor errors not removed.
+    dtheta, dv : (N, 3)
+        Their coning/sculling-compensated increments (rad, m/s), sensor errors not removed.
 
     Returns
     -------
@@ -191,6 +191,6 @@ def sample_rate_track(samples, estimates, t, dtheta):
     dts = np.diff(t, prepend=2.0 * t[0] - t[1] if len(t) > 1 else t[0] - 1.0)[i]
     errors = SensorErrors.of_estimates({name: v[samples.epoch - 1]
                                         for name, v in estimates.items()})
-    omega = (np.asarray(dtheta)[i] / dts[:, None] - errors.gyro_bias) / (1.0 + errors.gyro_scale)
+    th, _ = errors.compensate(np.asarray(dtheta)[i], np.asarray(dv)[i], dts)
     return ImuRateTrack(samples.t, samples.lat, samples.lon, samples.h, samples.v_enu,
-                        samples.q_nb, omega)
+                        samples.q_nb, th / dts[:, None])

@@ -160,7 +160,7 @@ def _point_messages(topic, result, lever, t, dtheta, dv) -> Iterator:
     # The forward pass's own (causal) states at the samples; the smoothed solution's between
     # its epochs
     dense = imu_rate_track(result, result.estimates, t, dtheta, dv) if result.samples is None \
-        else sample_rate_track(result.samples, result.estimates, t, dtheta)
+        else sample_rate_track(result.samples, result.estimates, t, dtheta, dv)
     lat, lon, h = lever_arm_position(dense.lat, dense.lon, dense.h, dense.q_nb, lever)
     v = lever_arm_velocity(dense.v_enu, dense.q_nb, dense.omega_b, lever, dense.lat)
     stamps = bagio.sec_to_ns(dense.t)
