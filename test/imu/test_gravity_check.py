@@ -1,5 +1,6 @@
-"""imu/gravity_check.py: an accelerometer stream in g, or without gravity, is told apart from the
-specific force in m/s^2 (on a simulated car's accelerations), and the preprocessor reports it."""
+"""imu/gravity_check.py: an accelerometer stream in g, or without gravity, or in axes other than
+base_link's FLU, is told apart from the specific force in m/s^2 in FLU (on a simulated car's
+accelerations), and the preprocessor reports it."""
 import numpy as np
 import pytest
 
@@ -38,6 +39,21 @@ def test_units_and_gravity_of_the_stream(scale, shift, verdict):
     assert len(windows) == 3  # one per complete WINDOW_S stretch
     for problem in windows:
         assert problem is None if verdict is None else verdict in problem
+
+
+@pytest.mark.parametrize("sensor_axes, verdict", [
+    (np.eye(3), None),
+    (np.diag([1.0, -1.0, -1.0]), "along -z (down)"),               # FRD: y right, z down
+    (np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0]]), "along +x (forward)"),  # x along the vertical
+    (np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]]), "along -y (right)")])   # on its side
+def test_axes_other_than_flu_are_named(sensor_axes, verdict):
+    """The stream in the sensor's axes (rows: the sensor's axes in base_link FLU)."""
+    (problem,) = judged(car_specific_force(11.0, 100.0) @ np.asarray(sensor_axes, float).T,
+                        100.0)
+    assert problem is None if verdict is None else verdict in problem
+    if verdict is not None:
+        assert "mounting_rpy_deg" in problem
+        assert ("FRD" in problem) == ("down" in verdict)
 
 
 def test_a_banked_turn_or_hard_braking_is_not_taken_for_wrong_units():
