@@ -185,15 +185,35 @@ def test_bad_measurements_are_counted_not_used(ros_context):
     node = EkfNode(context=ros_context, bus=InProcessBus())
     nan_fix = _fix_msg(1.0, 1.0, 0.5, 10.0, np.zeros(3))
     nan_fix.latitude = float("nan")
-    node.on_input(node.inputs.fix, nan_fix)
+    node.on_input("gnss/fix", node.inputs.fix, nan_fix)
     no_fix = _fix_msg(1.0, 1.0, 0.5, 10.0, np.zeros(3))
     no_fix.status.status = NavSatStatus.STATUS_NO_FIX
-    node.on_input(node.inputs.fix, no_fix)
-    node.on_input(node.inputs.velocity, _vel_msg(1.0, np.array([np.inf, 0.0, 0.0]), np.zeros(3)))
+    node.on_input("gnss/fix", node.inputs.fix, no_fix)
+    node.on_input("gnss/vel", node.inputs.velocity,
+                  _vel_msg(1.0, np.array([np.inf, 0.0, 0.0]), np.zeros(3)))
     assert node.navigator.update_count == 0
     assert node.diag.counts["non-finite gnss/fix rejected"] == 1
     assert node.diag.counts["non-finite gnss/vel rejected"] == 1
     assert node.diag.counts["gnss/fix without a fix ignored"] == 1
+    node.destroy_node()
+
+
+def test_an_input_without_a_stamp_takes_its_arrival_time(ros_context):
+    """A driver that fills no header stamp (0): its fixes were refused as stamped 1.75e9 s
+    before the IMU; now each takes its arrival time, counted on /diagnostics."""
+    from builtin_interfaces.msg import Time
+
+    from ins_gnss_ros.io import stamp_to_ns
+    from ins_gnss_ros.nodes.ekf_node import EkfNode
+
+    bus = InProcessBus()
+    bus.now_ns = int(T0 * 1e9) + 250_000_000
+    node = EkfNode(context=ros_context, bus=bus)
+    fix = _fix_msg(0.0, 1.0, 0.5, 10.0, np.zeros(3))
+    fix.header.stamp = Time()
+    node.on_input("gnss/fix", node.inputs.fix, fix)
+    assert stamp_to_ns(fix.header.stamp) == bus.now_ns
+    assert node.diag.counts["gnss/fix stamp unset (0): its arrival time used"] == 1
     node.destroy_node()
 
 
@@ -314,8 +334,10 @@ def test_imu_gap_is_bridged_and_a_long_one_restarts_the_alignment(ros_context):
         for k in range(int(round(t_from * 100)), int(round(t_to * 100))):
             node.on_delta(_payload(delta(k / 100)))
             if k % 25 == 0:
-                node.on_input(node.inputs.fix, _fix_msg(k / 100, lat, lon, h, np.zeros(3)))
-                node.on_input(node.inputs.velocity, _vel_msg(k / 100, np.zeros(3), np.zeros(3)))
+                node.on_input("gnss/fix", node.inputs.fix,
+                              _fix_msg(k / 100, lat, lon, h, np.zeros(3)))
+                node.on_input("gnss/vel", node.inputs.velocity,
+                              _vel_msg(k / 100, np.zeros(3), np.zeros(3)))
 
     run(0.01, 5.0)
     assert node.navigator.solution is not None

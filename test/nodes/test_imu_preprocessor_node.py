@@ -534,6 +534,23 @@ def test_clock_jump_is_taken_out_of_the_stamps_by_the_arrival_clock(graph):
                    for k in g.node.diag.counts)
 
 
+def test_samples_without_a_stamp_take_their_arrival_time(graph):
+    """A driver that fills no header stamp (0): the samples were held for a rate that never
+    measured, nothing was published, and the node said "ok"; now each takes its arrival time,
+    counted on /diagnostics."""
+    from ins_gnss_ros.io import stamp_to_ns
+
+    g = graph()
+    for k in range(300):
+        g.bus.now_ns = T0_NS + (k + 1) * DT_NS
+        g.imu(0, GOOD_W, G_UP)
+    stamps = np.array([stamp_to_ns(d.header.stamp) for d in g.out["/imu/delta"]])
+    assert len(stamps) >= 140
+    np.testing.assert_allclose(np.diff(stamps), 2 * DT_NS, atol=1000)
+    assert stamps[-1] == pytest.approx(T0_NS + 300 * DT_NS, abs=1000)
+    assert g.node.diag.counts["imu/data_raw stamp unset (0): its arrival time used"] == 300
+
+
 @pytest.mark.parametrize("paced, lost", [(False, False), (True, True)])
 def test_gaps_and_unpaced_streams_are_not_clock_jumps(graph, paced, lost):
     """Samples delivered faster than real time on a clock that does not pace them (a replay on

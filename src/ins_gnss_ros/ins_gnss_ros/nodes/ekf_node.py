@@ -70,7 +70,8 @@ from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import StrapdownSync
 from .base import DRIVER_QOS, LATCHED_QOS, SENSOR_QOS, STATE_QOS, TF_QOS, TF_STATIC_QOS, \
     NavNode, ParameterError, run
-from .convert import MODE_VALUES, increment_of, nav_state_from_msg, sensor_errors_of, set_vector3
+from .convert import MODE_VALUES, increment_of, nav_state_from_msg, sensor_errors_of, set_vector3, \
+    stamp_or_arrival
 from .ekf_inputs import EkfInputs
 from .ekf_services import EkfServices
 from .nav_messages import datum_msg, fix_payload, fix_status, imu_payload, odom_payload, \
@@ -145,7 +146,7 @@ class EkfNode(EkfServices, NavNode):
         self.ins_states = self.subscribe_queued(InsState, "ins/state", SENSOR_QOS,
                                                 self.on_ins_state, serialized=True)
         for topic, (msg_type, handler) in self.inputs.handlers().items():
-            self.subscribe(msg_type, topic, partial(self.on_input, handler),
+            self.subscribe(msg_type, topic, partial(self.on_input, topic, handler),
                            INPUT_QOS.get(topic, SENSOR_QOS))
 
     # -- inputs --------------------------------------------------------------------------------
@@ -164,8 +165,12 @@ class EkfNode(EkfServices, NavNode):
             self.sync.invalidate()
         self.after_filter()
 
-    def on_input(self, handler, msg) -> None:
+    def on_input(self, topic, handler, msg) -> None:
         self.ins_states.handle()
+        stamp_ns, unset = stamp_or_arrival(stamp_to_ns(msg.header.stamp), self.now_ns(), topic)
+        if unset:
+            msg.header.stamp = ns_to_stamp(stamp_ns)
+            self.diag.count(unset)
         if handler(msg):
             self.note_datum(msg.header.stamp)  # a first fix sets the datum
             self.after_filter()

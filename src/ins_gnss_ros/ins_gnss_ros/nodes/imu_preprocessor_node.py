@@ -30,7 +30,7 @@ from ..imu.preprocessor_params import PARAMS, orientation_headings_from_params, 
 from ..io import NS, codec, field_reader, field_writer, new, ns_to_stamp, set_stamp_ns, \
     stamp_to_ns
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, TF_STATIC_QOS, NavNode, run
-from .convert import sensor_errors_of, set_vector3, vec
+from .convert import sensor_errors_of, set_vector3, stamp_or_arrival, vec
 from .tf_messages import IMU_FRAME_PARAMS, static_tf
 
 
@@ -106,9 +106,13 @@ class ImuPreprocessorNode(NavNode):
 
     def on_sample(self, stamp_ns: int, gyro: tuple, accel: tuple, raw: bytes) -> None:
         """One raw sample: its stamp (ns), rates, and its payload."""
+        arrival_ns = self.now_ns()
+        stamp_ns, unset = stamp_or_arrival(stamp_ns, arrival_ns, "imu/data_raw")
+        if unset:
+            self.diag.count(unset)
         if self.pub_tf_static is not None:
             self.publish_static_tf(ns_to_stamp(stamp_ns))
-        for out in self.preprocessor.add(stamp_ns, self.now_ns(), gyro, accel, raw):
+        for out in self.preprocessor.add(stamp_ns, arrival_ns, gyro, accel, raw):
             if out.events:
                 self._report(out.events)
             if out.rates is None:
