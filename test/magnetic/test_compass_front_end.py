@@ -69,6 +69,8 @@ def test_withheld_samples_and_ignored_inputs_are_counted():
         "magnetometer sample rejected: non_finite": 1,
         "invalid ins/state ignored": 1,
         "gnss/fix without a valid position ignored": 2}
+    compass.fix(59.0, 30.0, np.nan, True)  # a 2-D fix: the WMM at sea level
+    assert compass.position == pytest.approx((np.radians(59.0), np.radians(30.0), 0.0))
 
 
 def test_a_filtered_ins_waits_for_the_filters_tilt_sigma():

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ins_gnss_ros.nav.aiding import WHITE_SHARE, Aiding, AidingPolicy, WheelPolicy, \
-    velocity_latency_summary
+from ins_gnss_ros.nav.aiding import NO_ALTITUDE_SIGMA, WHITE_SHARE, Aiding, AidingPolicy, \
+    WheelPolicy, velocity_latency_summary
 from ins_gnss_ros.nav.earth import earth_rate_enu, normal_gravity
 from ins_gnss_ros.nav.filter_config import PARAMS, navigator_config
 from ins_gnss_ros.nav.imu_timing import Verdict
@@ -330,6 +330,29 @@ def test_a_still_imu_starts_the_filter_at_once_and_the_fixes_rest_confirms_its_v
     out = nav.output()
     assert np.all(out.published_var[-1, :2] > 0.0)
     np.testing.assert_allclose(published_covariance(out.P[-1], out.published_var[-1])[:2, :2], P)
+
+
+def test_a_fix_without_an_altitude_is_taken_with_the_height_left_to_the_ins():
+    """NavSatFix's altitude is NaN where none is available (a 2-D fix): such fixes were all
+    refused as non-finite, and nothing navigated. Now the horizontal is taken; the height is the
+    solution's (before it the datum's), with a sigma that carries next to no information, and a
+    filter starting on such a fix starts with that sigma for its height."""
+    front, nav, events = aiding()
+    cov = np.diag([0.01, 0.01, np.nan])  # a driver's covariance without a vertical
+    assert front.fix(1.0, 59.9, 30.3, np.nan, cov, 2, True)
+    fix = nav.measurements[-1]
+    assert not fix.height_known and fix.h == 0.0 and front.datum[2] == 0.0
+    np.testing.assert_allclose(fix.cov_enu, np.diag([0.01, 0.01, NO_ALTITUDE_SIGMA ** 2]))
+    assert fix.common_var[1] == 0.0
+    assert "gnss/fix without altitude (NaN, a 2-D fix): the height left to the INS" in events
+    nav = Navigator(navigator_config(resolve(PARAMS, {}), record=True))
+    front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
+    for k in range(1, 6):
+        still_imu(front, k - 1.0, float(k), np.zeros(3), seed=k)
+        front.fix(float(k), 59.9, 30.3, np.nan, np.diag([1.0, 1.0, 4.0]), 0, True)
+    assert nav.started
+    up = nav.space["pos"].start + 2
+    assert np.sqrt(nav.covariance()[up, up]) > 0.9 * NO_ALTITUDE_SIGMA
 
 
 def test_the_rate_update_at_rest_averages_all_of_the_rest_to_the_white_noise_limit():

@@ -194,12 +194,14 @@ class CompassFrontEnd:
 
     # -- inputs other than the field -------------------------------------------------------------
     def fix(self, lat_deg: float, lon_deg: float, altitude: float, valid: bool) -> None:
-        """A GNSS fix (``valid``: it has a position): the WMM's position from now on."""
-        if not (valid and math.isfinite(lat_deg) and math.isfinite(lon_deg) and
-                math.isfinite(altitude)):
+        """A GNSS fix (``valid``: it has a position): the WMM's position from now on. A 2-D
+        fix (altitude NaN) puts it at sea level: the declination moves by hundredths of a
+        degree per kilometre of height, far below the model's own error."""
+        if not (valid and math.isfinite(lat_deg) and math.isfinite(lon_deg)):
             self.count("gnss/fix without a valid position ignored", log=False)
             return
-        self.position = (math.radians(lat_deg), math.radians(lon_deg), altitude)
+        self.position = (math.radians(lat_deg), math.radians(lon_deg),
+                         altitude if math.isfinite(altitude) else 0.0)
         self.fix_seen = True
 
     def ins_state(self, t: float, q_nb, position, aligning: bool, corrections: int) -> None:

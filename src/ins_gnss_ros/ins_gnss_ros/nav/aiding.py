@@ -87,6 +87,13 @@ COVARIANCE_REFUTED = 2.0
 #: Heights this filter navigates at, m (a fix outside is corrupt; the integrity logic would
 #: otherwise force it in after a while).
 HEIGHT_RANGE = (-1000.0, 1e5)
+#: Vertical sigma of a fix without an altitude (NavSatFix: "quiet NaN if no altitude is
+#: available", a 2-D fix), m: its height is the solution's (the filter starts there with this
+#: sigma, GnssFix.height_known), so the vertical is left to the INS and its other aiding
+#: (gnss/vel, the vehicle constraint). The fix keeps its vertical row: without it, with the
+#: height this uncertain, the horizontal rows' slight dependence on it (the Earth's curvature)
+#: moved the height by hundreds of metres on a simulated 90 s drive; with it the height holds.
+NO_ALTITUDE_SIGMA = 1000.0
 #: Fastest plausible GNSS velocity, m/s (beyond any vehicle this filter is for).
 MAX_SPEED = 1000.0
 
@@ -452,6 +459,11 @@ class Aiding:
             self.report("gnss/fix without a fix ignored", log=False)
             return self._seen("gnss/fix", t, False)
         cov = np.asarray(cov, float)
+        no_altitude = math.isnan(h)
+        if no_altitude:
+            h, cov = self._height_of_2d_fix(), cov.copy()
+            cov[2, :] = cov[:, 2] = 0.0
+            cov[2, 2] = NO_ALTITUDE_SIGMA ** 2
         # (the covariance's checks on Python floats: numpy's on a 3 x 3 cost several times more
         # at every fix)
         if not (math.isfinite(lat_deg) and math.isfinite(lon_deg) and math.isfinite(h)
@@ -510,9 +522,22 @@ class Aiding:
                 self.report("gnss/fix held: telling rest from motion before levelling",
                             log=False)
                 return self._seen("gnss/fix", t, True)
-        self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov, common_var))
+        if no_altitude:
+            cov[2, 2], common_var = NO_ALTITUDE_SIGMA ** 2, (common_var[0], 0.0)
+            self.report("gnss/fix without altitude (NaN, a 2-D fix): the height left to the INS",
+                        log=False)
+        self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov, common_var,
+                                               height_known=not no_altitude))
         self._course_velocity(t, lat, lon, h, cov)
         return self._seen("gnss/fix", t, True)
+
+    def _height_of_2d_fix(self) -> float:
+        """The height given a fix without one: the solution's, or before it the first fix's
+        (0 m if it had none either)."""
+        nav = self.navigator.solution if self.navigator.started else None
+        if nav is not None:
+            return float(nav.h)
+        return self.datum[2] if self.datum is not None else 0.0
 
     def _averaged_white_share(self, t: float, share: float) -> float:
         """The fixes' white share (of their reported variance) averaged over

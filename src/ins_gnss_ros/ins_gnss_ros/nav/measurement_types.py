@@ -19,7 +19,11 @@ class GnssFix:
     ``common_var`` (m^2 per horizontal axis, m^2 vertical) is the variance of an error all of
     the receiver's fixes share that ``cov_enu`` leaves out (the absolute accuracy of a receiver
     at single-point level, whose fixes are weighted by their fix-to-fix noise): no measurement
-    can observe it, so it is not a filter state but part of the published covariance."""
+    can observe it, so it is not a filter state but part of the published covariance.
+
+    ``height_known`` False: a fix without an altitude (a 2-D fix), whose ``h`` and vertical
+    variance stand for the solution's height and an uncertainty that carries next to no
+    information (nav/aiding.py): a filter starting on it takes that variance for its height."""
 
     t: float
     lat: float
@@ -27,6 +31,7 @@ class GnssFix:
     h: float
     cov_enu: np.ndarray
     common_var: tuple[float, float] = (0.0, 0.0)
+    height_known: bool = True
 
 
 @dataclass(frozen=True)

@@ -421,6 +421,9 @@ class Navigator:
             sigma_vel = cfg.sigma_vel0 if at_rest or np.isfinite(speed) else UNKNOWN_SPEED_SIGMA
             P0 = initial_covariance(self._space, cfg.noise, cfg.sigma_pos0, sigma_vel,
                                     cfg.sigma_tilt0)
+            if not m.height_known:  # a 2-D fix: the height is a guess
+                up = self._space["pos"].start + 2
+                P0[up, up] = m.cov_enu[2, 2]
             if at_rest or epoch - s.t_still <= REST_HOLD:
                 take_static_gyro_bias(s.levelling, self._space, cfg.noise, P0, s.estimates)
             s.pinned_antenna = (m.lat, m.lon, m.h)
