@@ -76,7 +76,11 @@ CELLS += [Cell("fix only 1 Hz", ("--gnss-rate", "1", "--no-gnss-vel")),
           Cell("fix + velocity of a noisy receiver (0.3 m/s per axis), no covariance",
                ("--gnss-sigma-vel", "0.3", "--no-gnss-cov")),
           Cell("fix + velocity of a noisy receiver (0.3 m/s per axis) reported as 0.03 m/s",
-               ("--gnss-sigma-vel", "0.3", "--gnss-sigma-vel-reported", "0.03"))]
+               ("--gnss-sigma-vel", "0.3", "--gnss-sigma-vel-reported", "0.03")),
+          Cell("fix + velocity stamped on arrival, 50-150 ms late",
+               ("--gnss-latency", "0.1", "--gnss-stamped-on-arrival")),
+          Cell("fix only 5 Hz stamped on arrival, 50-150 ms late",
+               ("--gnss-latency", "0.1", "--gnss-stamped-on-arrival", "--no-gnss-vel"))]
 SHORT = [CELLS[0], CELLS[3], CELLS[10]]
 
 

@@ -96,6 +96,9 @@ def _simulate_args(p):
                    help="mean time between wheel slip events, s (inf: none)")
     p.add_argument("--gnss-latency", type=float, default=0.0, metavar="S",
                    help="mean delay of gnss/* after their epochs (receiver output latency), s")
+    p.add_argument("--gnss-stamped-on-arrival", action="store_true",
+                   help="gnss/fix and gnss/vel stamped when they arrive (--gnss-latency after "
+                        "their epochs), as a driver stamping on arrival does")
     p.add_argument("--antennas", type=int, choices=range(5), default=0, metavar="N",
                    help="raw GNSS (gnss/observations per antenna, gnss/ephemeris) of N = 1-4 "
                    "antennas from the gnss_simulator node, gnss/fix and gnss/vel from its "
@@ -284,7 +287,9 @@ def cmd_simulate(args) -> int:
                                wheel_odometry=args.wheel_odometry,
                                wheel_scale_error=args.wheel_scale_error,
                                wheel_slip_interval=args.wheel_slip_interval,
-                               gnss_latency=args.gnss_latency, antennas=args.antennas,
+                               gnss_latency=args.gnss_latency,
+                               gnss_stamped_on_arrival=args.gnss_stamped_on_arrival,
+                               antennas=args.antennas,
                                array=args.array,
                                broadcast_residuals=args.broadcast_residuals))
     print(path)

@@ -95,6 +95,9 @@ class SimOptions:
         Mean delay of ``gnss/*`` after their stamps (log time = stamp + delay), s: the
         receiver's output latency; each epoch's delay is drawn uniformly from 0.5 to 1.5 times
         it (seed 003: the delays relative to the GNSS epochs are non-uniform).
+    gnss_stamped_on_arrival : bool
+        ``gnss/fix`` and ``gnss/vel`` stamped with their log time instead of their epoch (a
+        driver that stamps a message when it arrives), ``gnss_latency`` late.
     antenna_lever_arm : tuple of 3 float
         GNSS antenna relative to the IMU, m; with ``antennas``, the centre of the array.
     antennas : int
@@ -148,6 +151,7 @@ class SimOptions:
     gnss_sigma_vel: float = 0.05
     gnss_sigma_vel_reported: float | None = None
     gnss_latency: float = 0.0
+    gnss_stamped_on_arrival: bool = False
     antenna_lever_arm: tuple = (0.0, 0.0, 1.5)
     antennas: int = 0
     array: tuple = (1.5, 1.0)
@@ -305,6 +309,8 @@ def _write_gnss(writer, traj, options, rng, latency_rng):
     if options.gnss_latency > 0.0:
         arrival = t_ns + bag.sec_to_ns(options.gnss_latency
                                        * latency_rng.uniform(0.5, 1.5, len(t_ns)))
+    if options.gnss_stamped_on_arrival:
+        t_ns = arrival
     for i, t in enumerate(t_ns):
         writer.write("gnss/fix", msgs.fix_msg(t, lat[i], lon[i], h[i],
                                                var if options.gnss_covariance else None),
