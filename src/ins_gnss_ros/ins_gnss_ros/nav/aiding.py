@@ -92,7 +92,7 @@ HEIGHT_RANGE = (-1000.0, 1e5)
 #: sigma, GnssFix.height_known), so the vertical is left to the INS and its other aiding
 #: (gnss/vel, the vehicle constraint). The fix keeps its vertical row: without it, with the
 #: height this uncertain, the horizontal rows' slight dependence on it (the Earth's curvature)
-#: moved the height by hundreds of metres on a simulated 90 s drive; with it the height holds.
+#: moved the height by up to 300 m on a simulated 90 s drive; with it the height holds.
 NO_ALTITUDE_SIGMA = 1000.0
 #: Fastest plausible GNSS velocity, m/s (beyond any vehicle this filter is for).
 MAX_SPEED = 1000.0
@@ -460,7 +460,7 @@ class Aiding:
             return self._seen("gnss/fix", t, False)
         cov = np.asarray(cov, float)
         no_altitude = math.isnan(h)
-        if no_altitude:
+        if no_altitude:  # (its vertical set again at the end, after the variance policy's)
             h, cov = self._height_of_2d_fix(), cov.copy()
             cov[2, :] = cov[:, 2] = 0.0
             cov[2, 2] = NO_ALTITUDE_SIGMA ** 2
