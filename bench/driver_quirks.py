@@ -3,7 +3,8 @@ cases that the fault injector (``trial replay --faults``) does not make.
 
 Quirks:
 
-* ``imu_stamps_unset``: every ``imu/data_raw`` header stamp 0 (a driver that fills none);
+* ``imu_stamps_unset``: every ``imu/data_raw`` and ``imu/mag_raw`` header stamp 0 (a driver
+  that fills none);
 * ``gnss_stamps_unset``: the same for every ``gnss/*`` message;
 * ``imu_frd``: ``imu/data_raw`` in FRD axes (y and z of the rates and specific force negated:
   a driver that keeps the sensor's NED-convention axes).
@@ -29,7 +30,7 @@ QUIRKS = ("imu_stamps_unset", "gnss_stamps_unset", "imu_frd")
 
 def rewrite(msg, topic: str, quirk: str) -> None:
     """Apply ``quirk`` to one decoded message of ``topic`` (absolute name), in place."""
-    if (quirk == "imu_stamps_unset" and topic == "/imu/data_raw") or \
+    if (quirk == "imu_stamps_unset" and topic in ("/imu/data_raw", "/imu/mag_raw")) or \
             (quirk == "gnss_stamps_unset" and topic.startswith("/gnss/")):
         msg.header.stamp.sec = msg.header.stamp.nanosec = 0
     elif quirk == "imu_frd" and topic == "/imu/data_raw":

@@ -537,18 +537,25 @@ def test_clock_jump_is_taken_out_of_the_stamps_by_the_arrival_clock(graph):
 def test_samples_without_a_stamp_take_their_arrival_time(graph):
     """A driver that fills no header stamp (0): the samples were held for a rate that never
     measured, nothing was published, and the node said "ok"; now each takes its arrival time,
-    counted on /diagnostics."""
+    counted on /diagnostics, and the magnetometer's samples too."""
     from ins_gnss_ros.io import stamp_to_ns
+
+    from sensor_msgs.msg import MagneticField
 
     g = graph()
     for k in range(300):
         g.bus.now_ns = T0_NS + (k + 1) * DT_NS
         g.imu(0, GOOD_W, G_UP)
+        if k % 4 == 0:
+            g.send("imu/mag_raw", MagneticField())  # the magnetometer's stamps too
     stamps = np.array([stamp_to_ns(d.header.stamp) for d in g.out["/imu/delta"]])
     assert len(stamps) >= 140
     np.testing.assert_allclose(np.diff(stamps), 2 * DT_NS, atol=1000)
     assert stamps[-1] == pytest.approx(T0_NS + 300 * DT_NS, abs=1000)
-    assert g.node.diag.counts["imu/data_raw stamp unset (0): its arrival time used"] == 300
+    assert stamp_to_ns(g.out["/imu/mag"][-1].header.stamp) == T0_NS + 297 * DT_NS
+    counts = g.node.diag.counts
+    assert counts["imu/data_raw stamp unset (0): its arrival time used"] == 300
+    assert counts["imu/mag_raw stamp unset (0): its arrival time used"] == 75
 
 
 @pytest.mark.parametrize("paced, lost", [(False, False), (True, True)])

@@ -502,3 +502,19 @@ def _quat(state):
 def _vec(msg):
     f = msg.magnetic_field
     return np.array([f.x, f.y, f.z])
+
+
+def test_a_field_without_a_stamp_takes_its_arrival_time(graph):
+    """imu/mag from a driver that fills no header stamp (0) is read at its arrival: a heading
+    comes from it, counted on /diagnostics."""
+    from sensor_msgs.msg import MagneticField
+
+    from ins_gnss_ros.io import stamp_to_ns
+    from ins_gnss_ros.nodes.convert import to_vector3
+
+    g = graph()
+    g.ins(1.0, 0.0, 0.0, 0.0)
+    g.bus.now_ns = stamp_to_ns(_stamp(1.02))
+    g.send("imu/mag", MagneticField(magnetic_field=to_vector3(_earth_field().enu)))
+    assert len(g.headings) == 1 and stamp_to_ns(g.headings[0].header.stamp) == g.bus.now_ns
+    assert g.node.diag.counts["imu/mag stamp unset (0): its arrival time used"] == 1

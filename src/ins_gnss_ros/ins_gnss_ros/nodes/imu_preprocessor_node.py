@@ -221,8 +221,11 @@ class ImuPreprocessorNode(NavNode):
 
     # -- magnetometer --------------------------------------------------------------------------
     def on_mag(self, msg: MagneticField) -> None:
-        out = self.preprocessor.add_magnetic(stamp_to_ns(msg.header.stamp),
-                                             vec(msg.magnetic_field))
+        stamp_ns, unset = stamp_or_arrival(stamp_to_ns(msg.header.stamp), self.now_ns(),
+                                           "imu/mag_raw")
+        if unset:
+            self.diag.count(unset)
+        out = self.preprocessor.add_magnetic(stamp_ns, vec(msg.magnetic_field))
         if isinstance(out, str):
             self.diag.count(f"magnetometer sample rejected: {out}")
             return

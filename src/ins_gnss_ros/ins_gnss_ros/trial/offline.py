@@ -282,7 +282,10 @@ class _Feeder:
         except bagio.CdrLayoutError as err:
             raise bagio.BagError(f"{bag_path}: message on {row.topic} at {row.t_ns} ns does not "
                                  f"decode ({err})") from None
-        t_ns = sec * bagio.NS + nanosec
+        t_ns, unset = self.stamp_or_arrival(sec * bagio.NS + nanosec, row.t_ns,
+                                            row.topic.lstrip("/"))
+        if unset:
+            self.events[unset] += 1
         if row.topic == "/imu/mag_raw":
             out = self.preprocessor.add_magnetic(t_ns, field)
             if isinstance(out, str):
