@@ -98,3 +98,31 @@ def test_payloads_of_a_fixed_layout_stay_undecoded_and_checked(tmp_path, bags):
                              row.data[:40] if row.topic == "/imu/delta" else row.data)
     with pytest.raises(bagio.BagError, match="/imu/delta at .* does not decode"):
         read_inputs(tmp_path / "cut", payloads=True)
+
+
+def test_a_velocity_without_covariance_is_read_as_the_graph_takes_it(tmp_path):
+    """A driver's TwistStamped (nmea_navsat_driver's ``vel``) on gnss/vel was refused as not
+    the graph's type; it reads as a TwistWithCovarianceStamped with an all-zero covariance (the
+    ekf then assumes one), and a bag topic of it no node reads is proposed for gnss/vel."""
+    from geometry_msgs.msg import TwistStamped
+
+    from ins_gnss_ros.trial.inputs import TWIST, TWIST_WITH_COVARIANCE, input_types
+
+    vel = TwistStamped()
+    vel.header.stamp = bagio.ns_to_stamp(T0)
+    vel.header.frame_id = "gnss"
+    vel.twist.linear.x, vel.twist.linear.y = 3.0, -1.0
+    for name in ("gnss/vel", "vel"):
+        with bagio.BagWriter(tmp_path / name) as writer:
+            writer.write("imu/delta", msgs.delta_msg(T0, [0, 0, 0], [0, 0, 0.981], 0.01))
+            writer.write(name, vel)
+    bag = tmp_path / "gnss/vel"
+    assert bagio.bag_topics(bag)["/gnss/vel"] == TWIST
+    assert input_types(bag)["/gnss/vel"] == TWIST_WITH_COVARIANCE
+    (read,) = [m.msg for m in read_inputs(bag) if m.topic == "/gnss/vel"]
+    assert read.header == vel.header and bagio.messages_equal(read.twist.twist, vel.twist)
+    assert not any(read.twist.covariance)
+    inputs = {"/imu/delta": "ins_gnss_msgs/msg/ImuDelta", "/gnss/vel": TWIST_WITH_COVARIANCE}
+    assert check_inputs(bag, inputs) == []
+    (note,) = check_inputs(tmp_path / "vel", inputs)
+    assert "--remap /vel:=/gnss/vel" in note

@@ -10,6 +10,12 @@ A bag recorded under other names (a driver's ``/fix``, ``/imu/data``) replays wi
 ``{bag topic: graph topic}`` (``trial replay --remap /fix:=/gnss/fix``, as ``ros2 bag play
 --remap`` does), applied to the absolute names. :func:`check_inputs` names the remapping: a
 bag topic no node reads whose type is that of a sensor input the bag lacks.
+
+A velocity recorded without its covariance, as drivers publish one (nmea_navsat_driver's
+``vel`` is a ``geometry_msgs/TwistStamped``), is read on ``gnss/vel`` and ``log/speed`` as the
+``TwistWithCovarianceStamped`` the graph takes there, with an all-zero covariance: the ekf takes
+that as none given and assumes one, named on /diagnostics (:data:`CONVERSIONS`). The live graph
+cannot: a ROS topic has one type.
 """
 from __future__ import annotations
 
@@ -19,6 +25,22 @@ from ins_gnss_ros import io as bagio
 
 #: Truth never reaches the nodes.
 TRUTH_PREFIX = "/truth/"
+
+TWIST = "geometry_msgs/msg/TwistStamped"
+TWIST_WITH_COVARIANCE = "geometry_msgs/msg/TwistWithCovarianceStamped"
+
+
+def _twist_without_covariance(msg):
+    from geometry_msgs.msg import TwistWithCovarianceStamped
+
+    out = TwistWithCovarianceStamped(header=msg.header)
+    out.twist.twist = msg.twist
+    return out
+
+
+#: (graph topic, bag type) -> (the type the graph takes there, conversion of a decoded message).
+CONVERSIONS = {(topic, TWIST): (TWIST_WITH_COVARIANCE, _twist_without_covariance)
+               for topic in ("/gnss/vel", "/log/speed")}
 
 
 class InputTopicsError(ValueError):
@@ -64,7 +86,8 @@ def bag_rows(bag_path, keep: Callable[[str], bool], remap=None) -> Iterator:
     Returns
     -------
     iterator of RawMessage
-        Streamed in stamp order (ties in writing order), each under its absolute topic name.
+        Streamed in stamp order (ties in writing order), each under its absolute topic name,
+        of the type the graph takes on it (:data:`CONVERSIONS`).
     """
     names = _names(bag_path, remap)
     listed = [t for t, name in names.items() if keep(name)]
@@ -76,9 +99,23 @@ def bag_rows(bag_path, keep: Callable[[str], bool], remap=None) -> Iterator:
         # The reader selects topics by absolute name only: read every row and pick them here.
         selected = set(listed)
         rows = (row for row in bagio.iter_raw(bag_path) if row.topic in selected)
-    if all(t == names[t] for t in listed):
-        return rows
-    return (row._replace(topic=names[row.topic]) for row in rows)
+    if any(t != names[t] for t in listed):
+        rows = (row._replace(topic=names[row.topic]) for row in rows)
+    if any((names[t], msgtype) in CONVERSIONS for t, msgtype in bagio.bag_topics(bag_path).items()
+           if t in listed):
+        rows = (_converted(row, bag_path) for row in rows)
+    return rows
+
+
+def _converted(row, bag_path):
+    """A row of a type the graph takes converted on its topic (:data:`CONVERSIONS`), or the
+    row."""
+    conversion = CONVERSIONS.get((row.topic, row.msgtype))
+    if conversion is None:
+        return row
+    msgtype, convert = conversion
+    return row._replace(msgtype=msgtype,
+                        data=bagio.serialize(convert(bagio.decode_message(row, bag_path))))
 
 
 def input_rows(bag_path, remap=None) -> Iterator:
@@ -131,7 +168,8 @@ def read_inputs(bag_path, remap=None, payloads: bool = False) -> list:
 def input_types(bag_path, remap=None) -> dict[str, str]:
     """{absolute topic (after ``remap``): type name} of the bag's topics a graph may see."""
     names = _names(bag_path, remap)
-    return {names[topic]: msgtype for topic, msgtype in bagio.bag_topics(bag_path).items()
+    return {names[topic]: CONVERSIONS.get((names[topic], msgtype), (msgtype,))[0]
+            for topic, msgtype in bagio.bag_topics(bag_path).items()
             if not names[topic].startswith(TRUTH_PREFIX)}
 
 
@@ -187,15 +225,18 @@ def check_inputs(bag_path, inputs: Mapping[str, str | None], remap=None,
         One line listing the bag's topics, the inputs and the remappings that would feed them.
     """
     names, types = _names(bag_path, remap), bagio.bag_topics(bag_path)
-    lacking = {}
-    for topic, msgtype in inputs.items():
-        if msgtype is not None and topic not in published and topic not in names.values():
-            lacking.setdefault(msgtype, []).append(topic)
-    rules = {topic: " or ".join(f"--remap {topic}:={target}"
-                                for target in sorted(lacking[types[topic]]))
+    lacking = sorted(topic for topic, msgtype in inputs.items()
+                     if msgtype is not None and topic not in published
+                     and topic not in names.values())
+
+    def feeds(topic):
+        """The lacking inputs the bag topic could feed (of their type, or converted to it)."""
+        return [target for target in lacking
+                if types[topic] == inputs[target] or (target, types[topic]) in CONVERSIONS]
+
+    rules = {topic: " or ".join(f"--remap {topic}:={target}" for target in feeds(topic))
              for topic, name in names.items()
-             if name not in inputs and not name.startswith(TRUTH_PREFIX)
-             and types[topic] in lacking}
+             if name not in inputs and not name.startswith(TRUTH_PREFIX) and feeds(topic)}
     if not set(names.values()) & set(inputs):
         shown = [t if bagio.resolve(t) == name else f"{t} (as {name})"
                  for t, name in names.items()]
