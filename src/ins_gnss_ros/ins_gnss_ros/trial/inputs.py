@@ -26,11 +26,13 @@ from ins_gnss_ros import io as bagio
 #: Truth never reaches the nodes.
 TRUTH_PREFIX = "/truth/"
 
+#: A velocity as drivers record it without its covariance, and as the graph takes it.
 TWIST = "geometry_msgs/msg/TwistStamped"
 TWIST_WITH_COVARIANCE = "geometry_msgs/msg/TwistWithCovarianceStamped"
 
 
 def _twist_without_covariance(msg):
+    """A TwistStamped as a TwistWithCovarianceStamped whose covariance is all zero (none)."""
     from geometry_msgs.msg import TwistWithCovarianceStamped
 
     out = TwistWithCovarianceStamped(header=msg.header)
