@@ -14,6 +14,7 @@ process. Navigation logic must therefore use message stamps, never the wall cloc
 
 from __future__ import annotations
 
+import ctypes
 import os
 import sys
 import time
@@ -723,11 +724,14 @@ def run(node_factory: Callable[[], Node], args: list[str] | None = None,
     finally:
         # The executor lets go of the node before either is destroyed: the events executor
         # aborts the process ("Destroying callback manager with callbacks remaining") when it
-        # is garbage-collected while a node's entities are still registered with it.
+        # is garbage-collected while a node's entities are still registered with it. That
+        # has not always been enough (a phase_heading process aborted so at exit in CI on
+        # 2026-12-05, after both): the executor is never destroyed, the process ends with it.
         if spinner is not None:
             if node is not None:
                 spinner.remove_node(node)
             spinner.shutdown()
+            ctypes.pythonapi.Py_IncRef(ctypes.py_object(spinner))
         if node is not None:
             node.destroy_node()
         if rclpy.ok():
