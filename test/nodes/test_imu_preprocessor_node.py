@@ -538,9 +538,9 @@ def test_samples_without_a_stamp_take_their_arrival_time(graph):
     """A driver that fills no header stamp (0): the samples were held for a rate that never
     measured, nothing was published, and the node said "ok"; now each takes its arrival time,
     counted on /diagnostics, and the magnetometer's samples too."""
-    from ins_gnss_ros.io import stamp_to_ns
-
     from sensor_msgs.msg import MagneticField
+
+    from ins_gnss_ros.io import stamp_to_ns
 
     g = graph()
     for k in range(300):
