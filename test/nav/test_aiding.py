@@ -32,6 +32,7 @@ def test_fixes_are_refused_floored_or_given_a_variance():
     assert not front.fix(1.0, 59.9, 30.3, 10.0, cov, status=-1, covariance_known=True)
     assert not front.fix(1.0, np.nan, 30.3, 10.0, cov, 0, True)
     assert not front.fix(1.0, 59.9, 30.3, 2e5, cov, 0, True)
+    assert not front.fix(1.0, 0.0, 0.0, 0.0, cov, 0, True)  # a driver's placeholder
     assert front.fix(1.0, 59.9, 30.3, 10.0, cov, 0, True)
     fix = nav.measurements[-1]
     assert isinstance(fix, GnssFix) and np.allclose(np.diag(fix.cov_enu), [0.01, 4.0, 1.0])
@@ -44,6 +45,7 @@ def test_fixes_are_refused_floored_or_given_a_variance():
     assert np.allclose(np.diag(nav.measurements[-1].cov_enu), [25.0, 25.0, 100.0])
     assert events == ["gnss/fix without a fix ignored", "non-finite gnss/fix rejected",
                       "implausible gnss/fix altitude rejected",
+                      "gnss/fix at 0 N 0 E rejected (a driver's placeholder)",
                       *[f"gnss/fix without covariance: {sigma} m assumed from its status, "
                         "weighted by the fixes' measured fix-to-fix noise"
                         for sigma in (5, 2, 1, 5)]]
