@@ -21,8 +21,8 @@ from .mcap_reader import RawMessage
 from .messages import (MessageTypeError, first_difference, messages_equal, msg_class,
                        msgtype_of, msgtype_of_class, new)
 from .stamps import (NS, msg_stamp_ns, ns_to_sec, ns_to_stamp, sec_nanosec, sec_to_ns,
-                     sec_to_stamp, sec_to_stamp_ns, set_stamp_ns, set_stamp_sec, stamp_to_ns,
-                     stamp_to_sec)
+                     sec_to_stamp, sec_to_stamp_ns, set_stamp_ns, set_stamp_sec, stamp_or_arrival,
+                     stamp_to_ns, stamp_to_sec)
 
 __all__ = [
     "NS", "BagError", "BagMessage", "BagWriter", "CdrLayoutError", "Codec", "MessageTypeError",
@@ -31,6 +31,7 @@ __all__ = [
     "first_line", "iter_bag", "iter_raw", "messages_equal", "msg_class", "msg_stamp_ns",
     "msgtype_of", "msgtype_of_class", "new", "ns_to_sec", "ns_to_stamp", "payload_stamp_ns",
     "read_bag", "read_raw", "resolve", "sec_nanosec", "sec_to_ns", "sec_to_stamp",
-    "sec_to_stamp_ns", "serialize", "set_stamp_ns", "set_stamp_sec", "stamp_to_ns",
+    "sec_to_stamp_ns", "serialize", "set_stamp_ns", "set_stamp_sec", "stamp_or_arrival",
+    "stamp_to_ns",
     "stamp_to_sec", "starts_with_header", "typestore",
 ]

@@ -26,6 +26,15 @@ def stamp_to_ns(stamp: Time) -> int:
     return stamp.sec * NS + stamp.nanosec
 
 
+def stamp_or_arrival(stamp_ns: int, arrival_ns: int, topic: str) -> tuple[int, str | None]:
+    """A message's stamp, or its arrival time where the driver left the stamp unset (0: no
+    clock reads it; such a stream was refused sample by sample, or never measured a rate, with
+    every node saying "ok"), and then what /diagnostics counts."""
+    if stamp_ns:
+        return stamp_ns, None
+    return arrival_ns, f"{topic} stamp unset (0): its arrival time used"
+
+
 def stamp_to_sec(stamp: Time) -> float:
     """Seconds (float) of a stamp."""
     return stamp.sec + stamp.nanosec * 1e-9

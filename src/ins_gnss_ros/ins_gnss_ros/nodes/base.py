@@ -36,7 +36,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 
-from ..io import NS, ns_to_stamp
+from ..io import NS, ns_to_stamp, stamp_or_arrival
 from ..io.arrival import ArrivalForecast
 from ..io.cdr import codec, payload_stamp_ns
 from ..io.messages import msgtype_of_class
@@ -654,6 +654,16 @@ class NavNode(Node):
         # The system time the ROS clock reads without /clock, without building an rclpy Time
         # (9 us here; the imu_preprocessor reads it per sample).
         return time.time_ns()
+
+    def stamp_unset_to_arrival(self, header, topic: str) -> None:
+        """A header whose stamp the driver left unset (0) takes the arrival time, counted on
+        /diagnostics (:func:`~ins_gnss_ros.io.stamp_or_arrival`); a stamped one is
+        left as it is, without reading the clock."""
+        if header.stamp.sec or header.stamp.nanosec:
+            return
+        stamp_ns, unset = stamp_or_arrival(0, self.now_ns(), topic)
+        header.stamp = ns_to_stamp(stamp_ns)
+        self.diag.count(unset)
 
     def now_msg(self) -> Time:
         """Current time as a message stamp (as rclpy's ``Time.to_msg``, without building an

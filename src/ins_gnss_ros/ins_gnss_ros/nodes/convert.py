@@ -26,15 +26,6 @@ MODE_VALUES = {ALIGNING: InsState.MODE_ALIGNING, NAVIGATING: InsState.MODE_NAVIG
                DEAD_RECKONING: InsState.MODE_DEAD_RECKONING, INVALID: InsState.MODE_INVALID}
 
 
-def stamp_or_arrival(stamp_ns: int, arrival_ns: int, topic: str) -> tuple[int, str | None]:
-    """A message's stamp, or its arrival time where the driver left the stamp unset (0: no
-    clock reads it; such a stream was refused sample by sample, or never measured a rate, with
-    every node saying "ok"), and then what /diagnostics counts."""
-    if stamp_ns:
-        return stamp_ns, None
-    return arrival_ns, f"{topic} stamp unset (0): its arrival time used"
-
-
 def vec(v: Vector3) -> np.ndarray:
     return np.array([v.x, v.y, v.z])
 

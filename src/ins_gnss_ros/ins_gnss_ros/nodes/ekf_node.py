@@ -70,8 +70,7 @@ from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import StrapdownSync
 from .base import DRIVER_QOS, LATCHED_QOS, SENSOR_QOS, STATE_QOS, TF_QOS, TF_STATIC_QOS, \
     NavNode, ParameterError, run
-from .convert import MODE_VALUES, increment_of, nav_state_from_msg, sensor_errors_of, set_vector3, \
-    stamp_or_arrival
+from .convert import MODE_VALUES, increment_of, nav_state_from_msg, sensor_errors_of, set_vector3
 from .ekf_inputs import EkfInputs
 from .ekf_services import EkfServices
 from .nav_messages import datum_msg, fix_payload, fix_status, imu_payload, odom_payload, \
@@ -167,10 +166,7 @@ class EkfNode(EkfServices, NavNode):
 
     def on_input(self, topic, handler, msg) -> None:
         self.ins_states.handle()
-        stamp_ns, unset = stamp_or_arrival(stamp_to_ns(msg.header.stamp), self.now_ns(), topic)
-        if unset:
-            msg.header.stamp = ns_to_stamp(stamp_ns)
-            self.diag.count(unset)
+        self.stamp_unset_to_arrival(msg.header, topic)
         if handler(msg):
             self.note_datum(msg.header.stamp)  # a first fix sets the datum
             self.after_filter()

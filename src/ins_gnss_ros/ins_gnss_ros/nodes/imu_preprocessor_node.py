@@ -28,9 +28,9 @@ from tf2_msgs.msg import TFMessage
 from ..imu.preprocessor_params import PARAMS, orientation_headings_from_params, \
     preprocessor_from_params
 from ..io import NS, codec, field_reader, field_writer, new, ns_to_stamp, set_stamp_ns, \
-    stamp_to_ns
+    stamp_or_arrival, stamp_to_ns
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, TF_STATIC_QOS, NavNode, run
-from .convert import sensor_errors_of, set_vector3, stamp_or_arrival, vec
+from .convert import sensor_errors_of, set_vector3, vec
 from .tf_messages import IMU_FRAME_PARAMS, static_tf
 
 
@@ -221,11 +221,9 @@ class ImuPreprocessorNode(NavNode):
 
     # -- magnetometer --------------------------------------------------------------------------
     def on_mag(self, msg: MagneticField) -> None:
-        stamp_ns, unset = stamp_or_arrival(stamp_to_ns(msg.header.stamp), self.now_ns(),
-                                           "imu/mag_raw")
-        if unset:
-            self.diag.count(unset)
-        out = self.preprocessor.add_magnetic(stamp_ns, vec(msg.magnetic_field))
+        self.stamp_unset_to_arrival(msg.header, "imu/mag_raw")
+        out = self.preprocessor.add_magnetic(stamp_to_ns(msg.header.stamp),
+                                             vec(msg.magnetic_field))
         if isinstance(out, str):
             self.diag.count(f"magnetometer sample rejected: {out}")
             return

@@ -35,10 +35,10 @@ import sys
 from ins_gnss_msgs.msg import FilterStatus, Heading, InsState
 from sensor_msgs.msg import Imu, MagneticField, NavSatFix, NavSatStatus
 
-from ..io import ns_to_stamp, stamp_to_ns, stamp_to_sec
+from ..io import stamp_to_sec
 from ..magnetic.compass_front_end import PARAMS, CompassFrontEnd
 from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, NavNode, run
-from .convert import compass_heading, quat, stamp_or_arrival, vec
+from .convert import compass_heading, quat, vec
 
 
 class MagCompassNode(NavNode):
@@ -81,11 +81,7 @@ class MagCompassNode(NavNode):
 
     def on_mag(self, msg: MagneticField) -> None:
         self.ins_state.handle()
-        stamp_ns, unset = stamp_or_arrival(stamp_to_ns(msg.header.stamp), self.now_ns(),
-                                           "imu/mag")
-        if unset:
-            msg.header.stamp = ns_to_stamp(stamp_ns)
-            self.diag.count(unset)
+        self.stamp_unset_to_arrival(msg.header, "imu/mag")
         reading = self.front.mag(stamp_to_sec(msg.header.stamp), vec(msg.magnetic_field))
         if reading is not None:
             self.pub.publish(compass_heading(reading, msg.header.stamp, self.p["frame_id"],

@@ -222,11 +222,10 @@ class _Feeder:
         # Message modules load with the first offline run, not with the trial package.
         from ins_gnss_ros.imu.preprocessor_params import orientation_headings_from_params
         from ins_gnss_ros.magnetic.compass_front_end import CompassFrontEnd
-        from ins_gnss_ros.nodes.convert import compass_heading, increment_of, stamp_or_arrival
+        from ins_gnss_ros.nodes.convert import compass_heading, increment_of
         from ins_gnss_ros.nodes.ekf_inputs import EkfInputs
 
         self.increment_of, self.compass_heading = increment_of, compass_heading
-        self.stamp_or_arrival = stamp_or_arrival
         self.read_imu = bagio.field_reader(IMU_TYPE, IMU_FIELDS)
         self.read_mag = bagio.field_reader(MAG_TYPE, MAG_FIELDS)
         # imu/heading: the imu_preprocessor node's, from the raw samples' own orientation
@@ -259,15 +258,20 @@ class _Feeder:
         handler = self.handlers.get(row.topic)
         if handler is not None:
             msg = bagio.decode_message(row, bag_path)
-            stamp_ns, unset = self.stamp_or_arrival(bagio.stamp_to_ns(msg.header.stamp),
-                                                    row.t_ns, row.topic.lstrip("/"))
-            if unset:
-                msg.header.stamp = bagio.ns_to_stamp(stamp_ns)
-                self.events[unset] += 1
+            msg.header.stamp = bagio.ns_to_stamp(
+                self.stamp_ns(bagio.stamp_to_ns(msg.header.stamp), row))
             if row.topic == "/gnss/fix" and self.compass is not None:
                 self.compass.fix(msg.latitude, msg.longitude, msg.altitude,
                                  msg.status.status >= msg.status.STATUS_FIX)
             handler(msg)
+
+    def stamp_ns(self, stamp_ns, row):
+        """A message's stamp (ns), or its row's log time where the driver left it unset,
+        counted as the node counts it (io.stamp_or_arrival)."""
+        stamp_ns, unset = bagio.stamp_or_arrival(stamp_ns, row.t_ns, row.topic.lstrip("/"))
+        if unset:
+            self.events[unset] += 1
+        return stamp_ns
 
     def magnetometer(self, row, bag_path):
         """An imu/mag_raw row (rotated into base_link as the imu_preprocessor does) or an
@@ -282,10 +286,7 @@ class _Feeder:
         except bagio.CdrLayoutError as err:
             raise bagio.BagError(f"{bag_path}: message on {row.topic} at {row.t_ns} ns does not "
                                  f"decode ({err})") from None
-        t_ns, unset = self.stamp_or_arrival(sec * bagio.NS + nanosec, row.t_ns,
-                                            row.topic.lstrip("/"))
-        if unset:
-            self.events[unset] += 1
+        t_ns = self.stamp_ns(sec * bagio.NS + nanosec, row)
         if row.topic == "/imu/mag_raw":
             out = self.preprocessor.add_magnetic(t_ns, field)
             if isinstance(out, str):
@@ -341,9 +342,7 @@ class _Feeder:
         orientation_covariance, w, f = values[:9], tuple(values[9:12]), tuple(values[12:])
         # The arrival clock is the log time, as the replayed graph's (its bus time). Times in s
         # as the nodes read them from the messages' stamps (io.ns_to_sec).
-        stamp, unset = self.stamp_or_arrival(sec * bagio.NS + nanosec, row.t_ns, "imu/data_raw")
-        if unset:
-            self.events[unset] += 1
+        stamp = self.stamp_ns(sec * bagio.NS + nanosec, row)
         for out in self.preprocessor.add(stamp, row.t_ns, w, f):
             t = bagio.ns_to_sec(out.t_ns)
             if out.rates is None:
