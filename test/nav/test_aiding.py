@@ -6,8 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ins_gnss_ros.nav.aiding import NO_ALTITUDE_SIGMA, WHITE_SHARE, Aiding, AidingPolicy, \
-    WheelPolicy, velocity_latency_summary
+from ins_gnss_ros.nav.aiding import ARRIVAL_LATENCY_SIGMA, NO_ALTITUDE_SIGMA, WHITE_SHARE, \
+    Aiding, AidingPolicy, WheelPolicy, velocity_latency_summary
+from ins_gnss_ros.nav.ekf import ExtraState
 from ins_gnss_ros.nav.earth import earth_rate_enu, normal_gravity
 from ins_gnss_ros.nav.filter_config import PARAMS, navigator_config
 from ins_gnss_ros.nav.imu_timing import Verdict
@@ -479,3 +480,42 @@ def test_a_clear_velocity_lag_is_explained_with_both_of_its_causes():
     for latency, sigma in ((0.004, 0.001), (0.05, 0.02), (-0.06, 0.005)):
         assert velocity_latency_summary(latency, sigma) == \
             f"{1e3 * latency:.0f} +- {1e3 * sigma:.0f} ms"
+
+
+def test_a_receiver_stamped_on_arrival_has_its_latency_estimated_from_the_start():
+    """gnss/* that reach the filter within the transport of their stamps (a driver stamping
+    the time it reads them) or without one are late by an unknown latency: the filter gets a
+    time-offset state before it starts. A recording logged at its stamps, a receiver's message
+    arriving its latency after its epoch, and the other inputs change nothing."""
+    def front_end():
+        nav = Navigator(navigator_config(resolve(PARAMS, {}), record=True))
+        events = []
+        return Aiding(nav, AidingPolicy(), lambda text, log=True: events.append(text)), nav, \
+            events
+
+    t_ns = 1_767_225_600 * 10 ** 9
+    for name, stamp, arrival in (("gnss/fix", t_ns, t_ns), ("gnss/fix", t_ns, t_ns + 40_000_000),
+                                 ("gnss/heading", t_ns, t_ns + 500_000),
+                                 ("gnss/fix", t_ns + 1_000_000, t_ns)):
+        front, nav, events = front_end()
+        front.arrival(name, stamp, arrival)
+        assert "td" not in nav.space and not front.gnss_stamped_on_arrival and not events
+    for stamp, how in ((t_ns, "on its arrival (0.5 ms before it)"), (0, "unset")):
+        front, nav, events = front_end()
+        front.arrival("gnss/vel", stamp, t_ns + 500_000)
+        front.arrival("gnss/fix", stamp, t_ns + 500_000)  # (judged once)
+        assert nav.space.extras["td"].sigma0 == ARRIVAL_LATENCY_SIGMA and \
+            front.timing.gnss_latency_state and front.gnss_stamped_on_arrival
+        assert events == [f"gnss/vel stamped {how}: the receiver's latency estimated (time "
+                          "offset, sigma 0.2 s)"]
+    # once the filter runs its states are fixed: the remedy is named instead
+    front, nav, events = front_end()
+    for k in range(1, 4):
+        still_imu(front, k - 1.0, float(k), np.zeros(3), seed=k)
+        front.fix(float(k), 59.9, 30.3, 20.0, np.diag([1.0, 1.0, 4.0]), 0, True)
+        front.velocity(float(k), np.zeros(3), np.eye(3) * 0.01)
+    assert nav.started
+    front.arrival("gnss/fix", t_ns, t_ns + 500_000)
+    assert "td" not in nav.space and "set the ekf's time_offset_sigma_s 0.1-0.2" in events[-1]
+    with pytest.raises(RuntimeError, match="the filter has started"):
+        nav.add_extra_state("td", ExtraState(1, ARRIVAL_LATENCY_SIGMA))

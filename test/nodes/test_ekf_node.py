@@ -214,6 +214,26 @@ def test_an_input_without_a_stamp_takes_its_arrival_time(ros_context):
     node.on_input("gnss/fix", node.inputs.fix, fix)
     assert stamp_to_ns(fix.header.stamp) == bus.now_ns
     assert node.diag.counts["gnss/fix stamp unset (0): its arrival time used"] == 1
+    # (and its latency is unknown: estimated from the start, as for stamps taken on arrival)
+    assert "td" in node.navigator.space
+    node.destroy_node()
+
+
+@pytest.mark.parametrize("after_stamp_ms, on_arrival", [(0.5, True), (0.0, False), (60.0, False)])
+def test_fixes_stamped_on_their_arrival_have_their_latency_estimated(ros_context, after_stamp_ms,
+                                                                       on_arrival):
+    """A fix arriving within the transport of its stamp was stamped on arrival, its latency
+    unknown: the filter estimates it (nav/aiding.py, Aiding.arrival). One logged at its stamp
+    (a recording written at its stamps) or its receiver's latency after it changes nothing."""
+    from ins_gnss_ros.nodes.ekf_node import EkfNode
+
+    bus = InProcessBus()
+    bus.now_ns = int(T0 * 1e9) + round(after_stamp_ms * 1e6)
+    node = EkfNode(context=ros_context, bus=bus)
+    node.on_input("gnss/fix", node.inputs.fix, _fix_msg(0.0, 1.0, 0.5, 10.0, np.zeros(3)))
+    assert ("td" in node.navigator.space) == on_arrival
+    assert any(text.startswith("gnss/fix stamped on its arrival (0.5 ms before it)")
+               for text in node.diag.counts) == on_arrival
     node.destroy_node()
 
 

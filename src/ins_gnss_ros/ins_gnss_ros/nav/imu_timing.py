@@ -123,7 +123,7 @@ class ImuTimingCheck:
     def __init__(self, gnss_latency_state: bool = False):
         # The filter estimates a GNSS latency (its "td" state): fixes stamped after the IMU's
         # clock are taken there, not a defect of the IMU's stamps.
-        self._gnss_latency_state = gnss_latency_state
+        self.gnss_latency_state = gnss_latency_state
         self._imu = deque()                 # (t, accumulated vertical rotation, rad)
         self._rotation = 0.0
         self._specific_force = [0.0, 0.0, 0.0]  # summed dv: its direction is the body's up
@@ -301,7 +301,7 @@ class ImuTimingCheck:
         off = abs(offset) > max(3.0 * sigma, IN_STEP_S)
         if not off:
             verdict = "in step"
-        elif offset > 0.0 and self._gnss_latency_state:
+        elif offset > 0.0 and self.gnss_latency_state:
             verdict, off = ("the fixes are stamped after the IMU's clock (on arrival?): the "
                             "filter's time-offset state takes it"), False
         elif offset > 0.0:

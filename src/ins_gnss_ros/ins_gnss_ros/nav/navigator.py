@@ -24,6 +24,7 @@ Per-epoch outputs (recording.py) keep what the RTS smoother (smoother.py) needs.
 from __future__ import annotations
 
 import bisect
+from dataclasses import replace
 
 import numpy as np
 
@@ -104,13 +105,8 @@ class Navigator:
 
     def __init__(self, config):
         self.config = config
-        self._space = StateSpace(make_layout(config.layout, config.noise), dict(config.extras))
-        if "gs" in self._space or "ng" in self._space or "na" in self._space:
-            raise ValueError("the navigator compensates bias and scale-factor blocks only")
+        self._use_space()
         self._lever = np.asarray(config.lever_arm_b, float)
-        self._nav_blocks = tuple(self._space[name].start for name in ("pos", "vel", "att"))
-        self._no_var = np.zeros(self._space.size)  # (_published_var: read, never written)
-        self._no_var.flags.writeable = False
         # Corrections of the solution so far, pseudo-measurements (NHC, ZARU) included: what a
         # follower of the solution (the strapdown node) must hear of. Monotonic, neither reset
         # nor rewound: a re-run after a delayed measurement changes the solution again.
@@ -137,11 +133,43 @@ class Navigator:
             if cfg.nhc_learn and cfg.nhc_sigma is None else None
         self._recorder = Recorder(self._space, cfg.record, cfg.store_covariance)
         self._gaps = BridgedGaps(cfg.gap_accel_sigma, cfg.gap_rate_sigma)
-        # the GNSS velocity's lever-arm consider columns take a smoothed rate (measurements.py)
-        self._lever_columns = any(name in self._space for name in LEVER_ARM_EXTRAS)
         # The fixes' common error (GnssFix.common_var) of the latest fix used, m^2: a property
         # of the receiver, not of the run state, so a rewind keeps it.
         self._fix_common_var = (0.0, 0.0)
+
+    def _use_space(self):
+        """The filter's states as the configuration gives them, and what is derived from them."""
+        cfg = self.config
+        self._space = StateSpace(make_layout(cfg.layout, cfg.noise), dict(cfg.extras))
+        if "gs" in self._space or "ng" in self._space or "na" in self._space:
+            raise ValueError("the navigator compensates bias and scale-factor blocks only")
+        self._nav_blocks = tuple(self._space[name].start for name in ("pos", "vel", "att"))
+        self._no_var = np.zeros(self._space.size)  # (_published_var: read, never written)
+        self._no_var.flags.writeable = False
+        # the GNSS velocity's lever-arm consider columns take a smoothed rate (measurements.py)
+        self._lever_columns = any(name in self._space for name in LEVER_ARM_EXTRAS)
+
+    def add_extra_state(self, name, block):
+        """Estimate one more extra block (``NavigatorConfig.extras``; an ExtraState) from the
+        start: what the first inputs tell of the sensors before the filter runs (a receiver
+        whose stamps are its messages' arrival: the time offset "td"). Nothing changes if the
+        filter has the block already.
+
+        Raises
+        ------
+        RuntimeError
+            Once the filter has started: its states are fixed from then on.
+        """
+        if name in self._space:
+            return
+        if self.started:
+            raise RuntimeError(f"the filter has started: the extra state {name!r} cannot be "
+                               "added")
+        self.config = replace(self.config, extras={**self.config.extras, name: block})
+        self._use_space()
+        self._state.estimates[name] = np.zeros(block.size)
+        self._recorder = Recorder(self._space, self.config.record,
+                                  self.config.store_covariance)  # (nothing recorded before)
 
     def note_imu_rates_wrong(self, wrong):
         """Whether the turns show the IMU's rates in other units or of the wrong sign (the

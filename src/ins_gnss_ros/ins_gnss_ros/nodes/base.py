@@ -655,6 +655,14 @@ class NavNode(Node):
         # (9 us here; the imu_preprocessor reads it per sample).
         return time.time_ns()
 
+    def transport_arrival_ns(self) -> int | None:
+        """The time a message arrives as its transport gives it, ns: the bus' replay time (the
+        log time) or the system time; None under /clock (use_sim_time), which is the player's
+        time of a message, not the transport's (it may run ahead of the messages delivered)."""
+        if self.bus is None and self.get_clock().ros_time_is_active:
+            return None
+        return self.now_ns()
+
     def stamp_unset_to_arrival(self, header, topic: str) -> None:
         """A header whose stamp the driver left unset (0) takes the arrival time, counted on
         /diagnostics (:func:`~ins_gnss_ros.io.stamp_or_arrival`); a stamped one is

@@ -166,6 +166,7 @@ class EkfNode(EkfServices, NavNode):
 
     def on_input(self, topic, handler, msg) -> None:
         self.ins_states.handle()
+        self.aiding.arrival(topic, stamp_to_ns(msg.header.stamp), self.transport_arrival_ns())
         self.stamp_unset_to_arrival(msg.header, topic)
         if handler(msg):
             self.note_datum(msg.header.stamp)  # a first fix sets the datum

@@ -97,8 +97,9 @@ def _simulate_args(p):
     p.add_argument("--gnss-latency", type=float, default=0.0, metavar="S",
                    help="mean delay of gnss/* after their epochs (receiver output latency), s")
     p.add_argument("--gnss-stamped-on-arrival", action="store_true",
-                   help="gnss/fix and gnss/vel stamped when they arrive (--gnss-latency after "
-                        "their epochs), as a driver stamping on arrival does")
+                   help="gnss/fix and gnss/vel stamped when the driver reads them "
+                        "(--gnss-latency after their epochs), as a driver stamping on arrival "
+                        "does, and logged 0.1-1 ms later")
     p.add_argument("--antennas", type=int, choices=range(5), default=0, metavar="N",
                    help="raw GNSS (gnss/observations per antenna, gnss/ephemeris) of N = 1-4 "
                    "antennas from the gnss_simulator node, gnss/fix and gnss/vel from its "

@@ -258,8 +258,9 @@ class _Feeder:
         handler = self.handlers.get(row.topic)
         if handler is not None:
             msg = bagio.decode_message(row, bag_path)
-            msg.header.stamp = bagio.ns_to_stamp(
-                self.stamp_ns(bagio.stamp_to_ns(msg.header.stamp), row))
+            stamp_ns = bagio.stamp_to_ns(msg.header.stamp)
+            self.aiding.arrival(row.topic.lstrip("/"), stamp_ns, row.t_ns)
+            msg.header.stamp = bagio.ns_to_stamp(self.stamp_ns(stamp_ns, row))
             if row.topic == "/gnss/fix" and self.compass is not None:
                 self.compass.fix(msg.latitude, msg.longitude, msg.altitude,
                                  msg.status.status >= msg.status.STATUS_FIX)

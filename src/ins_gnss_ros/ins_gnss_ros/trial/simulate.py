@@ -48,6 +48,9 @@ from ins_gnss_ros.trial import contract_messages as msgs
 #: ROS time of simulated t = 0: 2026-01-01T00:00:00 UTC, ns.
 SIM_EPOCH_NS = 1_767_225_600 * 1_000_000_000
 
+#: Delay from a driver's stamp to the message's log time, s (a recorder on the same machine).
+TRANSPORT_DELAY_S = (1e-4, 1e-3)
+
 #: IMU grade per scenario when none is given: a MEMS unit in the car (seed 004 Lab 1 uses an
 #: ADIS16405-class prototype), a tactical-grade unit on the ship (seed 004 Lab 2).
 DEFAULT_GRADE = {"car": "mems_adis16405", "sea": "tactical", "aircraft": "navigation"}
@@ -96,8 +99,9 @@ class SimOptions:
         receiver's output latency; each epoch's delay is drawn uniformly from 0.5 to 1.5 times
         it (seed 003: the delays relative to the GNSS epochs are non-uniform).
     gnss_stamped_on_arrival : bool
-        ``gnss/fix`` and ``gnss/vel`` stamped with their log time instead of their epoch (a
-        driver that stamps a message when it arrives), ``gnss_latency`` late.
+        ``gnss/fix`` and ``gnss/vel`` stamped when they arrive instead of at their epoch (a
+        driver that stamps a message when it reads it), ``gnss_latency`` late, and logged
+        ``TRANSPORT_DELAY_S`` after that stamp.
     antenna_lever_arm : tuple of 3 float
         GNSS antenna relative to the IMU, m; with ``antennas``, the centre of the array.
     antennas : int
@@ -310,7 +314,9 @@ def _write_gnss(writer, traj, options, rng, latency_rng):
         arrival = t_ns + bag.sec_to_ns(options.gnss_latency
                                        * latency_rng.uniform(0.5, 1.5, len(t_ns)))
     if options.gnss_stamped_on_arrival:
+        # the driver stamps the time it reads the message; it is logged after the transport
         t_ns = arrival
+        arrival = t_ns + bag.sec_to_ns(latency_rng.uniform(*TRANSPORT_DELAY_S, len(t_ns)))
     for i, t in enumerate(t_ns):
         writer.write("gnss/fix", msgs.fix_msg(t, lat[i], lon[i], h[i],
                                                var if options.gnss_covariance else None),
