@@ -37,6 +37,14 @@ class Param:
         values = list(value) if isinstance(value, (list, tuple)) else [value]
         if self.length is not None and len(values) != self.length:
             raise ParameterError(f"parameter '{self.name}': expected {self.length} values, got {value!r}")
+        expected = self._kind()
+        accepted = _ACCEPTED.get(expected, (expected,))
+        wrong = next((v for v in values if _kind_of(v) not in accepted), None)
+        if wrong is not None:
+            # (as ROS refuses a value of another type: a quoted number read as text reached
+            # the filter's arithmetic and ended a replay in a TypeError)
+            raise ParameterError(f"parameter '{self.name}' = {value!r}: {wrong!r} is not "
+                                 f"a {expected}")
         for v in values:
             if isinstance(v, (int, float)) and not isinstance(v, bool):
                 if not math.isfinite(v):
@@ -51,6 +59,33 @@ class Param:
                 f"parameter '{self.name}' = {value!r} is not one of {', '.join(self.choices)}"
             )
         return value
+
+    def _kind(self) -> str:
+        """The kind of value the default is (its elements' for a list)."""
+        default = self.default
+        if isinstance(default, (list, tuple)):
+            return _kind_of(default[0]) if default else "number"
+        return _kind_of(default)
+
+
+def _kind_of(value: Any) -> str:
+    """'bool', 'integer', 'number' (float), 'string', or the type's name (the kind a
+    parameter's default gives it)."""
+    if isinstance(value, bool):
+        return "bool"
+    if isinstance(value, int):
+        return "integer"
+    if isinstance(value, float):
+        return "number"
+    if isinstance(value, str):
+        return "string"
+    return type(value).__name__
+
+
+#: The kinds of value each kind of parameter takes (a float one an integer too, as the offline
+#: paths always have; ROS itself takes a double for a double only).
+_ACCEPTED = {"bool": ("bool",), "integer": ("integer",), "number": ("number", "integer"),
+             "string": ("string",)}
 
 
 def resolve(specs: Sequence[Param], values: Mapping[str, Any]) -> dict[str, Any]:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 from pathlib import Path
 from typing import Any, Iterable, Mapping
@@ -38,8 +39,18 @@ MAX_DEPTH = 32
 
 # A ROS 2 params file value: a scalar or a homogeneous list of scalars (rcl_yaml_param_parser).
 _ROS_SCALARS = (bool, int, float, str)
-# libyaml's parser when PyYAML was built with it (much faster on a 1 MiB file), else pure Python.
-_SAFE_LOADER = yaml.CSafeLoader if yaml.__with_libyaml__ else yaml.SafeLoader
+
+
+# (libyaml's parser when PyYAML was built with it: much faster on a 1 MiB file)
+class _SafeLoader(yaml.CSafeLoader if yaml.__with_libyaml__ else yaml.SafeLoader):
+    """PyYAML's safe loader, reading a number with an exponent and no point (``6e-3``) as a
+    float, as ROS's params-file parser (rcl_yaml_param_parser's strtod) does: YAML 1.1 reads
+    it as text, which reached the filter's arithmetic as a string."""
+
+
+_SafeLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
 
 
 class ParamsFileError(ValueError):
@@ -64,7 +75,7 @@ def _check_events(data: str, source: str, max_nodes: int, max_depth: int) -> Non
     nested brackets must be refused here, where the parser is an iterative state machine.
     """
     depth = count = 0
-    for event in yaml.parse(data, Loader=_SAFE_LOADER):
+    for event in yaml.parse(data, Loader=_SafeLoader):
         if isinstance(event, (yaml.SequenceStartEvent, yaml.MappingStartEvent)):
             depth += 1
             if depth > max_depth:
@@ -173,7 +184,7 @@ def load_yaml(data: str | bytes, source: str = "<string>", *, max_bytes: int = M
         _check_events(data, source, max_nodes, max_depth)
         # Compose (nodes only, nothing constructed), check the expanded graph, then construct
         # from the same loader: exactly yaml.safe_load split in two so the checks come first.
-        loader = _SAFE_LOADER(data)
+        loader = _SafeLoader(data)
         node = loader.get_single_node()
         if node is None:
             raise ParamsFileError(f"{source}: empty document (a mapping is expected)")
