@@ -9,7 +9,11 @@ Quirks:
 * ``imu_frd``: ``imu/data_raw`` in FRD axes (y and z of the rates and specific force negated:
   a driver that keeps the sensor's NED-convention axes);
 * ``gnss_vel_twist``: ``gnss/vel`` as a ``geometry_msgs/TwistStamped`` (nmea_navsat_driver's
-  ``vel``: no covariance).
+  ``vel``: no covariance);
+* ``imu_mounted_tf``: ``imu/data_raw`` in the axes of an IMU mounted rolled 180 deg and yawed
+  90 deg in base_link (``MOUNTING_RPY_DEG``: z down, x to the left), and the installation on
+  ``/tf_static`` as a URDF gives it (REP-145): base_link -> imu_link (that rotation) and
+  base_link -> gnss (the simulated antenna's place).
 
 The log times stay as they were (the messages' arrival). A NaN altitude (a 2-D fix) is a fault:
 ``{kind: nan, topic: /gnss/fix, field: altitude}``.
@@ -25,9 +29,14 @@ from __future__ import annotations
 
 import argparse
 
-from ins_gnss_ros import io
+import numpy as np
 
-QUIRKS = ("imu_stamps_unset", "gnss_stamps_unset", "imu_frd", "gnss_vel_twist")
+from ins_gnss_ros import io
+from ins_gnss_ros.nav.rotations import dcm_from_euler, dcm_to_quat
+
+QUIRKS = ("imu_stamps_unset", "gnss_stamps_unset", "imu_frd", "gnss_vel_twist", "imu_mounted_tf")
+#: The IMU's mounting of ``imu_mounted_tf``: roll, pitch, yaw in base_link, deg.
+MOUNTING_RPY_DEG = (180.0, 0.0, 90.0)
 
 
 def rewrite(msg, topic: str, quirk: str):
@@ -43,6 +52,34 @@ def rewrite(msg, topic: str, quirk: str):
     elif quirk == "imu_frd" and topic == "/imu/data_raw":
         for v in (msg.angular_velocity, msg.linear_acceleration):
             v.y, v.z = -v.y, -v.z
+    elif quirk == "imu_mounted_tf" and topic == "/imu/data_raw":
+        if msg.orientation_covariance[0] >= 0.0:
+            raise ValueError("imu_mounted_tf rotates rates and specific force, not orientation")
+        c_sb = dcm_from_euler(*np.radians(MOUNTING_RPY_DEG)).T  # base_link -> the IMU's axes
+        for v in (msg.angular_velocity, msg.linear_acceleration):
+            v.x, v.y, v.z = (float(x) for x in c_sb @ [v.x, v.y, v.z])
+    return msg
+
+
+def installation_tf(stamp, imu_frame: str, gnss_frame: str):
+    """The /tf_static of ``imu_mounted_tf``: base_link -> imu_frame (the mounting) and
+    base_link -> gnss_frame (the simulated antenna's lever arm)."""
+    from geometry_msgs.msg import TransformStamped
+    from tf2_msgs.msg import TFMessage
+
+    from ins_gnss_ros.trial.simulate import SimOptions
+
+    q = dcm_to_quat(dcm_from_euler(*np.radians(MOUNTING_RPY_DEG)))
+    msg = TFMessage()
+    for child, rotation, translation in ((imu_frame, q, (0.0, 0.0, 0.0)),
+                                         (gnss_frame, (1.0, 0.0, 0.0, 0.0),
+                                          SimOptions.antenna_lever_arm)):
+        tf = TransformStamped()
+        tf.header.stamp, tf.header.frame_id, tf.child_frame_id = stamp, "base_link", child
+        r, t = tf.transform.rotation, tf.transform.translation
+        r.w, r.x, r.y, r.z = (float(x) for x in rotation)
+        t.x, t.y, t.z = (float(x) for x in translation)
+        msg.transforms.append(tf)
     return msg
 
 
@@ -52,8 +89,16 @@ def main(argv=None) -> int:
     parser.add_argument("out")
     parser.add_argument("quirk", choices=QUIRKS)
     args = parser.parse_args(argv)
+    frames = {}
     with io.BagWriter(args.out) as out:
         for m in io.iter_bag(args.bag):
+            if args.quirk == "imu_mounted_tf" and m.topic in ("/imu/data_raw", "/gnss/fix") \
+                    and m.topic not in frames:
+                frames[m.topic] = m.msg.header.frame_id
+                if len(frames) == 2:  # (logged with the first messages, as a recorder does)
+                    out.write("/tf_static", installation_tf(m.msg.header.stamp,
+                                                            frames["/imu/data_raw"],
+                                                            frames["/gnss/fix"]), m.t_ns)
             out.write(m.topic, rewrite(m.msg, m.topic, args.quirk), m.t_ns)
     return 0
 

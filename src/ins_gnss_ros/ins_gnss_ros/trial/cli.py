@@ -349,6 +349,8 @@ def _print_counts(summary) -> None:
     from ins_gnss_ros.trial.run_folder import counts_table
 
     print("\n".join("  " + line for line in counts_table(summary["messages"])))
+    for note in summary["installation"]:
+        print(f"installation: {note}", file=sys.stderr)
     for note in summary["unread_topics"]:
         print(f"warning: {note}", file=sys.stderr)
 

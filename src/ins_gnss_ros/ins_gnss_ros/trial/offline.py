@@ -34,7 +34,7 @@ from ins_gnss_ros.nav.increments import increment_problem
 from ins_gnss_ros.params import ParameterError, resolve
 from ins_gnss_ros.trial.inputs import bag_rows, check_inputs, input_count, input_rows
 from ins_gnss_ros.trial.outages import GNSS_PREFIX, gnss_windows, in_outage
-from ins_gnss_ros.trial.profile import ProfileError, load_profile
+from ins_gnss_ros.trial.profile import ProfileError, load_profile, profile_with_installation
 from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_summary
 
 #: The imu/data_raw type and the fields of it the offline path reads, in field order.
@@ -135,6 +135,8 @@ class ForwardPass:
         The cores that ran, as ``replay.json`` names them.
     unread : list of str
         The bag's topics no input took that one of their type could (check_inputs).
+    installation : list of str
+        What the bag's /tf_static gave the profile (trial/profile.profile_with_installation).
     """
 
     navigator: object
@@ -146,13 +148,14 @@ class ForwardPass:
     frames: OutputFrames
     graph: tuple
     unread: list
+    installation: list
 
     def summary(self, out, bag_path, outages, mode, graph=None) -> dict:
         """Write ``OUT/replay.json`` (run_folder.write_summary) with the front end's events;
         ``graph``: what ran (default: the offline path's cores)."""
         return write_summary(out, bag_path, self.profile, outages, self.windows, self.counts,
                              mode, 0.0, graph=list(graph or self.graph), events=self.events,
-                             unread=self.unread)
+                             unread=self.unread, installation=self.installation)
 
 
 def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
@@ -173,7 +176,8 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
     from ins_gnss_ros.nav.aiding import Aiding, AidingPolicy
     from ins_gnss_ros.nav.filter_config import navigator_config
 
-    profile = load_profile(profile_path)
+    profile, installed = profile_with_installation(load_profile(profile_path), bag_path,
+                                                   remap=remap)
     pre_p, ekf_p, compass_p = offline_parameters(profile)
     runs_compass = compass_p is not None and ekf_p["use_magnetic_heading"]
     unread = check_inputs(bag_path, {**OFFLINE_TOPICS, **dict.fromkeys(
@@ -211,7 +215,8 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
     graph = ("imu_preprocessor",) + (("mag_compass",) if feed.compass else ()) + \
         ("ekf (filter only)",)
     return ForwardPass(navigator, aiding.datum, profile, windows, counts, events,
-                       OutputFrames(ekf_p, pre_p, preprocessor.calibration.c_bs), graph, unread)
+                       OutputFrames(ekf_p, pre_p, preprocessor.calibration.c_bs), graph, unread,
+                       installed)
 
 
 class _Feeder:

@@ -24,7 +24,8 @@ from pathlib import Path
 from ins_gnss_ros import io as bagio
 from ins_gnss_ros.trial.inputs import check_inputs, read_inputs
 from ins_gnss_ros.trial.outages import gnss_windows, in_gnss_outage
-from ins_gnss_ros.trial.profile import load_profile, profile_with_truth_init
+from ins_gnss_ros.trial.profile import load_profile, profile_with_installation, \
+    profile_with_truth_init
 from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_summary
 
 
@@ -50,6 +51,8 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
     messages = read_inputs(bag_path, remap)
     windows = gnss_windows(messages, outages)
     out = new_run_folder(out)
+    profile, installed = profile_with_installation(profile, bag_path, out / "profile.yaml",
+                                                   remap)
     if init_from_truth:
         profile = load_profile(profile_with_truth_init(profile, bag_path, out / "profile.yaml"))
     inputs = [m for m in messages if not in_gnss_outage(m.topic, m.t_ns, windows)]
@@ -132,7 +135,7 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
     with lock:
         writer.close()
     return write_summary(out, bag_path, profile, outages, windows, counts,
-                         "processes", float(rate), unread=unread)
+                         "processes", float(rate), unread=unread, installation=installed)
 
 
 #: Topics every rclpy node publishes: not outputs of the graph.

@@ -109,15 +109,62 @@ def profile_with_truth_init(profile: Profile, bag_path, path) -> Path:
     params = truth_init_parameters(bag_path)
     if not params:
         raise ValueError("--init-from-truth: the bag has no truth/state")
-    data = {}
+    sections = {}
     for name, section in profile.sections.items():
-        section = dict(section)
         if name in profile.graph:
             declared = {spec.name for spec in node_class(name).PARAMS}
-            # Copies, not shared lists: yaml would write an alias, which rcl refuses.
-            section.update({k: copy.deepcopy(v) for k, v in params.items() if k in declared})
-        data["/" + name] = {"ros__parameters": section}
+            section = {**section, **{k: v for k, v in params.items() if k in declared}}
+        sections[name] = section
+    return _write(sections, path)
+
+
+def _write(sections: dict, path) -> Path:
+    """A params file of these node sections at path."""
+    # Copies, not shared lists: yaml would write an alias, which rcl refuses.
+    data = {"/" + name: {"ros__parameters": copy.deepcopy(section)}
+            for name, section in sections.items()}
     path = Path(path)
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
 
+
+#: Where a replay puts the installation the bag's /tf_static gives (trial/installation.py):
+#: parameter -> node section.
+INSTALLATION_PARAMS = {"mounting_rpy_deg": "imu_preprocessor", "lever_arm": "ekf"}
+
+
+def profile_with_installation(profile: Profile, bag_path, path=None,
+                              remap=None) -> tuple[Profile, list]:
+    """``profile`` with the IMU mounting and antenna lever arm of the bag's /tf_static
+    (:func:`~ins_gnss_ros.trial.installation.installation`) where its sections run and leave
+    them at zero, the value that stands for "not known" (config/default.yaml writes it; an
+    imu_preprocessor with a ``calibration_file`` keeps that file's mounting), written to
+    ``path`` if given and anything was taken (the nodes read a params file); and what was
+    taken, kept or not found, as lines."""
+    from ins_gnss_ros.trial.installation import installation
+
+    base = profile.sections.get("imu_preprocessor", {}).get("frame_id", "base_link")
+    found, unplaced = installation(bag_path, base, remap)
+    sections, notes = dict(profile.sections), []
+    for param, node in INSTALLATION_PARAMS.items():
+        section = sections.get(node)
+        if section is None or param not in found and param not in unplaced:
+            continue
+        given = section.get(param)
+        kept = given is not None and any(given) or (param == "mounting_rpy_deg"
+                                                    and bool(section.get("calibration_file")))
+        if param in unplaced:
+            if not kept:
+                notes.append(f"{node} {param} left at zero: the bag's /tf_static does not place "
+                             f"the frame '{unplaced[param]}' of its messages in '{base}'")
+        elif kept:
+            notes.append(f"{node} {param}: the profile's kept, the bag's /tf_static gives "
+                         f"{found[param]}")
+        else:
+            sections[node] = {**section, param: found[param]}
+            notes.append(f"{node} {param} {found[param]}: from the bag's /tf_static")
+    if sections == profile.sections:
+        return profile, notes
+    if path is None:
+        return Profile(profile.path, sections, profile.graph, profile.ignored), notes
+    return load_profile(_write(sections, path)), notes

@@ -33,7 +33,8 @@ from ins_gnss_ros.nodes import registry
 from ins_gnss_ros.trial.inputs import InputTopicsError, check_inputs, input_types, read_inputs
 from ins_gnss_ros.trial.outages import gnss_windows, highest_satellites, in_gnss_outage, \
     parse_satellite_spec, reduce_constellation
-from ins_gnss_ros.trial.profile import ProfileError, load_profile, profile_with_truth_init
+from ins_gnss_ros.trial.profile import ProfileError, load_profile, \
+    profile_with_installation, profile_with_truth_init
 from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_summary
 
 #: Bag-time interval of the diagnostics the replay asks every node to publish, ns.
@@ -121,6 +122,8 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
             (m.t_ns, m.topic, m.msg) for m in messages
             if not in_gnss_outage(m.topic, m.t_ns, windows)))
     out = new_run_folder(out)
+    profile, installed = profile_with_installation(profile, bag_path, out / "profile.yaml",
+                                                   remap)
     if init_from_truth:
         profile = load_profile(profile_with_truth_init(profile, bag_path, out / "profile.yaml"))
     writer = bagio.BagWriter(out / "bag")
@@ -188,7 +191,7 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
     writer.close()
     return write_summary(out, bag_path, profile, outages, windows, counts, "in-process", 0.0,
                          faults=None if injector is None else injector.summary(),
-                         satellites=reduced, unread=unread)
+                         satellites=reduced, unread=unread, installation=installed)
 
 
 def _bus():

@@ -66,7 +66,8 @@ def new_run_folder(out) -> Path:
 
 
 def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
-                  graph=None, faults=None, satellites=None, events=None, unread=()) -> dict:
+                  graph=None, faults=None, satellites=None, events=None, unread=(),
+                  installation=()) -> dict:
     """Write ``OUT/replay.json``, the facts of a replay, and return them.
 
     Parameters
@@ -99,6 +100,9 @@ def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
     unread : list of str
         The bag's topics no node read that an input of their type could take, with the
         remapping (:func:`~ins_gnss_ros.trial.inputs.check_inputs`).
+    installation : list of str
+        What was taken from the bag's /tf_static, or found there unplaced
+        (:func:`~ins_gnss_ros.trial.profile.profile_with_installation`).
     """
     summary = {
         "input_bag": str(Path(bag_path).resolve()),
@@ -118,6 +122,7 @@ def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
         "topics": bagio.bag_topics(out / "bag") if (out / "bag").exists() else {},
         "messages": counts.per_topic(),
         "unread_topics": list(unread),
+        "installation": list(installation),
     }
     if faults is not None:
         summary["faults"] = faults
