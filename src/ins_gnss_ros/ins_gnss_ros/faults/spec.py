@@ -177,7 +177,7 @@ def _parse_entry(i: int, entry: Any) -> Fault:
         if not _is_type(value, types) or (check is not None and not check(value)):
             hint = ""
             if types is _NUM and isinstance(value, str) and _looks_numeric(value):
-                hint = " (YAML 1.1 reads an exponent without sign as text: write 1.0e+9)"
+                hint = " (a quoted number is text: write it without quotes)"
             raise FaultSpecError(f"{where}: {key!r} must be {_type_name(types)}"
                                  f"{', ' + demand if demand else ''}, got {_short(value)}{hint}")
         params[key] = value

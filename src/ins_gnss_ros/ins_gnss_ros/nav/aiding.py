@@ -104,9 +104,12 @@ GNSS_STAMPED = ("gnss/fix", "gnss/vel")
 #: no receiver delivers a solution that soon after its epoch (10-100 ms at output rates of
 #: 1-20 Hz), while a driver's stamp precedes its message's arrival only by the transport
 #: (0.1-1 ms on one machine). Judged on the least delay seen (any message may come late, none
-#: comes before its epoch), in the node's clock or a replay's log time; a log time equal to
-#: the stamp (a recording written at its stamps: simulated, converted) tells nothing.
+#: comes before its epoch), in the node's clock or a replay's log time.
 ARRIVAL_STAMP_MAX_NS = 3_000_000
+#: A delay below this tells nothing, ns: a recording written at its stamps (simulated,
+#: converted), whose log times equal them or differ by the rounding of a float time; no
+#: transport between two processes takes less.
+ARRIVAL_STAMP_MIN_NS = 10_000
 #: Sigma of the receiver's latency behind such stamps (the filter's time-offset state "td"), s:
 #: receivers and serial links give 20-200 ms.
 ARRIVAL_LATENCY_SIGMA = 0.2
@@ -332,7 +335,8 @@ class Aiding:
         nav/fix beyond 5 sigma (docs/results/product_path.md, "2026-12-05 (session 25)"); the
         state from the start costs correctly stamped fixes accuracy (an RTK receiver's: 2-20
         times its sigma), so it is added only for such stamps."""
-        on_arrival = arrival_ns is not None and 0 < arrival_ns - stamp_ns <= ARRIVAL_STAMP_MAX_NS
+        on_arrival = arrival_ns is not None and \
+            ARRIVAL_STAMP_MIN_NS <= arrival_ns - stamp_ns <= ARRIVAL_STAMP_MAX_NS
         if name not in GNSS_STAMPED or self.gnss_stamped_on_arrival or \
                 not (stamp_ns == 0 or on_arrival):
             return

@@ -6,9 +6,9 @@ frame on the vehicle by a static transform (a URDF through robot_state_publisher
 static_transform_publisher); a receiver's fix names its antenna's frame likewise. A replay of
 such a recording with a profile that leaves the imu_preprocessor's ``mounting_rpy_deg`` or
 the ekf's ``lever_arm`` at zero takes them from there, and says so (a profile that gives them
-keeps its own: trial/profile.py, ``profile_with_installation``). This project's base_link has the IMU at its origin (the imu_preprocessor
-rotates into base_link, it does not translate), so the lever arm is the antenna's position
-minus the IMU's, in base_link axes.
+keeps its own: trial/profile.py, ``profile_with_installation``). This project's base_link
+has the IMU at its origin (the imu_preprocessor rotates into base_link, it does not
+translate), so the lever arm is the antenna's position minus the IMU's, in base_link axes.
 """
 from __future__ import annotations
 
