@@ -609,3 +609,29 @@ def test_jittered_driver_stamps_are_replaced_by_the_sensor_clock(graph, enabled)
         np.testing.assert_allclose(dt[250:], 0.02, atol=2e-5)   # raw: ±2 ms
     else:
         assert abs(err).max() > 5e-4 and dt.std() > 5e-4
+
+
+@pytest.mark.parametrize("placed", [False, True])
+def test_a_urdf_s_mounting_is_taken_and_its_frame_not_published_twice(graph, placed):
+    """An IMU upside down in its frame imu_link, which a URDF places in base_link (rolled 180
+    deg) on /tf_static before the first sample: with no mounting given, the node takes that
+    pose (gravity up in base_link) and does not publish its own imu_link transform, which
+    would conflict with the URDF's. Without the URDF: the axes as they come (gravity down), and
+    its own transform published."""
+    from ins_gnss_ros.io import ns_to_stamp
+    from ins_gnss_ros.nodes.tf_messages import static_tf
+
+    g = graph()
+    if placed:
+        g.send("/tf_static", static_tf(ns_to_stamp(T0_NS), "base_link", [
+            ("imu_link", (0.0, 0.0, 0.1), dcm_from_euler(np.pi, 0.0, 0.0))]))
+    for k in range(100):
+        g.bus.now_ns = T0_NS + (k + 1) * DT_NS
+        g.imu(T0_NS + (k + 1) * DT_NS, np.zeros(3), -G_UP)  # gravity along the sensor's -z
+    up = np.mean([d.delta_velocity.z for d in g.out["/imu/delta"]])
+    assert (up > 0.0) == placed
+    mounting = g.node.diag._values["mounting"]
+    assert mounting.startswith("[180.0, -0.0, 0.0] deg: /tf_static's pose of 'imu_link'"
+                               if placed else "[0, 0, 0] deg: /tf_static does not place")
+    assert (g.node.diag.counts["imu_link placed by another node's /tf_static: this node's "
+                               "transform not published"] == 1) == placed

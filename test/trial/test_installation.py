@@ -10,30 +10,9 @@ import numpy as np
 import pytest
 from conftest import REPO
 
-from ins_gnss_ros.nav.rotations import dcm_from_euler
-from ins_gnss_ros.trial.installation import pose_in
 from ins_gnss_ros.trial.offline import replay_offline
 from ins_gnss_ros.trial.profile import load_profile, profile_with_installation
 from ins_gnss_ros.trial.simulate import SimOptions, simulate
-
-
-def test_a_pose_is_composed_through_the_tree_either_way():
-    """base_link -> mast (yawed 90 deg, 1 m forward) -> antenna (rolled 180 deg, 2 m along
-    the mast's y): the antenna's origin at (1, 0, 0) + Rz(90) (0, 2, 0) = (-1, 0, 0)."""
-    yaw, roll = dcm_from_euler(0.0, 0.0, np.pi / 2), dcm_from_euler(np.pi, 0.0, 0.0)
-    tree = {"mast": ("base_link", yaw, np.array([1.0, 0.0, 0.0])),
-            "antenna": ("mast", roll, np.array([0.0, 2.0, 0.0])),
-            "odom_child": ("odom", np.eye(3), np.zeros(3))}
-    C, t = pose_in(tree, "base_link", "antenna")
-    np.testing.assert_allclose(C, yaw @ roll, atol=1e-15)
-    np.testing.assert_allclose(t, [-1.0, 0.0, 0.0], atol=1e-15)
-    C_back, t_back = pose_in(tree, "antenna", "base_link")
-    np.testing.assert_allclose(C_back, C.T, atol=1e-15)
-    np.testing.assert_allclose(t_back, -C.T @ t, atol=1e-15)
-    C_sib, t_sib = pose_in(tree, "mast", "mast")
-    np.testing.assert_allclose(C_sib, np.eye(3))
-    np.testing.assert_allclose(t_sib, 0.0)
-    assert pose_in(tree, "base_link", "odom_child") is None
 
 
 @pytest.fixture(scope="module")

@@ -71,6 +71,11 @@ TF_STATIC_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
 # The last value of a slowly changing fact (the datum), latched for late joiners.
 LATCHED_QOS = TF_STATIC_QOS
+# Reading /tf_static: every publisher's latched transforms (a URDF's, static_transform_
+# publishers'), also those published before this node started.
+TF_STATIC_READ_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                                reliability=ReliabilityPolicy.RELIABLE,
+                                durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def descriptor(spec: Param) -> ParameterDescriptor:

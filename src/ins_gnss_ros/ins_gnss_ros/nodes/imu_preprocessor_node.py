@@ -9,6 +9,13 @@ and every completed increment on ``imu/delta``, stamped at the end of its interv
 Magnetometer samples (``imu/mag_raw``) are rotated into ``base_link`` with the same mounting and
 published on ``imu/mag``; hard/soft iron belongs to the vehicle and is removed by ``mag_compass``.
 
+The mounting is ``mounting_rpy_deg`` (or the calibration file's); where that is zero and
+``/tf_static`` (a URDF through robot_state_publisher, a static_transform_publisher) places the
+first sample's ``header.frame_id`` in ``frame_id`` (REP-145: IMU data in the sensor's frame),
+that pose is the mounting. The node's own ``frame_id -> imu_frame`` transform is published
+unless another node places ``imu_frame``: two publishers of one static transform conflict.
+Both are decided at the first sample, with the transforms received by then.
+
 On DDS, with more than two samples an increment and nobody reading ``imu/data``, the samples
 before the one that completes an increment wait and are handled together shortly before it is
 due (:class:`~ins_gnss_ros.nodes.base.Paced`); the completing one is handled as it comes. A
@@ -29,7 +36,9 @@ from ..imu.preprocessor_params import PARAMS, orientation_headings_from_params, 
     preprocessor_from_params
 from ..io import NS, codec, field_reader, field_writer, new, ns_to_stamp, set_stamp_ns, \
     stamp_or_arrival, stamp_to_ns
-from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, TF_STATIC_QOS, NavNode, run
+from ..nav.frame_tree import FrameTree, mounting_rpy_deg
+from .base import DRIVER_QOS, SENSOR_QOS, STATE_QOS, TF_STATIC_QOS, TF_STATIC_READ_QOS, \
+    NavNode, run
 from .convert import sensor_errors_of, set_vector3, vec
 from .tf_messages import IMU_FRAME_PARAMS, static_tf
 
@@ -89,6 +98,43 @@ class ImuPreprocessorNode(NavNode):
             self.subscribe(InsCorrection, "ins/correction", self.on_correction, STATE_QOS)
         self.pub_tf_static = self.publisher(TFMessage, "/tf_static", TF_STATIC_QOS) \
             if p["publish_tf"] else None
+        # Read until the first sample settles the mounting and our own transform.
+        self.frames = FrameTree()
+        self._frames_settled = False
+        self.subscribe(TFMessage, "/tf_static", self.on_tf_static, TF_STATIC_READ_QOS)
+
+    def on_tf_static(self, msg: TFMessage) -> None:
+        if not self._frames_settled:
+            self.frames.add_transforms(msg.transforms)
+
+    def _settle_frames(self, raw: bytes, stamp_ns: int) -> None:
+        """At the first sample: the mounting from /tf_static where the parameters leave it at
+        zero, and this node's frame_id -> imu_frame transform unless another node places
+        imu_frame (module doc)."""
+        self._frames_settled = True
+        p, base = self.p, self._frame_id
+        frame = self._decode_raw(raw).header.frame_id.lstrip("/")
+        if frame and frame != base and not any(p["mounting_rpy_deg"]) \
+                and not p["calibration_file"]:
+            pose = self.frames.pose_in(base, frame)
+            if pose is None:
+                self.diag.set_value("mounting", f"[0, 0, 0] deg: /tf_static does not place "
+                                                f"imu/data_raw's frame '{frame}' in '{base}'")
+            else:
+                rpy = mounting_rpy_deg(pose[0])
+                self.preprocessor = preprocessor_from_params({**p, "mounting_rpy_deg": rpy})
+                self.orientation, self._declination = orientation_headings_from_params(
+                    p, self.preprocessor.calibration.c_bs)
+                self.diag.set_value("mounting", f"{rpy} deg: /tf_static's pose of '{frame}' "
+                                                f"in '{base}'")
+        if self.pub_tf_static is None:
+            return
+        if self.frames.places(p["imu_frame"]):
+            self.pub_tf_static = None
+            self.diag.count(f"{p['imu_frame']} placed by another node's /tf_static: this "
+                            "node's transform not published")
+        else:
+            self.publish_static_tf(ns_to_stamp(stamp_ns))
 
     def publish_static_tf(self, stamp) -> None:
         """frame_id -> imu_frame (the mounting; the IMU is base_link's origin) on /tf_static,
@@ -110,8 +156,8 @@ class ImuPreprocessorNode(NavNode):
         stamp_ns, unset = stamp_or_arrival(stamp_ns, arrival_ns, "imu/data_raw")
         if unset:
             self.diag.count(unset)
-        if self.pub_tf_static is not None:
-            self.publish_static_tf(ns_to_stamp(stamp_ns))
+        if not self._frames_settled:
+            self._settle_frames(raw, stamp_ns)
         for out in self.preprocessor.add(stamp_ns, arrival_ns, gyro, accel, raw):
             if out.events:
                 self._report(out.events)

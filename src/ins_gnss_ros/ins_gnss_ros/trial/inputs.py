@@ -25,6 +25,9 @@ from ins_gnss_ros import io as bagio
 
 #: Truth never reaches the nodes.
 TRUTH_PREFIX = "/truth/"
+#: Read by nodes where a bag has them (the installation: imu_preprocessor), never a sensor
+#: input a bag lacks: no other topic is proposed for them.
+FRAME_TOPICS = ("/tf", "/tf_static")
 
 #: A velocity as drivers record it without its covariance, and as the graph takes it.
 TWIST = "geometry_msgs/msg/TwistStamped"
@@ -229,7 +232,7 @@ def check_inputs(bag_path, inputs: Mapping[str, str | None], remap=None,
     names, types = _names(bag_path, remap), bagio.bag_topics(bag_path)
     lacking = sorted(topic for topic, msgtype in inputs.items()
                      if msgtype is not None and topic not in published
-                     and topic not in names.values())
+                     and topic not in names.values() and topic not in FRAME_TOPICS)
 
     def feeds(topic):
         """The lacking inputs the bag topic could feed (of their type, or converted to it)."""

@@ -14,53 +14,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from ins_gnss_ros.nav.rotations import dcm_to_quat, quat_to_dcm, quat_to_euler
+from ins_gnss_ros.nav.frame_tree import FrameTree, mounting_rpy_deg
 from ins_gnss_ros.trial.inputs import iter_topic
 
 #: The topics whose frames are placed: the IMU's (mounting) and the receiver's (lever arm).
 IMU_TOPIC, FIX_TOPIC = "/imu/data_raw", "/gnss/fix"
 
 
-def static_transforms(bag_path) -> dict:
-    """Child frame -> (parent frame, C_parent_child (3, 3), translation in the parent (3,)) of
-    every transform on the bag's /tf_static (a later one of a child replaces an earlier; one
-    whose quaternion is not a rotation, e.g. all zeros, is left out)."""
-    tree = {}
+def static_transforms(bag_path) -> FrameTree:
+    """The frames of every transform on the bag's /tf_static."""
+    tree = FrameTree()
     for m in iter_topic(bag_path, "/tf_static"):
-        for tf in m.msg.transforms:
-            r, t = tf.transform.rotation, tf.transform.translation
-            q = np.array([r.w, r.x, r.y, r.z])
-            norm = np.linalg.norm(q)
-            if not abs(norm - 1.0) < 1e-3:
-                continue
-            tree[tf.child_frame_id.lstrip("/")] = (
-                tf.header.frame_id.lstrip("/"), quat_to_dcm(q / norm), np.array([t.x, t.y, t.z]))
+        tree.add_transforms(m.msg.transforms)
     return tree
-
-
-def pose_in(tree: dict, frame: str, child: str):
-    """(C_frame_child, position of child's origin in frame) through the tree, or None when the
-    two frames are not connected."""
-    def to_root(name):
-        """[(name, C_root_name, t)] from name up to its root."""
-        chain, C, t, seen = [(name, np.eye(3), np.zeros(3))], np.eye(3), np.zeros(3), {name}
-        while name in tree:
-            parent, C_pc, t_pc = tree[name]
-            if parent in seen:  # a loop in a damaged tree
-                break
-            seen.add(parent)
-            # v_parent = C_pc v_child + t_pc, composed onto what is below
-            C, t = C_pc @ C, C_pc @ t + t_pc
-            name = parent
-            chain.append((name, C, t))
-        return chain
-
-    ups = {name: (C, t) for name, C, t in to_root(child)}
-    for name, C_nf, t_nf in to_root(frame):
-        if name in ups:  # the lowest common ancestor
-            C_nc, t_nc = ups[name]
-            return C_nf.T @ C_nc, C_nf.T @ (t_nc - t_nf)
-    return None
 
 
 def installation(bag_path, base_frame: str, remap=None) -> tuple[dict, dict]:
@@ -76,13 +42,12 @@ def installation(bag_path, base_frame: str, remap=None) -> tuple[dict, dict]:
         frame = _first_frame(bag_path, bag_topic.get(topic, topic))
         if not frame or frame == base_frame:
             continue
-        pose = pose_in(tree, base_frame, frame)
+        pose = tree.pose_in(base_frame, frame)
         if pose is None:
             unplaced[name] = frame
         elif topic == IMU_TOPIC:
             imu_at = pose[1]
-            found[name] = [round(float(a), 6) for a in
-                           np.degrees(quat_to_euler(dcm_to_quat(pose[0])))]
+            found[name] = mounting_rpy_deg(pose[0])
         else:
             found[name] = [round(float(x), 6) for x in pose[1] - imu_at]
     return found, unplaced

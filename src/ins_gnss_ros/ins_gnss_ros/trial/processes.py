@@ -45,6 +45,8 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
     from rosgraph_msgs.msg import Clock
     from tqdm import tqdm
 
+    from ins_gnss_ros.nodes.base import TF_STATIC_READ_QOS
+
     if not rate > 0.0:
         raise ValueError(f"--rate must be > 0, got {rate}")
     profile = load_profile(profile_path)
@@ -72,7 +74,9 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
     pubs = {}
     for m in inputs:
         if m.topic not in pubs:
-            pubs[m.topic] = node.create_publisher(type(m.msg), m.topic, qos)
+            # (/tf_static latched, as its readers ask: a volatile writer would never match them)
+            pubs[m.topic] = node.create_publisher(
+                type(m.msg), m.topic, TF_STATIC_READ_QOS if m.topic == "/tf_static" else qos)
     procs = [subprocess.Popen(
         [str(Path(sys.executable).parent / name), "--ros-args", "--params-file",
          str(profile.path), "-p", "use_sim_time:=true"],
