@@ -103,10 +103,12 @@ def test_payloads_of_a_fixed_layout_stay_undecoded_and_checked(tmp_path, bags):
 def test_a_velocity_without_covariance_is_read_as_the_graph_takes_it(tmp_path):
     """A driver's TwistStamped (nmea_navsat_driver's ``vel``) on gnss/vel was refused as not
     the graph's type; it reads as a TwistWithCovarianceStamped with an all-zero covariance (the
-    ekf then assumes one), and a bag topic of it no node reads is proposed for gnss/vel."""
+    ekf then assumes one), said in the replay's summary, and a bag topic of it no node reads is
+    proposed for gnss/vel."""
     from geometry_msgs.msg import TwistStamped
 
-    from ins_gnss_ros.trial.inputs import TWIST, TWIST_WITH_COVARIANCE, input_types
+    from ins_gnss_ros.trial.inputs import TWIST, TWIST_WITH_COVARIANCE, conversion_notes, \
+        input_types
 
     vel = TwistStamped()
     vel.header.stamp = bagio.ns_to_stamp(T0)
@@ -124,5 +126,10 @@ def test_a_velocity_without_covariance_is_read_as_the_graph_takes_it(tmp_path):
     assert not any(read.twist.covariance)
     inputs = {"/imu/delta": "ins_gnss_msgs/msg/ImuDelta", "/gnss/vel": TWIST_WITH_COVARIANCE}
     assert check_inputs(bag, inputs) == []
+    assert conversion_notes(bag) == [
+        f"/gnss/vel ({TWIST}) read as {TWIST_WITH_COVARIANCE} without a covariance: the ekf "
+        "assumes one"]  # (replay.json "converted", printed by trial replay)
     (note,) = check_inputs(tmp_path / "vel", inputs)
     assert "--remap /vel:=/gnss/vel" in note
+    assert conversion_notes(tmp_path / "vel") == [] and \
+        len(conversion_notes(tmp_path / "vel", {"/vel": "/gnss/vel"})) == 1

@@ -351,6 +351,8 @@ def _print_counts(summary) -> None:
     print("\n".join("  " + line for line in counts_table(summary["messages"])))
     for note in summary["installation"]:
         print(f"installation: {note}", file=sys.stderr)
+    for note in summary["converted"]:
+        print(f"converted: {note}", file=sys.stderr)
     for note in summary["unread_topics"]:
         print(f"warning: {note}", file=sys.stderr)
 

@@ -170,6 +170,15 @@ def read_inputs(bag_path, remap=None, payloads: bool = False) -> list:
     return out
 
 
+def conversion_notes(bag_path, remap=None) -> list[str]:
+    """One line per bag topic read as another type (:data:`CONVERSIONS`)."""
+    names = _names(bag_path, remap)
+    return [f"{topic} ({msgtype}) read as {CONVERSIONS[(names[topic], msgtype)][0]} without "
+            "a covariance: the ekf assumes one"
+            for topic, msgtype in bagio.bag_topics(bag_path).items()
+            if (names[topic], msgtype) in CONVERSIONS]
+
+
 def input_types(bag_path, remap=None) -> dict[str, str]:
     """{absolute topic (after ``remap``): type name} of the bag's topics a graph may see."""
     names = _names(bag_path, remap)

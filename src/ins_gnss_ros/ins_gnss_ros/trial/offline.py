@@ -32,7 +32,8 @@ import numpy as np
 from ins_gnss_ros import io as bagio
 from ins_gnss_ros.nav.increments import increment_problem
 from ins_gnss_ros.params import ParameterError, resolve
-from ins_gnss_ros.trial.inputs import bag_rows, check_inputs, input_count, input_rows
+from ins_gnss_ros.trial.inputs import bag_rows, check_inputs, conversion_notes, input_count, \
+    input_rows
 from ins_gnss_ros.trial.outages import GNSS_PREFIX, gnss_windows, in_outage
 from ins_gnss_ros.trial.profile import ProfileError, load_profile, profile_with_installation
 from ins_gnss_ros.trial.run_folder import MessageCounts, new_run_folder, write_summary
@@ -137,6 +138,8 @@ class ForwardPass:
         The bag's topics no input took that one of their type could (check_inputs).
     installation : list of str
         What the bag's /tf_static gave the profile (trial/profile.profile_with_installation).
+    converted : list of str
+        The bag's topics read as another type (trial/inputs.conversion_notes).
     """
 
     navigator: object
@@ -149,13 +152,15 @@ class ForwardPass:
     graph: tuple
     unread: list
     installation: list
+    converted: list
 
     def summary(self, out, bag_path, outages, mode, graph=None) -> dict:
         """Write ``OUT/replay.json`` (run_folder.write_summary) with the front end's events;
         ``graph``: what ran (default: the offline path's cores)."""
         return write_summary(out, bag_path, self.profile, outages, self.windows, self.counts,
                              mode, 0.0, graph=list(graph or self.graph), events=self.events,
-                             unread=self.unread, installation=self.installation)
+                             unread=self.unread, installation=self.installation,
+                             converted=self.converted)
 
 
 def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
@@ -216,7 +221,7 @@ def forward_pass(bag_path, profile_path, outages=None, progress=False, out=None,
         ("ekf (filter only)",)
     return ForwardPass(navigator, aiding.datum, profile, windows, counts, events,
                        OutputFrames(ekf_p, pre_p, preprocessor.calibration.c_bs), graph, unread,
-                       installed)
+                       installed, conversion_notes(bag_path, remap))
 
 
 class _Feeder:

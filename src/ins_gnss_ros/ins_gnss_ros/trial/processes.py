@@ -22,7 +22,7 @@ from collections import Counter
 from pathlib import Path
 
 from ins_gnss_ros import io as bagio
-from ins_gnss_ros.trial.inputs import check_inputs, read_inputs
+from ins_gnss_ros.trial.inputs import check_inputs, conversion_notes, read_inputs
 from ins_gnss_ros.trial.outages import gnss_windows, in_gnss_outage
 from ins_gnss_ros.trial.profile import load_profile, profile_with_installation, \
     profile_with_truth_init
@@ -139,7 +139,8 @@ def replay_processes(bag_path, profile_path, out, rate=1.0, outages=None, progre
     with lock:
         writer.close()
     return write_summary(out, bag_path, profile, outages, windows, counts,
-                         "processes", float(rate), unread=unread, installation=installed)
+                         "processes", float(rate), unread=unread, installation=installed,
+                         converted=conversion_notes(bag_path, remap))
 
 
 #: Topics every rclpy node publishes: not outputs of the graph.

@@ -30,7 +30,8 @@ from collections import Counter
 from ins_gnss_ros import io as bagio
 from ins_gnss_ros.gnss.constants import UBX_GNSS_ID
 from ins_gnss_ros.nodes import registry
-from ins_gnss_ros.trial.inputs import InputTopicsError, check_inputs, input_types, read_inputs
+from ins_gnss_ros.trial.inputs import InputTopicsError, check_inputs, conversion_notes, \
+    input_types, read_inputs
 from ins_gnss_ros.trial.outages import gnss_windows, highest_satellites, in_gnss_outage, \
     parse_satellite_spec, reduce_constellation
 from ins_gnss_ros.trial.profile import ProfileError, load_profile, \
@@ -191,7 +192,8 @@ def replay(bag_path, profile_path, out, outages=None, progress=False,
     writer.close()
     return write_summary(out, bag_path, profile, outages, windows, counts, "in-process", 0.0,
                          faults=None if injector is None else injector.summary(),
-                         satellites=reduced, unread=unread, installation=installed)
+                         satellites=reduced, unread=unread, installation=installed,
+                         converted=conversion_notes(bag_path, remap))
 
 
 def _bus():

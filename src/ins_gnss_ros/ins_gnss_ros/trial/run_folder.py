@@ -67,7 +67,7 @@ def new_run_folder(out) -> Path:
 
 def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
                   graph=None, faults=None, satellites=None, events=None, unread=(),
-                  installation=()) -> dict:
+                  installation=(), converted=()) -> dict:
     """Write ``OUT/replay.json``, the facts of a replay, and return them.
 
     Parameters
@@ -103,6 +103,9 @@ def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
     installation : list of str
         What was taken from the bag's /tf_static, or found there unplaced
         (:func:`~ins_gnss_ros.trial.profile.profile_with_installation`).
+    converted : list of str
+        The bag's topics read as another type
+        (:func:`~ins_gnss_ros.trial.inputs.conversion_notes`).
     """
     summary = {
         "input_bag": str(Path(bag_path).resolve()),
@@ -123,6 +126,7 @@ def write_summary(out, bag_path, profile, outages, windows, counts, mode, rate,
         "messages": counts.per_topic(),
         "unread_topics": list(unread),
         "installation": list(installation),
+        "converted": list(converted),
     }
     if faults is not None:
         summary["faults"] = faults
