@@ -110,7 +110,8 @@ PARAMS = (
     Param("wheel.delay_s", 0.0, "latency of wheel/odom: a reading stamped t is applied at "
           "t - delay (transport plus half the speed's averaging interval), s", 0.0, 2.0),
     Param("time_offset_sigma_s", 0.0,
-          "initial sigma of the IMU-GNSS time-offset state, s (0: no state)", 0.0, 1.0),
+          "initial sigma of the IMU-GNSS time-offset state, s (0: no state, unless gnss/* "
+          "come stamped on their arrival: then 0.2, nav/aiding.py Aiding.arrival)", 0.0, 1.0),
     Param("nonholonomic_sigma_mps", [0.0, 0.0],
           "wheeled-vehicle constraint noise (lateral, vertical), m/s; 0: learned or off "
           "(nonholonomic.learn)", 0.0, 10.0, length=2),
