@@ -41,7 +41,8 @@ def test_default_profile_loads_as_pyyaml_reads_it():
 
 
 def test_plain_data_is_returned_unchanged():
-    text = "a: 1\nb: [1.5, -2, 3.0e+2]\nc: {d: text, e: true, f: null}\nanchor: &x [1, 2]\nuse: *x\n"
+    text = ("a: 1\nb: [1.5, -2, 3.0e+2]\nc: {d: text, e: true, f: null}\nanchor: &x [1, 2]\n"
+            "use: *x\n")
     assert load_yaml(text) == yaml.safe_load(text)
 
 
@@ -51,7 +52,8 @@ def test_numbers_are_read_as_ros_reads_a_params_file():
     it stays text, and a number parameter refuses it by name."""
     data = load_yaml("a: 6e-3\nb: [1e5, -2.5E-1, .5e1]\nc: '6e-3'\nd: e5\ne: 12\n")
     assert data == {"a": 6e-3, "b": [1e5, -0.25, 5.0], "c": "6e-3", "d": "e5", "e": 12}
-    with pytest.raises(ParameterError, match="'noise.accel_white' = '6e-3': '6e-3' is not a number"):
+    with pytest.raises(ParameterError,
+                       match="'noise.accel_white' = '6e-3': '6e-3' is not a number"):
         resolve(PARAMS, {"noise.accel_white": data["c"]})
     with pytest.raises(ParameterError, match="'use_heading' = 1: 1 is not a bool"):
         resolve(PARAMS, {"use_heading": 1})
