@@ -70,10 +70,12 @@ def parse_remap(rules) -> dict[str, str]:
     return remap
 
 
-def _names(bag_path, remap) -> dict[str, str]:
-    """The bag's topics -> the absolute names the graph sees them under."""
+def _topics(bag_path, remap) -> dict[str, tuple[str, str]]:
+    """The bag's topics -> (the absolute name the graph sees it under, the bag's type), from one
+    reading of its metadata."""
     remap = remap or {}
-    return {t: remap.get(bagio.resolve(t), bagio.resolve(t)) for t in bagio.bag_topics(bag_path)}
+    return {t: (remap.get(bagio.resolve(t), bagio.resolve(t)), msgtype)
+            for t, msgtype in bagio.bag_topics(bag_path).items()}
 
 
 def bag_rows(bag_path, keep: Callable[[str], bool], remap=None) -> Iterator:
@@ -94,8 +96,8 @@ def bag_rows(bag_path, keep: Callable[[str], bool], remap=None) -> Iterator:
         Streamed in stamp order (ties in writing order), each under its absolute topic name,
         of the type the graph takes on it (:data:`CONVERSIONS`).
     """
-    names = _names(bag_path, remap)
-    listed = [t for t, name in names.items() if keep(name)]
+    topics = _topics(bag_path, remap)
+    listed = [t for t, (name, _) in topics.items() if keep(name)]
     if not listed:
         return iter(())
     if all(t.startswith("/") for t in listed):
@@ -104,10 +106,9 @@ def bag_rows(bag_path, keep: Callable[[str], bool], remap=None) -> Iterator:
         # The reader selects topics by absolute name only: read every row and pick them here.
         selected = set(listed)
         rows = (row for row in bagio.iter_raw(bag_path) if row.topic in selected)
-    if any(t != names[t] for t in listed):
-        rows = (row._replace(topic=names[row.topic]) for row in rows)
-    if any((names[t], msgtype) in CONVERSIONS for t, msgtype in bagio.bag_topics(bag_path).items()
-           if t in listed):
+    if any(t != topics[t][0] for t in listed):
+        rows = (row._replace(topic=topics[row.topic][0]) for row in rows)
+    if any(topics[t] in CONVERSIONS for t in listed):
         rows = (_converted(row, bag_path) for row in rows)
     return rows
 
@@ -131,9 +132,9 @@ def input_rows(bag_path, remap=None) -> Iterator:
 def input_count(bag_path, remap=None) -> int:
     """How many messages :func:`input_rows` gives at most (metadata.yaml's counts: a progress
     bar's total)."""
-    names = _names(bag_path, remap)
+    topics = _topics(bag_path, remap)
     return sum(n for topic, n in bagio.bag_message_counts(bag_path).items()
-               if not names[topic].startswith(TRUTH_PREFIX))
+               if not topics[topic][0].startswith(TRUTH_PREFIX))
 
 
 def read_inputs(bag_path, remap=None, payloads: bool = False) -> list:
@@ -172,19 +173,17 @@ def read_inputs(bag_path, remap=None, payloads: bool = False) -> list:
 
 def conversion_notes(bag_path, remap=None) -> list[str]:
     """One line per bag topic read as another type (:data:`CONVERSIONS`)."""
-    names = _names(bag_path, remap)
-    return [f"{topic} ({msgtype}) read as {CONVERSIONS[(names[topic], msgtype)][0]} without "
-            "a covariance: the ekf assumes one"
-            for topic, msgtype in bagio.bag_topics(bag_path).items()
-            if (names[topic], msgtype) in CONVERSIONS]
+    return [f"{topic} ({msgtype}) read as {CONVERSIONS[(name, msgtype)][0]} without a "
+            "covariance: the ekf assumes one"
+            for topic, (name, msgtype) in _topics(bag_path, remap).items()
+            if (name, msgtype) in CONVERSIONS]
 
 
 def input_types(bag_path, remap=None) -> dict[str, str]:
     """{absolute topic (after ``remap``): type name} of the bag's topics a graph may see."""
-    names = _names(bag_path, remap)
-    return {names[topic]: CONVERSIONS.get((names[topic], msgtype), (msgtype,))[0]
-            for topic, msgtype in bagio.bag_topics(bag_path).items()
-            if not names[topic].startswith(TRUTH_PREFIX)}
+    return {name: CONVERSIONS.get((name, msgtype), (msgtype,))[0]
+            for name, msgtype in _topics(bag_path, remap).values()
+            if not name.startswith(TRUTH_PREFIX)}
 
 
 def payload_types(bag_path, remap=None) -> dict[str, str]:
@@ -238,7 +237,9 @@ def check_inputs(bag_path, inputs: Mapping[str, str | None], remap=None,
     InputTopicsError
         One line listing the bag's topics, the inputs and the remappings that would feed them.
     """
-    names, types = _names(bag_path, remap), bagio.bag_topics(bag_path)
+    topics = _topics(bag_path, remap)
+    names = {topic: name for topic, (name, _) in topics.items()}
+    types = {topic: msgtype for topic, (_, msgtype) in topics.items()}
     lacking = sorted(topic for topic, msgtype in inputs.items()
                      if msgtype is not None and topic not in published
                      and topic not in names.values() and topic not in FRAME_TOPICS)
