@@ -144,6 +144,13 @@ def orientation_headings_from_params(p: dict, c_bs) -> tuple[OrientationHeadings
         float("nan") if p["orientation_heading.reference"] == "magnetic" else None)
 
 
+def mounting_given(p: dict) -> bool:
+    """Whether parameters (a profile's section or the node's) give the IMU's mounting: a
+    non-zero ``mounting_rpy_deg`` or a ``calibration_file`` (which may hold it). Zero stands
+    for "not known", which /tf_static may then tell (trial/installation.py, the node)."""
+    return any(p.get("mounting_rpy_deg", ())) or bool(p.get("calibration_file"))
+
+
 def calibration_from_params(p: dict) -> ImuCalibration:
     """ImuCalibration from the file or the inline parameters; ParameterError names the cause."""
     source = "calibration.*"

@@ -32,8 +32,8 @@ from ins_gnss_msgs.msg import Heading, ImuDelta, InsCorrection
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 from tf2_msgs.msg import TFMessage
 
-from ..imu.preprocessor_params import PARAMS, orientation_headings_from_params, \
-    preprocessor_from_params
+from ..imu.preprocessor_params import PARAMS, mounting_given, \
+    orientation_headings_from_params, preprocessor_from_params
 from ..io import NS, codec, field_reader, field_writer, new, ns_to_stamp, set_stamp_ns, \
     stamp_or_arrival, stamp_to_ns
 from ..nav.frame_tree import FrameTree, mounting_rpy_deg
@@ -114,8 +114,7 @@ class ImuPreprocessorNode(NavNode):
         self._frames_settled = True
         p, base = self.p, self._frame_id
         frame = self._decode_raw(raw).header.frame_id.lstrip("/")
-        if frame and frame != base and not any(p["mounting_rpy_deg"]) \
-                and not p["calibration_file"]:
+        if frame and frame != base and not mounting_given(p):
             pose = self.frames.pose_in(base, frame)
             if pose is None:
                 self.diag.set_value("mounting", f"[0, 0, 0] deg: /tf_static does not place "

@@ -141,6 +141,7 @@ def profile_with_installation(profile: Profile, bag_path, path=None,
     imu_preprocessor with a ``calibration_file`` keeps that file's mounting), written to
     ``path`` if given and anything was taken (the nodes read a params file); and what was
     taken, kept or not found, as lines."""
+    from ins_gnss_ros.imu.preprocessor_params import mounting_given
     from ins_gnss_ros.trial.installation import installation
 
     base = profile.sections.get("imu_preprocessor", {}).get("frame_id", "base_link")
@@ -150,9 +151,8 @@ def profile_with_installation(profile: Profile, bag_path, path=None,
         section = sections.get(node)
         if section is None or param not in found and param not in unplaced:
             continue
-        given = section.get(param)
-        kept = given is not None and any(given) or (param == "mounting_rpy_deg"
-                                                    and bool(section.get("calibration_file")))
+        kept = mounting_given(section) if param == "mounting_rpy_deg" \
+            else any(section.get(param, ()))
         if param in unplaced:
             if not kept:
                 notes.append(f"{node} {param} left at zero: the bag's /tf_static does not place "
