@@ -47,7 +47,9 @@ def _params(**over) -> list[Parameter]:
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
-def _imu_msg(t_ns: int, gyro, accel):
+def _imu_msg(t_ns: int, gyro, accel, frame_id="base_link"):
+    """A raw sample; in base_link's axes unless ``frame_id`` names another frame (whose
+    mounting the node takes from the parameters or /tf_static)."""
     from sensor_msgs.msg import Imu
 
     from ins_gnss_ros.nodes.convert import to_vector3
@@ -55,7 +57,7 @@ def _imu_msg(t_ns: int, gyro, accel):
 
     msg = Imu(angular_velocity=to_vector3(gyro), linear_acceleration=to_vector3(accel))
     msg.header.stamp = ns_to_stamp(t_ns)
-    msg.header.frame_id = "imu_link"
+    msg.header.frame_id = frame_id
     return msg
 
 
@@ -77,8 +79,8 @@ class _Graph:
         self.bus.publish(topic, msg)
         self.bus.drain()
 
-    def imu(self, t_ns, gyro, accel):
-        self.send("imu/data_raw", _imu_msg(t_ns, gyro, accel))
+    def imu(self, t_ns, gyro, accel, frame_id="base_link"):
+        self.send("imu/data_raw", _imu_msg(t_ns, gyro, accel, frame_id))
 
     def close(self):
         self.node.destroy_node()
@@ -611,27 +613,35 @@ def test_jittered_driver_stamps_are_replaced_by_the_sensor_clock(graph, enabled)
         assert abs(err).max() > 5e-4 and dt.std() > 5e-4
 
 
-@pytest.mark.parametrize("placed", [False, True])
-def test_a_urdf_s_mounting_is_taken_and_its_frame_not_published_twice(graph, placed):
+@pytest.mark.parametrize("urdf_at", [None, 0, 20])
+def test_a_urdf_s_mounting_is_taken_and_its_frame_not_published_twice(graph, urdf_at):
     """An IMU upside down in its frame imu_link, which a URDF places in base_link (rolled 180
-    deg) on /tf_static before the first sample: with no mounting given, the node takes that
-    pose (gravity up in base_link) and does not publish its own imu_link transform, which
-    would conflict with the URDF's. Without the URDF: the axes as they come (gravity down), and
-    its own transform published."""
+    deg) on /tf_static before the first sample (``urdf_at`` 0) or after the first 20 (0.1 s:
+    DDS matched the URDF's publisher after the IMU's): with no mounting given, the node takes
+    that pose for every sample (gravity up in base_link; the early ones waited and none is
+    lost) and does not publish its own imu_link transform, which would conflict with the
+    URDF's. Without a URDF (None): the samples wait TF_WAIT_S for one, then go on in the axes
+    as they come (gravity down), with its own transform published."""
     from ins_gnss_ros.io import ns_to_stamp
+    from ins_gnss_ros.nodes.imu_preprocessor_node import TF_WAIT_S
     from ins_gnss_ros.nodes.tf_messages import static_tf
 
     g = graph()
-    if placed:
-        g.send("/tf_static", static_tf(ns_to_stamp(T0_NS), "base_link", [
-            ("imu_link", (0.0, 0.0, 0.1), dcm_from_euler(np.pi, 0.0, 0.0))]))
-    for k in range(100):
+    n = int(2 * TF_WAIT_S * NS / DT_NS)
+    for k in range(n):
+        if k == urdf_at:
+            g.send("/tf_static", static_tf(ns_to_stamp(T0_NS), "base_link", [
+                ("imu_link", (0.0, 0.0, 0.1), dcm_from_euler(np.pi, 0.0, 0.0))]))
         g.bus.now_ns = T0_NS + (k + 1) * DT_NS
-        g.imu(T0_NS + (k + 1) * DT_NS, np.zeros(3), -G_UP)  # gravity along the sensor's -z
-    up = np.mean([d.delta_velocity.z for d in g.out["/imu/delta"]])
-    assert (up > 0.0) == placed
+        g.imu(T0_NS + (k + 1) * DT_NS, np.zeros(3), -G_UP, "imu_link")  # gravity along its -z
+        if k == 19:  # before the URDF comes, or within the wait for it: nothing yet
+            assert (len(g.out["/imu/delta"]) > 0) == (urdf_at == 0)
+    up = [d.delta_velocity.z for d in g.out["/imu/delta"]]
+    assert len(up) == n // 2  # none lost
+    assert all((u > 0.0) == (urdf_at is not None) for u in up)
     mounting = g.node.diag._values["mounting"]
-    assert mounting.startswith("[180.0, -0.0, 0.0] deg: /tf_static's pose of 'imu_link'"
-                               if placed else "[0, 0, 0] deg: /tf_static does not place")
+    assert mounting == ("[0, 0, 0] deg: /tf_static does not place imu/data_raw's frame "
+                        "'imu_link' in 'base_link' (waited 1 s)" if urdf_at is None else
+                        "[180.0, -0.0, 0.0] deg: /tf_static's pose of 'imu_link' in 'base_link'")
     assert (g.node.diag.counts["imu_link placed by another node's /tf_static: this node's "
-                               "transform not published"] == 1) == placed
+                               "transform not published"] == 1) == (urdf_at is not None)

@@ -14,7 +14,11 @@ The mounting is ``mounting_rpy_deg`` (or the calibration file's); where that is 
 first sample's ``header.frame_id`` in ``frame_id`` (REP-145: IMU data in the sensor's frame),
 that pose is the mounting. The node's own ``frame_id -> imu_frame`` transform is published
 unless another node places ``imu_frame``: two publishers of one static transform conflict.
-Both are decided at the first sample, with the transforms received by then.
+Both are decided at the first sample, with the transforms received by then; where that sample's
+frame is not yet placed, the samples (and the magnetometer's meanwhile) wait for its transform
+up to :data:`TF_WAIT_S` after the first one arrived and are then handled in order: a URDF's latched
+transform reaches a node started with it once DDS has matched the two, which an IMU's first
+sample may beat, and the mounting must not depend on that race.
 
 On DDS, with more than two samples an increment and nobody reading ``imu/data``, the samples
 before the one that completes an increment wait and are handled together shortly before it is
@@ -59,6 +63,11 @@ _EVENTS = {"clock_jump": "imu clock jump: stamps corrected by the arrival clock"
                               "one_sample used"}
 
 
+#: How long the first samples wait for /tf_static to place their frame (module doc), s of the
+#: arrival clock (the replays' log time): DDS discovery on one host takes 0.1-1 s; a frame no
+#: transform places by then gets no mounting, said on /diagnostics.
+TF_WAIT_S = 1.0
+
 #: A drift of the IMU's stamps against the arrival clock beyond this (and 3 sigma) is told as
 #: one: a crystal's error, 10-100 ms over ten minutes; NTP slews a host's clock by 500 ppm at
 #: most, and by far less once it has settled.
@@ -101,24 +110,41 @@ class ImuPreprocessorNode(NavNode):
         # Read until the first sample settles the mounting and our own transform.
         self.frames = FrameTree()
         self._frames_settled = False
+        self._raw_frame = None  # the first sample's header.frame_id
+        self._held = []  # (handler, its arguments) of what waits for its frame, in order
+        self._held_since_ns = 0  # the first held sample's arrival
         self.subscribe(TFMessage, "/tf_static", self.on_tf_static, TF_STATIC_READ_QOS)
 
     def on_tf_static(self, msg: TFMessage) -> None:
-        if not self._frames_settled:
-            self.frames.add_transforms(msg.transforms)
+        if self._frames_settled:
+            return
+        self.frames.add_transforms(msg.transforms)
+        if self._held and self.frames.pose_in(self._frame_id, self._raw_frame) is not None:
+            self._settle_frames()
 
-    def _settle_frames(self, raw: bytes, stamp_ns: int) -> None:
-        """At the first sample: the mounting from /tf_static where the parameters leave it at
-        zero, and this node's frame_id -> imu_frame transform unless another node places
-        imu_frame (module doc)."""
+    def _waits_for_frame(self, raw: bytes, arrival_ns: int) -> bool:
+        """Whether a sample before the frames settle waits for /tf_static (module doc)."""
+        if self._held:
+            return arrival_ns - self._held_since_ns < TF_WAIT_S * NS
+        frame = self._raw_frame = self._decode_raw(raw).header.frame_id.lstrip("/")
+        self._held_since_ns = arrival_ns
+        return bool(frame) and frame != self._frame_id and not mounting_given(self.p) \
+            and self.frames.pose_in(self._frame_id, frame) is None
+
+    def _settle_frames(self) -> None:
+        """At the first sample, or when its frame is placed or has waited TF_WAIT_S: the
+        mounting from /tf_static where the parameters leave it at zero, this node's frame_id ->
+        imu_frame transform unless another node places imu_frame (module doc); then what
+        waited."""
         self._frames_settled = True
-        p, base = self.p, self._frame_id
-        frame = self._decode_raw(raw).header.frame_id.lstrip("/")
+        p, base, frame = self.p, self._frame_id, self._raw_frame
         if frame and frame != base and not mounting_given(p):
             pose = self.frames.pose_in(base, frame)
             if pose is None:
+                waited = f" (waited {TF_WAIT_S:g} s)" if self._held else ""
                 self.diag.set_value("mounting", f"[0, 0, 0] deg: /tf_static does not place "
-                                                f"imu/data_raw's frame '{frame}' in '{base}'")
+                                                f"imu/data_raw's frame '{frame}' in '{base}'"
+                                                + waited)
             else:
                 rpy = mounting_rpy_deg(pose[0])
                 self.preprocessor = preprocessor_from_params({**p, "mounting_rpy_deg": rpy})
@@ -126,14 +152,13 @@ class ImuPreprocessorNode(NavNode):
                     p, self.preprocessor.calibration.c_bs)
                 self.diag.set_value("mounting", f"{rpy} deg: /tf_static's pose of '{frame}' "
                                                 f"in '{base}'")
-        if self.pub_tf_static is None:
-            return
-        if self.frames.places(p["imu_frame"]):
+        if self.pub_tf_static is not None and self.frames.places(p["imu_frame"]):
             self.pub_tf_static = None
             self.diag.count(f"{p['imu_frame']} placed by another node's /tf_static: this "
                             "node's transform not published")
-        else:
-            self.publish_static_tf(ns_to_stamp(stamp_ns))
+        held, self._held = self._held, []
+        for handle, args in held:
+            handle(*args)
 
     def publish_static_tf(self, stamp) -> None:
         """frame_id -> imu_frame (the mounting; the IMU is base_link's origin) on /tf_static,
@@ -156,7 +181,17 @@ class ImuPreprocessorNode(NavNode):
         if unset:
             self.diag.count(unset)
         if not self._frames_settled:
-            self._settle_frames(raw, stamp_ns)
+            if self._waits_for_frame(raw, arrival_ns):
+                self._held.append((self._handle_sample, (stamp_ns, arrival_ns, gyro, accel,
+                                                         raw)))
+                return
+            self._settle_frames()
+        self._handle_sample(stamp_ns, arrival_ns, gyro, accel, raw)
+
+    def _handle_sample(self, stamp_ns: int, arrival_ns: int, gyro: tuple, accel: tuple,
+                       raw: bytes) -> None:
+        if self.pub_tf_static is not None:
+            self.publish_static_tf(ns_to_stamp(stamp_ns))
         for out in self.preprocessor.add(stamp_ns, arrival_ns, gyro, accel, raw):
             if out.events:
                 self._report(out.events)
@@ -267,6 +302,12 @@ class ImuPreprocessorNode(NavNode):
     # -- magnetometer --------------------------------------------------------------------------
     def on_mag(self, msg: MagneticField) -> None:
         self.stamp_unset_to_arrival(msg.header, "imu/mag_raw")
+        if self._held:  # rotated by the mounting the IMU's samples wait for
+            self._held.append((self._handle_mag, (msg,)))
+            return
+        self._handle_mag(msg)
+
+    def _handle_mag(self, msg: MagneticField) -> None:
         out = self.preprocessor.add_magnetic(stamp_to_ns(msg.header.stamp),
                                              vec(msg.magnetic_field))
         if isinstance(out, str):
