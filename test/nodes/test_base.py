@@ -156,6 +156,39 @@ def test_on_the_bus_a_queued_subscription_is_handled_as_it_comes(ros_context):
     node.destroy_node()
 
 
+def test_a_latest_subscription_once_stopped_receives_nothing(executor, probe, ros_context):
+    """A node that needs a stream only for a while (the ekf: one raw IMU sample's frame) stops
+    its subscription: on DDS it is gone (the publisher no longer delivers to it, its process
+    is no longer woken), on the bus nothing more is kept."""
+    from ins_gnss_msgs.msg import InsState
+
+    from ins_gnss_ros.nodes.base import SENSOR_QOS, InProcessBus
+
+    node = _Counting(context=ros_context)
+    executor.add_node(node)
+    latest = node.subscribe_latest(InsState, "base_test/latest", SENSOR_QOS, None)
+    pub = probe.create_publisher(InsState, "base_test/latest", SENSOR_QOS)
+    spin_until(executor, lambda: pub.get_subscription_count() > 0, what="the subscription")
+    pub.publish(InsState(correction_sequence=1))
+    spin_until(executor, lambda: latest.waiting, what="the state")
+    assert latest.take().correction_sequence == 1
+    latest.stop()
+    spin_until(executor, lambda: pub.get_subscription_count() == 0, what="the subscription gone")
+    pub.publish(InsState(correction_sequence=2))
+    assert latest.take() is None and not latest.waiting
+
+    bus = InProcessBus()
+    on_bus = _Counting(context=ros_context, bus=bus)
+    latest = on_bus.subscribe_latest(InsState, "state", SENSOR_QOS, None)
+    bus.publish("state", InsState(correction_sequence=1))
+    bus.drain()
+    latest.stop()
+    bus.publish("state", InsState(correction_sequence=2))
+    bus.drain()
+    assert latest.take() is None
+    on_bus.destroy_node()
+
+
 def test_a_paced_subscription_handles_what_came_while_it_rested(executor, probe, ros_context):
     import time
 

@@ -487,3 +487,67 @@ def test_diagnostics_say_when_the_antenna_lever_arm_is_assumed(ros_context):
     assert "GNSS antenna lever arm" not in measured.diag._values
     assumed.destroy_node()
     measured.destroy_node()
+
+
+def test_a_lever_arm_not_given_is_taken_from_a_urdf_until_the_filter_starts(trial, ros_context):
+    """lever_arm left at zero, a URDF on /tf_static placing the IMU's frame (imu_link, off
+    base_link's origin) and the receiver's (gps): the ekf takes the antenna's place less the
+    IMU's as the lever arm before the filter starts (also when the URDF comes after the first
+    fix), says so, and places its own gnss_0 there; once the filter runs, a moved transform
+    changes nothing."""
+    from sensor_msgs.msg import Imu
+    from tf2_msgs.msg import TFMessage
+
+    from ins_gnss_ros.nodes.ekf_node import EkfNode
+    from ins_gnss_ros.nodes.tf_messages import static_tf
+
+    traj, imu, gnss = trial
+    imu_at = np.array([0.2, -0.1, 0.3])
+    bus = InProcessBus()
+    ekf = EkfNode(context=ros_context, bus=bus, parameter_overrides=[
+        Parameter("lever_arm_sigma_m", value=[0.0, 0.0, 0.0])])
+    static: list[TFMessage] = []
+    bus.subscribe("/tf_static", static.append)
+
+    def urdf(antenna):
+        return static_tf(sec_to_stamp(T0), "base_link", [
+            ("imu_link", imu_at, np.eye(3)), ("gps", imu_at + antenna, np.eye(3))])
+
+    raw = Imu()
+    raw.header.frame_id = "imu_link"
+    bus.publish("imu/data_raw", raw)
+    g = 0
+    for k in range(int(round(30.0 / imu.dt))):
+        while g < len(gnss) and gnss[g][0] <= imu.t[k]:
+            tg, lat, lon, h, v, npos, nvel = gnss[g]
+            fix = _fix_msg(tg, lat, lon, h, npos)
+            fix.header.frame_id = "gps"
+            bus.publish("gnss/fix", fix)
+            bus.publish("gnss/vel", _vel_msg(tg, v, nvel))
+            bus.drain()
+            if g == 3:  # the URDF after the first fixes, before the start
+                assert not ekf.navigator.started and not ekf.navigator.lever_arm_b.any()
+                bus.publish("/tf_static", urdf(LEVER))
+            g += 1
+        delta = ImuDelta(dt=float(imu.dt))
+        delta.header.stamp = sec_to_stamp(T0 + imu.t[k])
+        delta.delta_angle, delta.delta_velocity = to_vector3(imu.dtheta[k]), to_vector3(imu.dv[k])
+        bus.publish("imu/delta", delta)
+        bus.drain()
+    assert ekf.navigator.started
+    np.testing.assert_allclose(ekf.navigator.lever_arm_b, LEVER, atol=1e-12)
+    assert ekf.diag._values["GNSS antenna lever arm"] == (
+        f"{LEVER.tolist()} m FLU: /tf_static's place of 'gps' less the IMU's 'imu_link' in "
+        "'base_link'")
+    gnss_0 = [tf.transform.translation for m in static for tf in m.transforms
+              if tf.child_frame_id == "gnss_0"]
+    assert [gnss_0[-1].x, gnss_0[-1].y, gnss_0[-1].z] == pytest.approx(LEVER.tolist())
+    bus.publish("/tf_static", urdf(2.0 * LEVER))
+    fix = _fix_msg(*gnss[g][:4], np.zeros(3))
+    fix.header.frame_id = "gps"
+    bus.publish("gnss/fix", fix)
+    bus.drain()
+    np.testing.assert_allclose(ekf.navigator.lever_arm_b, LEVER, atol=1e-12)
+    with pytest.raises(RuntimeError, match="the filter has started"):
+        ekf.navigator.set_lever_arm(2.0 * LEVER)
+    ekf.destroy_node()

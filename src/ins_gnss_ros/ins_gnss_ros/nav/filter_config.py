@@ -37,7 +37,8 @@ PARAMS = (
           "grade's)", 0.0, 10.0),
     Param("noise.accel_bias_walk", 0.0, "accelerometer bias random walk, m/s^2/sqrt(s) (0: the "
           "grade's)", 0.0, 10.0),
-    Param("lever_arm", [0.0, 0.0, 0.0], "GNSS antenna position in base_link (FLU), m",
+    Param("lever_arm", [0.0, 0.0, 0.0], "GNSS antenna position in base_link (FLU), m; all zero: "
+          "not known (the ekf node then takes it from /tf_static, before its filter starts)",
           -100.0, 100.0, length=3),
     Param("lever_arm_sigma_m", [0.0, 0.0, 0.0],
           "uncertainty of lever_arm per axis (FLU), m, carried in the covariance and never "

@@ -171,6 +171,20 @@ class Navigator:
         self._recorder = Recorder(self._space, self.config.record,
                                   self.config.store_covariance)  # (nothing recorded before)
 
+    def set_lever_arm(self, lever_arm_b):
+        """Place the GNSS antenna (relative to the IMU, base_link FLU, m) before the filter
+        starts: the ekf node's from a URDF's /tf_static, which may come after the node.
+
+        Raises
+        ------
+        RuntimeError
+            Once the filter has started: it has taken fixes of the antenna where it was.
+        """
+        if self.started:
+            raise RuntimeError("the filter has started: the lever arm cannot change")
+        self.config = replace(self.config, lever_arm_b=np.array(lever_arm_b, float))
+        self._lever = self.config.lever_arm_b
+
     def note_imu_rates_wrong(self, wrong):
         """Whether the turns show the IMU's rates in other units or of the wrong sign (the
         front end's imu_timing.ImuTimingCheck): while they do the solution is degraded

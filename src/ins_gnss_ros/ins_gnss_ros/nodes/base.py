@@ -209,12 +209,19 @@ class InProcessBus:
                             f"{msgtype_of_class(known)} is")
 
     def subscribe(self, topic: str, callback: Callable[[Any], None],
-                  form: str = OBJECT, msg_type=None) -> None:
+                  form: str = OBJECT, msg_type=None) -> Callable[[], None]:
         """``callback`` takes the topic's messages in ``form``; ``msg_type``, if given, is the
-        class it takes (:meth:`advertise` refuses another)."""
+        class it takes (:meth:`advertise` refuses another). Returns what ends the
+        subscription."""
         if msg_type is not None:
             self.advertise(topic, msg_type)
-        self._subscribers[self.resolve(topic)].append((callback, form))
+        topic, entry = self.resolve(topic), (callback, form)
+        self._subscribers[topic].append(entry)
+        return partial(self._unsubscribe, topic, entry)
+
+    def _unsubscribe(self, topic: str, entry: tuple) -> None:
+        # a new list: a delivery under way goes on over the one it has
+        self._subscribers[topic] = [e for e in self._subscribers[topic] if e is not entry]
 
     def publish(self, topic: str, msg: Any, recorded: bool = True) -> None:
         """Queue ``msg`` (an object, or the payload of the type advertised on ``topic``);
@@ -291,17 +298,27 @@ class Latest:
     """
 
     def __init__(self, msg_type, handler,
-                 subscribe: Callable[[], Callable[[], Any]] | None = None):
+                 subscribe: Callable[[], tuple[Callable[[], Any], Callable[[], None]]]
+                 | None = None):
         self._codec, self._handler = codec(msg_type), handler
-        self._subscribe = subscribe  # makes the DDS subscription, returns its take_newest
+        # makes the DDS subscription, returns its take_newest and what ends it
+        self._subscribe = subscribe
         self._take_newest = None
         self._pending = None
+        self.unsubscribe: Callable[[], None] | None = None  # ends the subscription (stop)
 
     def start(self) -> None:
         """Subscribe on DDS, if not yet (:meth:`NavNode.subscribe_latest` with ``start``
         false): what was published before is not received."""
         if self._subscribe is not None:
-            self._take_newest, self._subscribe = self._subscribe(), None
+            (self._take_newest, self.unsubscribe), self._subscribe = self._subscribe(), None
+
+    def stop(self) -> None:
+        """Receive no more: for a node that needs the stream only for a while (an
+        undispatched subscription still wakes its process for every message)."""
+        if self.unsubscribe is not None:
+            self.unsubscribe()
+        self.unsubscribe = self._subscribe = self._take_newest = self._pending = None
 
     def put(self, data) -> None:
         self._pending = data
@@ -575,7 +592,8 @@ class NavNode(Node):
         replay then reads as it always did), each message kept as it was published."""
         if self.bus is not None:
             latest = Latest(msg_type, handler)
-            self.bus.subscribe(topic, latest.put, InProcessBus.AS_PUBLISHED, msg_type)
+            latest.unsubscribe = self.bus.subscribe(topic, latest.put,
+                                                    InProcessBus.AS_PUBLISHED, msg_type)
             return latest
         latest = Latest(msg_type, handler,
                         partial(self._undispatched_take, msg_type, topic, qos, 1, "taken"))
@@ -598,16 +616,17 @@ class NavNode(Node):
             self.subscribe(msg_type, topic, handler, qos, serialized)
             return Queued(handler)
         queued = Queued(self._taking(msg_type, handler, serialized),
-                        self._undispatched_take(msg_type, topic, qos, qos.depth, "received"))
+                        self._undispatched_take(msg_type, topic, qos, qos.depth, "received")[0])
         self.diag.before_publish.append(queued.handle)
         return queued
 
     def _undispatched_take(self, msg_type, topic: str, qos, depth: int, counted_as: str):
         """``take()``: the oldest message not taken yet of a subscription (``depth``, ``qos``
         otherwise) of :meth:`_undispatched_node`, serialized, or None; counted in
-        ``diag.traffic["<counted_as> <topic>"]``."""
+        ``diag.traffic["<counted_as> <topic>"]``; and what ends the subscription."""
         name = self.resolve_topic_name(topic)  # this node's namespace and remappings
-        sub = self._undispatched_node().create_subscription(
+        node = self._undispatched_node()
+        sub = node.create_subscription(
             msg_type, name, lambda _: None,
             QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=qos.reliability,
                        durability=qos.durability), raw=True)
@@ -618,7 +637,7 @@ class NavNode(Node):
             if taken is not None:
                 traffic[key] += 1
             return taken
-        return take
+        return take, partial(node.destroy_subscription, sub)
 
     def _undispatched_node(self) -> Node:
         """The hidden node (``_<name>_latest``: ``ros2 node list`` omits it) that holds the

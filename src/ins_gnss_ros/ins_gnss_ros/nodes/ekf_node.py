@@ -33,7 +33,10 @@ correction made after it (``StrapdownSync.mode``): the outputs agree about when 
 aligned, and nav/status says NAVIGATING with the first such ins/state.
 
 Inputs are translated by :class:`.ekf_inputs.EkfInputs`, as the offline replay translates
-them. Services (``~/reset``, ``~/set_pose``, ``~/set_datum``, ``~/to_ll``, ``~/from_ll``):
+them. Where ``lever_arm`` is zero (not known), ``/tf_static`` places the antenna until the filter
+starts: the place of ``gnss/fix``'s frame in base_link less that of the IMU's (``imu/data_raw``'s
+frame, read off one raw sample; base_link's origin where nothing places it), as the replays take
+it from a recording (trial/installation.py); /diagnostics ``GNSS antenna lever arm`` says so. Services (``~/reset``, ``~/set_pose``, ``~/set_datum``, ``~/to_ll``, ``~/from_ll``):
 :class:`.ekf_services.EkfServices`.
 
 Integrity: a measurement kind rejected at the gate for 2 s is forced in with its innovation
@@ -65,11 +68,12 @@ from ..nav import ALIGNING, NAVIGATING, Navigator
 from ..nav.aiding import Aiding, AidingPolicy, velocity_latency_summary
 from ..nav.error_model import LAYOUTS
 from ..nav.filter_config import PARAMS, navigator_config
+from ..nav.frame_tree import FrameTree
 from ..nav.odom_frame import OdomTrack
 from ..nav.strapdown import NavState
 from ..nav.strapdown_sync import StrapdownSync
 from .base import DRIVER_QOS, LATCHED_QOS, SENSOR_QOS, STATE_QOS, TF_QOS, TF_STATIC_QOS, \
-    NavNode, ParameterError, run
+    TF_STATIC_READ_QOS, NavNode, ParameterError, run
 from .convert import MODE_VALUES, increment_of, nav_state_from_msg, sensor_errors_of, set_vector3
 from .ekf_inputs import EkfInputs
 from .ekf_services import EkfServices
@@ -99,6 +103,12 @@ class EkfNode(EkfServices, NavNode):
             self.diag.set_value("GNSS antenna lever arm", (
                 f"{list(p['lever_arm'])} m FLU, not measured: within +-"
                 f"{list(p['lever_arm_sigma_m'])} m assumed (lever_arm, lever_arm_sigma_m)"))
+        # A lever arm not given is read off /tf_static until the filter starts (module doc).
+        self.frames = self.raw_imu = self.imu_frame = None
+        if not any(p["lever_arm"]):
+            self.frames = FrameTree()
+            self.subscribe(TFMessage, "/tf_static", self.on_tf_static, TF_STATIC_READ_QOS)
+            self.raw_imu = self.subscribe_latest(Imu, "imu/data_raw", DRIVER_QOS, None)
         # the turn check's verdict and what each biased heading source's readings carry
         # (nav/heading_noise.py), at each /diagnostics publication
         self.diag.before_publish.append(lambda: self.diag.set_value(
@@ -136,6 +146,7 @@ class EkfNode(EkfServices, NavNode):
         self.odom = (p["odom_frame"], OdomTrack()) if p["use_wheel_odometry"] else None
         self.pub_tf_static = self.publisher(TFMessage, "/tf_static", TF_STATIC_QOS) \
             if p["publish_tf"] else None
+        self.static_tf_stamp = None  # the first increment's, once published
         self.register_services()
         self.subscribe(ImuDelta, "imu/delta", self.on_delta, SENSOR_QOS, serialized=True)
         # Every state is kept for the synchronisation, but none is needed before the filter's
@@ -152,8 +163,9 @@ class EkfNode(EkfServices, NavNode):
     def on_delta(self, data: bytes) -> None:
         self.ins_states.handle()
         inc = increment_of(data)
-        if self.pub_tf_static is not None:
-            self.publish_static_tf(ns_to_stamp(inc.t_ns))
+        if self.static_tf_stamp is None and self.pub_tf_static is not None:
+            self.static_tf_stamp = ns_to_stamp(inc.t_ns)
+            self.publish_static_tf()
         if inc.problem is not None:
             self.diag.count(inc.problem)
             return
@@ -168,6 +180,8 @@ class EkfNode(EkfServices, NavNode):
         self.ins_states.handle()
         self.aiding.arrival(topic, stamp_to_ns(msg.header.stamp), self.transport_arrival_ns())
         self.stamp_unset_to_arrival(msg.header, topic)
+        if self.frames is not None and topic == "gnss/fix":
+            self.place_antenna(msg.header.frame_id.lstrip("/"))
         if handler(msg):
             self.note_datum(msg.header.stamp)  # a first fix sets the datum
             self.after_filter()
@@ -190,6 +204,40 @@ class EkfNode(EkfServices, NavNode):
         if t - self.last_status_t >= 1.0 or (self.sync.alignment_applied and not was_applied):
             self.publish_status(t, [])
 
+    def on_tf_static(self, msg: TFMessage) -> None:
+        if self.frames is not None:
+            self.frames.add_transforms(msg.transforms)
+
+    def place_antenna(self, frame: str) -> None:
+        """The lever arm from /tf_static before the filter starts: ``frame`` (a fix's) in
+        base_link less the IMU's frame there (module doc)."""
+        if self.navigator.started:  # the antenna stays where the filter started
+            self.frames = None
+            self.raw_imu.stop()
+            return
+        if self.imu_frame is None:
+            raw = self.raw_imu.take()
+            if raw is None:
+                return
+            self.imu_frame = raw.header.frame_id.lstrip("/")
+            self.raw_imu.stop()
+        base = self.p["base_link_frame"]
+        antenna = self.frames.pose_in(base, frame) if frame and frame != base else None
+        if antenna is None:
+            return
+        imu = self.frames.pose_in(base, self.imu_frame) if self.imu_frame else None
+        lever = antenna[1] - (np.zeros(3) if imu is None else imu[1])
+        if np.array_equal(lever, self.navigator.lever_arm_b):
+            return
+        self.navigator.set_lever_arm(lever)
+        sigma = self.p["lever_arm_sigma_m"]
+        self.diag.set_value("GNSS antenna lever arm", (
+            f"{np.round(lever, 4).tolist()} m FLU: /tf_static's place of '{frame}' less the "
+            f"IMU's '{self.imu_frame}' in '{base}'") + (
+            f", within +-{list(sigma)} m assumed (lever_arm_sigma_m)" if any(sigma) else ""))
+        if self.static_tf_stamp is not None:
+            self.publish_static_tf()  # the newest of a frame's static transforms holds
+
     def _report_heading_noise(self) -> None:
         for source, noise in self.aiding.heading_noise.items():
             self.diag.set_value(f"{source} error correlation", noise.summary())
@@ -210,12 +258,11 @@ class EkfNode(EkfServices, NavNode):
         self.diag.set_value("datum", f"{np.degrees(datum[0]):.9f} deg, "
                                      f"{np.degrees(datum[1]):.9f} deg, {datum[2]:.3f} m")
 
-    def publish_static_tf(self, stamp) -> None:
-        """base_link -> gnss_0 (the antenna lever arm) on /tf_static, once, stamped with the
-        first increment."""
-        pub, self.pub_tf_static = self.pub_tf_static, None
-        pub.publish(static_tf(stamp, self.p["base_link_frame"], [
-            (self.p["gnss_frame"], self.p["lever_arm"], np.eye(3))]))
+    def publish_static_tf(self) -> None:
+        """base_link -> gnss_0 (the antenna lever arm) on /tf_static, stamped with the first
+        increment."""
+        self.pub_tf_static.publish(static_tf(self.static_tf_stamp, self.p["base_link_frame"], [
+            (self.p["gnss_frame"], self.navigator.lever_arm_b, np.eye(3))]))
 
     def after_filter(self) -> None:
         nav = self.navigator
