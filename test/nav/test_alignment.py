@@ -209,6 +209,31 @@ def test_levelled_start_and_yaw_rotation():
     assert P2[space["att"].stop - 1, space["att"].stop - 1] == pytest.approx(0.02 ** 2)
 
 
+def test_the_start_couples_the_imus_place_to_an_uncertain_lever_arm():
+    """The IMU starts at the first fix less C l: with the lever arm uncertain (consider blocks,
+    true minus configured), its position errs by the start's own error plus C dl, so the
+    start's covariance of (position, lever arm) is that of (e + C dl, dl)."""
+    from ins_gnss_ros.nav.ekf import ExtraState, StateSpace
+    from ins_gnss_ros.nav.error_model import make_layout
+
+    noise = se.filter_noise(se.MEMS_ADIS16405, "rw")
+    space = StateSpace(make_layout("15", noise), {
+        "lever_x": ExtraState(1, 0.3, consider=True), "lever_z": ExtraState(1, 1.0, consider=True)})
+    q = quat_from_euler(0.1, -0.2, 0.7)
+    P = al.initial_covariance(space, noise, 0.5, 0.1, 0.02)
+    al.couple_start_to_lever_arm(P, space, q)
+    C = quat_to_dcm(q)
+    # (e, dl_x, dl_z) independent, position error e + C[:, 0] dl_x + C[:, 2] dl_z
+    A = np.hstack([np.eye(3), C[:, [0]], C[:, [2]]])
+    expected = A @ np.diag([0.25, 0.25, 0.25, 0.09, 1.0]) @ A.T
+    pos, x, z = space["pos"], space["lever_x"].start, space["lever_z"].start
+    np.testing.assert_allclose(P[pos, pos], expected, atol=1e-15)
+    np.testing.assert_allclose(P[pos, x], 0.09 * C[:, 0], atol=1e-15)
+    np.testing.assert_allclose(P[pos, z], C[:, 2], atol=1e-15)
+    np.testing.assert_array_equal(P, P.T)
+    assert np.linalg.eigvalsh(P).min() > -1e-12
+
+
 def test_yaw_rotation_correlates_the_turned_velocity_and_distance_with_the_yaw():
     """An INS that ran from rest with its yaw off by a: turning it by a + eps (a slightly
     wrong alignment) leaves velocity and position errors that the covariance predicts from

@@ -31,9 +31,10 @@ import numpy as np
 from . import _kernels
 from . import measurements as meas
 from . import modes
-from .alignment import Levelling, course_error_gain, fixes_with_course, initial_covariance, \
-    levelled_state, restart_velocity, rotate_yaw, take_static_gyro_bias, without_cross_track, \
-    yaw_error_from_course, yaw_error_from_heading, yaw_error_from_motion
+from .alignment import Levelling, couple_start_to_lever_arm, course_error_gain, \
+    fixes_with_course, initial_covariance, levelled_state, restart_velocity, rotate_yaw, \
+    take_static_gyro_bias, without_cross_track, yaw_error_from_course, yaw_error_from_heading, \
+    yaw_error_from_motion
 from .earth import WGS84
 from .ekf import LEVER_ARM_EXTRAS, ErrorStateEKF, StateSpace
 from .error_model import make_layout
@@ -469,9 +470,10 @@ class Navigator:
             if at_rest or epoch - s.t_still <= REST_HOLD:
                 take_static_gyro_bias(s.levelling, self._space, cfg.noise, P0, s.estimates)
             s.pinned_antenna = (m.lat, m.lon, m.h)
-            self._start(levelled_state(s.levelling, m.lat, m.lon, m.h, self._lever,
-                                       0.0 if at_rest else s.gnss_speed,
-                                       float(buf.time(k - 1))), P0)
+            nav = levelled_state(s.levelling, m.lat, m.lon, m.h, self._lever,
+                                 0.0 if at_rest else s.gnss_speed, float(buf.time(k - 1)))
+            couple_start_to_lever_arm(P0, self._space, nav.q_nb)
+            self._start(nav, P0)
         if s.nav is None and not self._pending and len(buf):
             # Without a measurement to start on, keep only the samples of the last `history`
             # (at least `level_time`) seconds: the first fix is levelled on the samples before
