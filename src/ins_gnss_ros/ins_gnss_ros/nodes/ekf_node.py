@@ -33,11 +33,12 @@ correction made after it (``StrapdownSync.mode``): the outputs agree about when 
 aligned, and nav/status says NAVIGATING with the first such ins/state.
 
 Inputs are translated by :class:`.ekf_inputs.EkfInputs`, as the offline replay translates
-them. Where ``lever_arm`` is zero (not known), ``/tf_static`` places the antenna until the filter
-starts: the place of ``gnss/fix``'s frame in base_link less that of the IMU's (``imu/data_raw``'s
-frame, read off one raw sample; base_link's origin where nothing places it), as the replays take
-it from a recording (trial/installation.py); /diagnostics ``GNSS antenna lever arm`` says so. Services (``~/reset``, ``~/set_pose``, ``~/set_datum``, ``~/to_ll``, ``~/from_ll``):
-:class:`.ekf_services.EkfServices`.
+them. Where ``lever_arm`` is zero (not known), ``/tf_static`` places the antenna until the
+filter starts: the place of ``gnss/fix``'s frame in base_link less that of the IMU's
+(``imu/data_raw``'s frame, read off one raw sample; base_link's origin where nothing places
+it), as the replays take it from a recording (trial/installation.py); /diagnostics ``GNSS
+antenna lever arm`` says so. Services (``~/reset``, ``~/set_pose``, ``~/set_datum``,
+``~/to_ll``, ``~/from_ll``): :class:`.ekf_services.EkfServices`.
 
 Integrity: a measurement kind rejected at the gate for 2 s is forced in with its innovation
 admitted on both sides (the navigator's integrity logic); until the noise floor this leaves decays

@@ -16,9 +16,9 @@ that pose is the mounting. The node's own ``frame_id -> imu_frame`` transform is
 unless another node places ``imu_frame``: two publishers of one static transform conflict.
 Both are decided at the first sample, with the transforms received by then; where that sample's
 frame is not yet placed, the samples (and the magnetometer's meanwhile) wait for its transform
-up to :data:`TF_WAIT_S` after the first one arrived and are then handled in order: a URDF's latched
-transform reaches a node started with it once DDS has matched the two, which an IMU's first
-sample may beat, and the mounting must not depend on that race.
+up to :data:`TF_WAIT_S` after the first one arrived and are then handled in order: a URDF's
+latched transform reaches a node started with it once DDS has matched the two, which an IMU's
+first sample may beat, and the mounting must not depend on that race.
 
 On DDS, with more than two samples an increment and nobody reading ``imu/data``, the samples
 before the one that completes an increment wait and are handled together shortly before it is
