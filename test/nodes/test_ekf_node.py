@@ -481,20 +481,22 @@ def test_diagnostics_say_when_the_antenna_lever_arm_is_assumed(ros_context):
         Parameter("lever_arm_sigma_m", value=[0.2, 0.2, 1.0])])
     measured = EkfNode(context=ros_context, bus=InProcessBus(), parameter_overrides=_ekf_params())
     assert assumed.diag._values["GNSS antenna lever arm"] == (
-        "[0.0, 0.0, 0.0] m FLU, not measured: within +-[0.2, 0.2, 1.0] m assumed (lever_arm, "
-        "lever_arm_sigma_m)")
+        "[0.0, 0.0, 0.0] m FLU, not measured; within +-[0.2, 0.2, 1.0] m assumed "
+        "(lever_arm_sigma_m)")
     assert {"lever_x", "lever_y", "lever_z"} <= set(assumed.navigator.config.extras)
     assert "GNSS antenna lever arm" not in measured.diag._values
     assumed.destroy_node()
     measured.destroy_node()
 
 
-def test_a_lever_arm_not_given_is_taken_from_a_urdf_until_the_filter_starts(trial, ros_context):
+@pytest.mark.parametrize("urdf", [True, False])
+def test_a_lever_arm_not_given_is_taken_from_a_urdf_until_the_filter_starts(trial, ros_context,
+                                                                            urdf):
     """lever_arm left at zero, a URDF on /tf_static placing the IMU's frame (imu_link, off
     base_link's origin) and the receiver's (gps): the ekf takes the antenna's place less the
     IMU's as the lever arm before the filter starts (also when the URDF comes after the first
     fix), says so, and places its own gnss_0 there; once the filter runs, a moved transform
-    changes nothing."""
+    changes nothing. Without a URDF it says that nothing placed the fixes' frame."""
     from sensor_msgs.msg import Imu
     from tf2_msgs.msg import TFMessage
 
@@ -509,9 +511,14 @@ def test_a_lever_arm_not_given_is_taken_from_a_urdf_until_the_filter_starts(tria
     static: list[TFMessage] = []
     bus.subscribe("/tf_static", static.append)
 
-    def urdf(antenna):
+    def urdf_msg(antenna):
         return static_tf(sec_to_stamp(T0), "base_link", [
             ("imu_link", imu_at, np.eye(3)), ("gps", imu_at + antenna, np.eye(3))])
+
+    def fix_msg(tg, lat, lon, h, noise):
+        fix = _fix_msg(tg, lat, lon, h, noise)
+        fix.header.frame_id = "gps"
+        return fix
 
     raw = Imu()
     raw.header.frame_id = "imu_link"
@@ -520,14 +527,12 @@ def test_a_lever_arm_not_given_is_taken_from_a_urdf_until_the_filter_starts(tria
     for k in range(int(round(30.0 / imu.dt))):
         while g < len(gnss) and gnss[g][0] <= imu.t[k]:
             tg, lat, lon, h, v, npos, nvel = gnss[g]
-            fix = _fix_msg(tg, lat, lon, h, npos)
-            fix.header.frame_id = "gps"
-            bus.publish("gnss/fix", fix)
+            bus.publish("gnss/fix", fix_msg(tg, lat, lon, h, npos))
             bus.publish("gnss/vel", _vel_msg(tg, v, nvel))
             bus.drain()
-            if g == 3:  # the URDF after the first fixes, before the start
+            if g == 3 and urdf:  # the URDF after the first fixes, before the start
                 assert not ekf.navigator.started and not ekf.navigator.lever_arm_b.any()
-                bus.publish("/tf_static", urdf(LEVER))
+                bus.publish("/tf_static", urdf_msg(LEVER))
             g += 1
         delta = ImuDelta(dt=float(imu.dt))
         delta.header.stamp = sec_to_stamp(T0 + imu.t[k])
@@ -535,19 +540,19 @@ def test_a_lever_arm_not_given_is_taken_from_a_urdf_until_the_filter_starts(tria
         bus.publish("imu/delta", delta)
         bus.drain()
     assert ekf.navigator.started
-    np.testing.assert_allclose(ekf.navigator.lever_arm_b, LEVER, atol=1e-12)
+    placed = LEVER if urdf else np.zeros(3)
+    np.testing.assert_allclose(ekf.navigator.lever_arm_b, placed, atol=1e-12)
     assert ekf.diag._values["GNSS antenna lever arm"] == (
-        f"{LEVER.tolist()} m FLU: /tf_static's place of 'gps' less the IMU's 'imu_link' in "
-        "'base_link'")
+        f"{LEVER.tolist()} m FLU, /tf_static's place of 'gps' less the IMU's 'imu_link' in "
+        "'base_link'" if urdf else "[0.0, 0.0, 0.0] m FLU, not measured: /tf_static does not "
+        "place gnss/fix's frame 'gps' in 'base_link'")
     gnss_0 = [tf.transform.translation for m in static for tf in m.transforms
               if tf.child_frame_id == "gnss_0"]
-    assert [gnss_0[-1].x, gnss_0[-1].y, gnss_0[-1].z] == pytest.approx(LEVER.tolist())
-    bus.publish("/tf_static", urdf(2.0 * LEVER))
-    fix = _fix_msg(*gnss[g][:4], np.zeros(3))
-    fix.header.frame_id = "gps"
-    bus.publish("gnss/fix", fix)
+    assert [gnss_0[-1].x, gnss_0[-1].y, gnss_0[-1].z] == pytest.approx(placed.tolist())
+    bus.publish("/tf_static", urdf_msg(2.0 * LEVER))
+    bus.publish("gnss/fix", fix_msg(*gnss[g][:4], np.zeros(3)))
     bus.drain()
-    np.testing.assert_allclose(ekf.navigator.lever_arm_b, LEVER, atol=1e-12)
+    np.testing.assert_allclose(ekf.navigator.lever_arm_b, placed, atol=1e-12)
     with pytest.raises(RuntimeError, match="the filter has started"):
         ekf.navigator.set_lever_arm(2.0 * LEVER)
     ekf.destroy_node()

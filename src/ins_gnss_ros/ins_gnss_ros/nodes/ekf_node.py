@@ -101,9 +101,7 @@ class EkfNode(EkfServices, NavNode):
         self.aiding = Aiding(self.navigator, AidingPolicy.from_params(p), self.diag.count)
         self.inputs = EkfInputs(self.aiding, p, self.diag.count)
         if any(p["lever_arm_sigma_m"]):  # what is missing from the installation, said once
-            self.diag.set_value("GNSS antenna lever arm", (
-                f"{list(p['lever_arm'])} m FLU, not measured: within +-"
-                f"{list(p['lever_arm_sigma_m'])} m assumed (lever_arm, lever_arm_sigma_m)"))
+            self.report_lever_arm("not measured")
         # A lever arm not given is read off /tf_static until the filter starts (module doc).
         self.frames = self.raw_imu = self.imu_frame = None
         if not any(p["lever_arm"]):
@@ -212,7 +210,11 @@ class EkfNode(EkfServices, NavNode):
     def place_antenna(self, frame: str) -> None:
         """The lever arm from /tf_static before the filter starts: ``frame`` (a fix's) in
         base_link less the IMU's frame there (module doc)."""
+        base = self.p["base_link_frame"]
         if self.navigator.started:  # the antenna stays where the filter started
+            if frame and frame != base and not self.navigator.lever_arm_b.any():
+                self.report_lever_arm(f"not measured: /tf_static does not place gnss/fix's "
+                                      f"frame '{frame}' in '{base}'")
             self.frames = None
             self.raw_imu.stop()
             return
@@ -222,7 +224,6 @@ class EkfNode(EkfServices, NavNode):
                 return
             self.imu_frame = raw.header.frame_id.lstrip("/")
             self.raw_imu.stop()
-        base = self.p["base_link_frame"]
         antenna = self.frames.pose_in(base, frame) if frame and frame != base else None
         if antenna is None:
             return
@@ -231,13 +232,18 @@ class EkfNode(EkfServices, NavNode):
         if np.array_equal(lever, self.navigator.lever_arm_b):
             return
         self.navigator.set_lever_arm(lever)
-        sigma = self.p["lever_arm_sigma_m"]
-        self.diag.set_value("GNSS antenna lever arm", (
-            f"{np.round(lever, 4).tolist()} m FLU: /tf_static's place of '{frame}' less the "
-            f"IMU's '{self.imu_frame}' in '{base}'") + (
-            f", within +-{list(sigma)} m assumed (lever_arm_sigma_m)" if any(sigma) else ""))
+        self.report_lever_arm(f"/tf_static's place of '{frame}' less the IMU's "
+                              f"'{self.imu_frame}' in '{base}'")
         if self.static_tf_stamp is not None:
             self.publish_static_tf()  # the newest of a frame's static transforms holds
+
+    def report_lever_arm(self, source: str) -> None:
+        """/diagnostics ``GNSS antenna lever arm``: the one in use, where it comes from, and
+        the uncertainty carried for it (lever_arm_sigma_m)."""
+        sigma = self.p["lever_arm_sigma_m"]
+        self.diag.set_value("GNSS antenna lever arm", (
+            f"{np.round(self.navigator.lever_arm_b, 4).tolist()} m FLU, {source}") + (
+            f"; within +-{list(sigma)} m assumed (lever_arm_sigma_m)" if any(sigma) else ""))
 
     def _report_heading_noise(self) -> None:
         for source, noise in self.aiding.heading_noise.items():
