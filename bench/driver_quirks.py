@@ -13,7 +13,10 @@ Quirks:
 * ``imu_mounted_tf``: ``imu/data_raw`` in the axes of an IMU mounted rolled 180 deg and yawed
   90 deg in base_link (``MOUNTING_RPY_DEG``: z down, x to the left), and the installation on
   ``/tf_static`` as a URDF gives it (REP-145): base_link -> imu_link (that rotation) and
-  base_link -> gnss (the simulated antenna's place).
+  base_link -> gnss (the simulated antenna's place);
+* ``installation_tf``: the data as simulated (the IMU in base_link's axes) with that
+  installation on ``/tf_static`` (imu_link unrotated): a recording whose URDF gives the
+  antenna's place.
 
 The log times stay as they were (the messages' arrival). A NaN altitude (a 2-D fix) is a fault:
 ``{kind: nan, topic: /gnss/fix, field: altitude}``.
@@ -32,9 +35,10 @@ import argparse
 import numpy as np
 
 from ins_gnss_ros import io
-from ins_gnss_ros.nav.rotations import dcm_from_euler, dcm_to_quat
+from ins_gnss_ros.nav.rotations import dcm_from_euler
 
-QUIRKS = ("imu_stamps_unset", "gnss_stamps_unset", "imu_frd", "gnss_vel_twist", "imu_mounted_tf")
+QUIRKS = ("imu_stamps_unset", "gnss_stamps_unset", "imu_frd", "gnss_vel_twist", "imu_mounted_tf",
+          "installation_tf")
 #: The IMU's mounting of ``imu_mounted_tf``: roll, pitch, yaw in base_link, deg.
 MOUNTING_RPY_DEG = (180.0, 0.0, 90.0)
 
@@ -61,26 +65,15 @@ def rewrite(msg, topic: str, quirk: str):
     return msg
 
 
-def installation_tf(stamp, imu_frame: str, gnss_frame: str):
-    """The /tf_static of ``imu_mounted_tf``: base_link -> imu_frame (the mounting) and
-    base_link -> gnss_frame (the simulated antenna's lever arm)."""
-    from geometry_msgs.msg import TransformStamped
-    from tf2_msgs.msg import TFMessage
-
+def installation_tf(stamp, imu_frame: str, gnss_frame: str, mounting_rpy_deg):
+    """The /tf_static of a URDF: base_link -> imu_frame (the mounting, deg) and base_link ->
+    gnss_frame (the simulated antenna's lever arm)."""
+    from ins_gnss_ros.nodes.tf_messages import static_tf
     from ins_gnss_ros.trial.simulate import SimOptions
 
-    q = dcm_to_quat(dcm_from_euler(*np.radians(MOUNTING_RPY_DEG)))
-    msg = TFMessage()
-    for child, rotation, translation in ((imu_frame, q, (0.0, 0.0, 0.0)),
-                                         (gnss_frame, (1.0, 0.0, 0.0, 0.0),
-                                          SimOptions.antenna_lever_arm)):
-        tf = TransformStamped()
-        tf.header.stamp, tf.header.frame_id, tf.child_frame_id = stamp, "base_link", child
-        r, t = tf.transform.rotation, tf.transform.translation
-        r.w, r.x, r.y, r.z = (float(x) for x in rotation)
-        t.x, t.y, t.z = (float(x) for x in translation)
-        msg.transforms.append(tf)
-    return msg
+    return static_tf(stamp, "base_link", [
+        (imu_frame, (0.0, 0.0, 0.0), dcm_from_euler(*np.radians(mounting_rpy_deg))),
+        (gnss_frame, SimOptions.antenna_lever_arm, np.eye(3))])
 
 
 def main(argv=None) -> int:
@@ -92,13 +85,15 @@ def main(argv=None) -> int:
     frames = {}
     with io.BagWriter(args.out) as out:
         for m in io.iter_bag(args.bag):
-            if args.quirk == "imu_mounted_tf" and m.topic in ("/imu/data_raw", "/gnss/fix") \
+            if args.quirk.endswith("_tf") and m.topic in ("/imu/data_raw", "/gnss/fix") \
                     and m.topic not in frames:
                 frames[m.topic] = m.msg.header.frame_id
                 if len(frames) == 2:  # (logged with the first messages, as a recorder does)
+                    mounting = MOUNTING_RPY_DEG if args.quirk == "imu_mounted_tf" else (0, 0, 0)
                     out.write("/tf_static", installation_tf(m.msg.header.stamp,
                                                             frames["/imu/data_raw"],
-                                                            frames["/gnss/fix"]), m.t_ns)
+                                                            frames["/gnss/fix"], mounting),
+                              m.t_ns)
             out.write(m.topic, rewrite(m.msg, m.topic, args.quirk), m.t_ns)
     return 0
 
