@@ -40,3 +40,18 @@ def test_a_pose_is_composed_through_the_tree_either_way():
     np.testing.assert_allclose(t_self, 0.0)
     assert tree.pose_in("base_link", "odom_child") is None and not tree.places("nothing")
     assert mounting_rpy_deg(C) == pytest.approx([180.0, 0.0, 90.0], abs=1e-9)
+
+
+def test_the_lever_arm_is_the_antennas_place_less_the_imus():
+    """In base_link axes, through a rotated mount; the IMU at base_link's origin where its
+    frame is not placed; none for an antenna frame not placed or base_link's own."""
+    tree = FrameTree()
+    tree.add_transforms([transform("base_link", "mount", (0.0, 0.0, np.pi / 2), (1.0, 0.0, 0.5)),
+                         transform("mount", "gps", (0.0, 0.0, 0.0), (0.2, 0.0, 0.3)),
+                         transform("base_link", "imu_link", (np.pi, 0.0, 0.0), (0.1, 0.1, 0.0))])
+    np.testing.assert_allclose(tree.lever_arm("base_link", "gps", "imu_link"), [0.9, 0.1, 0.8],
+                               atol=1e-12)
+    np.testing.assert_allclose(tree.lever_arm("base_link", "gps", "unplaced"), [1.0, 0.2, 0.8],
+                               atol=1e-12)
+    assert tree.lever_arm("base_link", "unplaced", "imu_link") is None
+    assert tree.lever_arm("base_link", "base_link", "imu_link") is None

@@ -3,8 +3,8 @@ between named frames, and the pose of one frame in another through it.
 
 A robot's URDF (through robot_state_publisher) or a static_transform_publisher places each
 sensor frame on the vehicle; REP-145 keeps IMU data in the sensor's frame, so its mounting in
-base_link is such a pose. Used by the imu_preprocessor node (the mounting of a live IMU) and the
-replays (trial/installation.py).
+base_link is such a pose. Used by the imu_preprocessor node (the mounting of a live IMU), the
+ekf node (the antenna's lever arm) and the replays (trial/installation.py).
 """
 from __future__ import annotations
 
@@ -47,6 +47,20 @@ class FrameTree:
                 C_nc, t_nc = ups[name]
                 return C_nf.T @ C_nc, C_nf.T @ (t_nc - t_nf)
         return None
+
+    def lever_arm(self, base: str, antenna: str, imu: str):
+        """The place of frame ``antenna`` in ``base`` less that of frame ``imu`` (``base``'s
+        origin where the IMU's frame is empty, ``base`` or not placed): the GNSS lever arm of
+        this project's base_link, which has the IMU at its origin (the imu_preprocessor rotates
+        into base_link, it does not translate). None where ``antenna`` is empty, ``base`` or not
+        placed."""
+        if not antenna or antenna == base:
+            return None
+        pose = self.pose_in(base, antenna)
+        if pose is None:
+            return None
+        imu_pose = self.pose_in(base, imu) if imu else None
+        return pose[1] if imu_pose is None else pose[1] - imu_pose[1]
 
     def _to_root(self, name: str) -> list:
         """[(frame, C_frame_name, name's origin in frame)] from name up to its root."""

@@ -224,12 +224,8 @@ class EkfNode(EkfServices, NavNode):
                 return
             self.imu_frame = raw.header.frame_id.lstrip("/")
             self.raw_imu.stop()
-        antenna = self.frames.pose_in(base, frame) if frame and frame != base else None
-        if antenna is None:
-            return
-        imu = self.frames.pose_in(base, self.imu_frame) if self.imu_frame else None
-        lever = antenna[1] - (np.zeros(3) if imu is None else imu[1])
-        if np.array_equal(lever, self.navigator.lever_arm_b):
+        lever = self.frames.lever_arm(base, frame, self.imu_frame)
+        if lever is None or np.array_equal(lever, self.navigator.lever_arm_b):
             return
         self.navigator.set_lever_arm(lever)
         self.report_lever_arm(f"/tf_static's place of '{frame}' less the IMU's "

@@ -111,6 +111,7 @@ class ImuPreprocessorNode(NavNode):
         self.frames = FrameTree()
         self._frames_settled = False
         self._raw_frame = None  # the first sample's header.frame_id
+        self._first_stamp_ns = 0  # the first sample's stamp (our transform's)
         self._held = []  # (handler, its arguments) of what waits for its frame, in order
         self._held_since_ns = 0  # the first held sample's arrival
         self.subscribe(TFMessage, "/tf_static", self.on_tf_static, TF_STATIC_READ_QOS)
@@ -122,12 +123,12 @@ class ImuPreprocessorNode(NavNode):
         if self._held and self.frames.pose_in(self._frame_id, self._raw_frame) is not None:
             self._settle_frames()
 
-    def _waits_for_frame(self, raw: bytes, arrival_ns: int) -> bool:
+    def _waits_for_frame(self, raw: bytes, stamp_ns: int, arrival_ns: int) -> bool:
         """Whether a sample before the frames settle waits for /tf_static (module doc)."""
         if self._held:
             return arrival_ns - self._held_since_ns < TF_WAIT_S * NS
         frame = self._raw_frame = self._decode_raw(raw).header.frame_id.lstrip("/")
-        self._held_since_ns = arrival_ns
+        self._first_stamp_ns, self._held_since_ns = stamp_ns, arrival_ns
         return bool(frame) and frame != self._frame_id and not mounting_given(self.p) \
             and self.frames.pose_in(self._frame_id, frame) is None
 
@@ -156,6 +157,8 @@ class ImuPreprocessorNode(NavNode):
             self.pub_tf_static = None
             self.diag.count(f"{p['imu_frame']} placed by another node's /tf_static: this "
                             "node's transform not published")
+        elif self.pub_tf_static is not None:
+            self.publish_static_tf(ns_to_stamp(self._first_stamp_ns))
         held, self._held = self._held, []
         for handle, args in held:
             handle(*args)
@@ -181,7 +184,7 @@ class ImuPreprocessorNode(NavNode):
         if unset:
             self.diag.count(unset)
         if not self._frames_settled:
-            if self._waits_for_frame(raw, arrival_ns):
+            if self._waits_for_frame(raw, stamp_ns, arrival_ns):
                 self._held.append((self._handle_sample, (stamp_ns, arrival_ns, gyro, accel,
                                                          raw)))
                 return
@@ -190,8 +193,6 @@ class ImuPreprocessorNode(NavNode):
 
     def _handle_sample(self, stamp_ns: int, arrival_ns: int, gyro: tuple, accel: tuple,
                        raw: bytes) -> None:
-        if self.pub_tf_static is not None:
-            self.publish_static_tf(ns_to_stamp(stamp_ns))
         for out in self.preprocessor.add(stamp_ns, arrival_ns, gyro, accel, raw):
             if out.events:
                 self._report(out.events)

@@ -6,13 +6,10 @@ frame on the vehicle by a static transform (a URDF through robot_state_publisher
 static_transform_publisher); a receiver's fix names its antenna's frame likewise. A replay of
 such a recording with a profile that leaves the imu_preprocessor's ``mounting_rpy_deg`` or
 the ekf's ``lever_arm`` at zero takes them from there, and says so (a profile that gives them
-keeps its own: trial/profile.py, ``profile_with_installation``). This project's base_link
-has the IMU at its origin (the imu_preprocessor rotates into base_link, it does not
-translate), so the lever arm is the antenna's position minus the IMU's, in base_link axes.
+keeps its own: trial/profile.py, ``profile_with_installation``). The lever arm is the
+antenna's position less the IMU's (``FrameTree.lever_arm``), as the ekf node takes it live.
 """
 from __future__ import annotations
-
-import numpy as np
 
 from ins_gnss_ros.nav.frame_tree import FrameTree, mounting_rpy_deg
 from ins_gnss_ros.trial.inputs import iter_topic
@@ -36,20 +33,21 @@ def installation(bag_path, base_frame: str, remap=None) -> tuple[dict, dict]:
     are not ``base_frame``; and, by the same parameter names, the frames it does not place."""
     bag_topic = {to: source for source, to in (remap or {}).items()}
     tree = static_transforms(bag_path)
+    imu, fix = (_first_frame(bag_path, bag_topic.get(topic, topic))
+                for topic in (IMU_TOPIC, FIX_TOPIC))
     found, unplaced = {}, {}
-    imu_at = np.zeros(3)  # base_link's origin where the IMU frame is base_link's own
-    for topic, name in ((IMU_TOPIC, "mounting_rpy_deg"), (FIX_TOPIC, "lever_arm")):
-        frame = _first_frame(bag_path, bag_topic.get(topic, topic))
-        if not frame or frame == base_frame:
-            continue
-        pose = tree.pose_in(base_frame, frame)
+    if imu and imu != base_frame:
+        pose = tree.pose_in(base_frame, imu)
         if pose is None:
-            unplaced[name] = frame
-        elif topic == IMU_TOPIC:
-            imu_at = pose[1]
-            found[name] = mounting_rpy_deg(pose[0])
+            unplaced["mounting_rpy_deg"] = imu
         else:
-            found[name] = [round(float(x), 6) for x in pose[1] - imu_at]
+            found["mounting_rpy_deg"] = mounting_rpy_deg(pose[0])
+    if fix and fix != base_frame:
+        lever = tree.lever_arm(base_frame, fix, imu)
+        if lever is None:
+            unplaced["lever_arm"] = fix
+        else:
+            found["lever_arm"] = [round(float(x), 6) for x in lever]
     return found, unplaced
 
 
