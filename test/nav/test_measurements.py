@@ -114,6 +114,35 @@ def test_lever_arm_columns(kind):
     np.testing.assert_allclose(model(np.zeros(S.size)).H[:, cols], H_num[:, cols], atol=1e-5)
 
 
+def test_lever_attitude_second_order_term():
+    # The filter linearises at its estimate: the "lever_*" columns are -C of the estimated
+    # attitude, and the true C carries the lever arm's error as well. Over random attitude
+    # errors and errors of the configured lever arm the residual's remainder beyond that
+    # first-order model is the product -[phi x] C dl, whose covariance the fix's R gains
+    # (measurements._lever_attitude_variance).
+    S, rng = LEVER_SPACE, np.random.default_rng(7)
+    att, lever = S["att"], slice(S["lever_x"].start, S["lever_z"].stop)
+    P = np.eye(S.size) * 1e-8
+    P[att, att] = [[4e-4, 1e-4, 0.0], [1e-4, 2.5e-4, -5e-5], [0.0, -5e-5, 9e-4]]
+    P[lever, lever] = np.diag([0.3, 0.5, 1.0]) ** 2
+    dx = np.zeros((4000, S.size))
+    dx[:, att] = rng.multivariate_normal(np.zeros(3), P[att, att], len(dx))
+    dx[:, lever] = rng.multivariate_normal(np.zeros(3), P[lever, lever], len(dx))
+    remainder = []
+    for d in dx:
+        estimate = apply_correction(TRUE, np.zeros(3), np.zeros(3), -d[att])
+        meas = lever_arm_position(TRUE.lat, TRUE.lon, TRUE.h, TRUE.q_nb, LEVER + d[lever])
+        model = M.gnss_position(S, estimate, *meas, np.eye(3), LEVER, P=P)
+        remainder.append(model.z - model.H @ d)
+    exact = (TRUE.lat, TRUE.lon, TRUE.h, np.eye(3), LEVER)
+    # 4,000 samples: each (co)variance to a few per cent
+    np.testing.assert_allclose(np.cov(np.transpose(remainder)),
+                               M.gnss_position(S, TRUE, *exact, P=P).R - np.eye(3),
+                               rtol=0.1, atol=1e-5)
+    # without P: the first-order model's R
+    assert np.array_equal(M.gnss_position(S, TRUE, *exact).R, np.eye(3))
+
+
 @pytest.mark.parametrize("axis_yaw", [0.0, 0.7])
 def test_heading(axis_yaw):
     x = np.cos(axis_yaw), np.sin(axis_yaw), 0.0

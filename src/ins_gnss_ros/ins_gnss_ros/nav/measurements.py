@@ -84,7 +84,7 @@ def position_residual_enu(lat, lon, h, lat_ref, lon_ref, h_ref, ell=WGS84):
                                                ell.e2))
 
 
-def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=None):
+def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=None, P=None):
     """GNSS antenna position (loose coupling).
 
     Parameters
@@ -100,6 +100,9 @@ def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=
         Antenna relative to the IMU, FLU, m.
     dzdt : array_like, shape (3,), optional
         Antenna velocity ENU (m/s), for the time-offset state.
+    P : (n, n) array_like, optional
+        The filter's covariance: with "lever_*" blocks, R gains the second-order term of the
+        attitude error times the lever arm's error (:func:`_lever_attitude_variance`).
 
     Returns
     -------
@@ -115,9 +118,42 @@ def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=
                            np.ascontiguousarray(lever_b, dtype=float), lat, lon, h, WGS84.a,
                            WGS84.e2, z, H, space["pos"].start, space["att"].start)
     _add_time_offset(space, H, dzdt)
+    R = np.asarray(cov_enu, float)
     if any(name in space for name in LEVER_ARM_EXTRAS):
-        _add_lever_arm(space, H, quat_to_dcm(state.q_nb))
-    return Innovation("gnss_pos", z, H, np.asarray(cov_enu, float))
+        C = quat_to_dcm(state.q_nb)
+        _add_lever_arm(space, H, C)
+        if P is not None:
+            R = R + _lever_attitude_variance(space, np.asarray(P, float), C)
+    return Innovation("gnss_pos", z, H, R)
+
+
+#: skew(e_a) of the unit vectors: [phi x] = sum over a of phi_a _SKEW_BASIS[a].
+_SKEW_BASIS = np.array([skew(e) for e in _I3])
+
+
+def _lever_attitude_variance(space, P, C):
+    """Covariance of the antenna displacement -[phi x] C dl (m^2, ENU, 3 x 3) by the attitude
+    error phi and the error dl of the configured lever arm (its "lever_*" blocks) together.
+
+    The filter linearises at its estimate: the "lever_*" columns are -C of the estimated
+    attitude, and the attitude columns take the configured arm, while the antenna hangs on the
+    true attitude at the true arm; the difference is the product -[phi x] C dl of two errors,
+    which neither column holds. With phi and u = C dl independent and zero-mean its covariance
+    is the sum over a, b of P_phi[a, b] S_a U S_b^T (S_a = [e_a x], U = C P_ll C^T): the
+    second-order term of the Gaussian second-order filter for a bilinear measurement (Gelb
+    (ed.), "Applied Optimal Estimation", 1974, ch. 6; Maybeck, "Stochastic Models, Estimation
+    and Control", vol. 2, 1982, ch. 12). It matters where the arm is known to a metre only
+    (default.yaml's antenna height) and the fixes to centimetres: 1 m times a tilt error of 5
+    mrad is 5 mm. The product is as slow as the attitude error, which a variance cannot say
+    (docs/results/product_path.md, "2026-12-05 (session 27)").
+    """
+    lever = [(axis, space[name].start) for axis, name in enumerate(LEVER_ARM_EXTRAS)
+             if name in space]
+    axes, cols = [a for a, _ in lever], [j for _, j in lever]
+    Cl = C[:, axes]
+    U = Cl @ P[np.ix_(cols, cols)] @ Cl.T
+    att = space["att"]
+    return np.einsum("ab,aij,jk,blk->il", P[att, att], _SKEW_BASIS, U, _SKEW_BASIS)
 
 
 #: Physical range of the GNSS velocity's latency estimate ("vd" state), s: a receiver's velocity

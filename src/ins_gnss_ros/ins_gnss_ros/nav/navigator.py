@@ -593,7 +593,7 @@ class Navigator:
         self._fix_common_var = m.common_var
         v_ant = point_velocity(st.v_enu, st.q_nb, s.omega, self._lever, st.lat)
         innov = meas.gnss_position(self._space, st, m.lat, m.lon, m.h, m.cov_enu, self._lever,
-                                   dzdt=v_ant)
+                                   dzdt=v_ant, P=s.ekf.P)
         fix = (m.lat, m.lon, m.h)
         frozen = fix == s.last_fix and np.linalg.norm(v_ant) > self.config.frozen_speed
         s.last_fix = fix
