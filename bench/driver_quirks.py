@@ -41,6 +41,8 @@ QUIRKS = ("imu_stamps_unset", "gnss_stamps_unset", "imu_frd", "gnss_vel_twist", 
           "installation_tf")
 #: The IMU's mounting of ``imu_mounted_tf``: roll, pitch, yaw in base_link, deg.
 MOUNTING_RPY_DEG = (180.0, 0.0, 90.0)
+#: The quirks that add an installation on /tf_static: quirk -> the IMU's mounting there, deg.
+TF_QUIRKS = {"imu_mounted_tf": MOUNTING_RPY_DEG, "installation_tf": (0.0, 0.0, 0.0)}
 
 
 def rewrite(msg, topic: str, quirk: str):
@@ -85,15 +87,14 @@ def main(argv=None) -> int:
     frames = {}
     with io.BagWriter(args.out) as out:
         for m in io.iter_bag(args.bag):
-            if args.quirk.endswith("_tf") and m.topic in ("/imu/data_raw", "/gnss/fix") \
+            if args.quirk in TF_QUIRKS and m.topic in ("/imu/data_raw", "/gnss/fix") \
                     and m.topic not in frames:
                 frames[m.topic] = m.msg.header.frame_id
                 if len(frames) == 2:  # (logged with the first messages, as a recorder does)
-                    mounting = MOUNTING_RPY_DEG if args.quirk == "imu_mounted_tf" else (0, 0, 0)
                     out.write("/tf_static", installation_tf(m.msg.header.stamp,
                                                             frames["/imu/data_raw"],
-                                                            frames["/gnss/fix"], mounting),
-                              m.t_ns)
+                                                            frames["/gnss/fix"],
+                                                            TF_QUIRKS[args.quirk]), m.t_ns)
             out.write(m.topic, rewrite(m.msg, m.topic, args.quirk), m.t_ns)
     return 0
 

@@ -33,7 +33,6 @@ import numpy as np
 from .conventions import wrap_pi
 from .course import ACCELERATION_CHANGE, WINDOW_S
 from .earth import WGS84, normal_gravity
-from .ekf import LEVER_ARM_EXTRAS
 from .lever_arm import lever_arm_position, lever_arm_velocity
 from .measurements import Innovation, gnss_position, position_residual_enu
 from .propagation import extrapolate
@@ -373,12 +372,10 @@ def couple_start_to_lever_arm(P, space, q_nb):
     1.5 m above the IMU, default lever sigma 1 m: height error 1.07 m against a published
     0.42 m)."""
     C, pos = quat_to_dcm(q_nb), space["pos"]
-    for axis, name in enumerate(LEVER_ARM_EXTRAS):
-        if name in space:
-            j = space[name].start
-            column = C[:, axis] * P[j, j]
-            P[pos, j] = P[j, pos] = column
-            P[pos, pos] += np.outer(C[:, axis], column)
+    for axis, j in space.lever_arm:
+        column = C[:, axis] * P[j, j]
+        P[pos, j] = P[j, pos] = column
+        P[pos, pos] += np.outer(C[:, axis], column)
 
 
 def _yaw_of_x(q_nb):

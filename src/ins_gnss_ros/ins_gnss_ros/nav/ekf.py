@@ -109,6 +109,9 @@ class StateSpace:
         consider = [i for name, block in self.extras.items() if block.consider
                     for i in range(n)[slices[name]]]
         object.__setattr__(self, "_consider", np.array(consider, np.int64))
+        object.__setattr__(self, "_lever_arm", tuple(
+            (axis, slices[name].start) for axis, name in enumerate(LEVER_ARM_EXTRAS)
+            if name in slices))
 
     @property
     def slices(self):
@@ -129,6 +132,12 @@ class StateSpace:
     def consider(self):
         """Indices of the states of consider blocks (never estimated: ExtraState.consider)."""
         return self._consider
+
+    @property
+    def lever_arm(self):
+        """(FLU axis, state index) of each "lever_*" block there is (empty: the lever arm is
+        exact)."""
+        return self._lever_arm
 
     def __getitem__(self, name):
         return self._slices[name]

@@ -20,7 +20,6 @@ import numpy as np
 from . import _kernels
 from .conventions import azimuth_from_yaw, wrap_pi
 from .earth import WGS84, earth_rate_enu, ecef_to_enu_matrix, geodetic_to_ecef
-from .ekf import LEVER_ARM_EXTRAS
 from .lever_arm import lever_arm_position, lever_arm_velocity, lever_arm_velocity_jacobians
 from .rotations import cross, quat_to_dcm, skew
 from .vehicle_constraint import turned
@@ -62,9 +61,8 @@ def _add_time_offset(space, H, dzdt):
 def _add_lever_arm(space, H, dzdl):
     """Columns of the "lever_*" consider blocks: each is the true lever arm minus the
     configured one along its axis ("true minus estimate", ekf.py), so z moves by -dz/dl."""
-    for axis, name in enumerate(LEVER_ARM_EXTRAS):
-        if name in space:
-            H[:, space[name].start] = -dzdl[:, axis]
+    for axis, j in space.lever_arm:
+        H[:, j] = -dzdl[:, axis]
 
 
 def _gyro_columns(space, H, block):
@@ -119,7 +117,7 @@ def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=
                            WGS84.e2, z, H, space["pos"].start, space["att"].start)
     _add_time_offset(space, H, dzdt)
     R = np.asarray(cov_enu, float)
-    if any(name in space for name in LEVER_ARM_EXTRAS):
+    if space.lever_arm:
         C = quat_to_dcm(state.q_nb)
         _add_lever_arm(space, H, C)
         if P is not None:
@@ -147,9 +145,7 @@ def _lever_attitude_variance(space, P, C):
     mrad is 5 mm. The product is as slow as the attitude error, which a variance cannot say
     (docs/results/product_path.md, "2026-12-05 (session 27)").
     """
-    lever = [(axis, space[name].start) for axis, name in enumerate(LEVER_ARM_EXTRAS)
-             if name in space]
-    axes, cols = [a for a, _ in lever], [j for _, j in lever]
+    axes, cols = zip(*space.lever_arm)
     Cl = C[:, axes]
     U = Cl @ P[np.ix_(cols, cols)] @ Cl.T
     att = space["att"]
@@ -205,7 +201,7 @@ def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3),
     H[:, space["att"]] = d_att
     _gyro_columns(space, H, d_gyro)
     _add_time_offset(space, H, dzdt)
-    if any(name in space for name in LEVER_ARM_EXTRAS):  # d v_a/d l = C [w x] - [w_ie x] C
+    if space.lever_arm:  # d v_a/d l = C [w x] - [w_ie x] C
         C = quat_to_dcm(state.q_nb)
         rate = omega_ib_b if lever_rate is None else lever_rate
         _add_lever_arm(space, H, C @ skew(rate) - skew(earth_rate_enu(state.lat)) @ C)

@@ -36,7 +36,7 @@ from .alignment import Levelling, couple_start_to_lever_arm, course_error_gain, 
     take_static_gyro_bias, without_cross_track, yaw_error_from_course, yaw_error_from_heading, \
     yaw_error_from_motion
 from .earth import WGS84
-from .ekf import LEVER_ARM_EXTRAS, ErrorStateEKF, StateSpace
+from .ekf import ErrorStateEKF, StateSpace
 from .error_model import make_layout
 from .gating import rejected
 from .imu_buffer import ImuBuffer
@@ -147,8 +147,6 @@ class Navigator:
         self._nav_blocks = tuple(self._space[name].start for name in ("pos", "vel", "att"))
         self._no_var = np.zeros(self._space.size)  # (_published_var: read, never written)
         self._no_var.flags.writeable = False
-        # the GNSS velocity's lever-arm consider columns take a smoothed rate (measurements.py)
-        self._lever_columns = any(name in self._space for name in LEVER_ARM_EXTRAS)
 
     def add_extra_state(self, name, block):
         """Estimate one more extra block (``NavigatorConfig.extras``; an ExtraState) from the
@@ -507,7 +505,9 @@ class Navigator:
         track = self._recorder.sample_buffer(len(rows[0]))
         phi = propagate(s, rows, s.ekf.noise, cfg.cov_interval, self._gaps, self._space, track)
         self._recorder.samples(rows[0], track)
-        if self._lever_columns:
+        if self._space.lever_arm:
+            # the GNSS velocity's lever-arm consider columns take a smoothed rate
+            # (measurements.py)
             s.omega_smooth = s.omega_smooth - np.expm1(-s.omega_time / LEVER_RATE_TAU) * (
                 s.omega - s.omega_smooth)
         if at_rest:
