@@ -16,7 +16,12 @@ Quirks:
   base_link -> gnss (the simulated antenna's place);
 * ``installation_tf``: the data as simulated (the IMU in base_link's axes) with that
   installation on ``/tf_static`` (imu_link unrotated): a recording whose URDF gives the
-  antenna's place.
+  antenna's place;
+* ``imu_orientation_ned``: the IMU's own orientation (``trial simulate --imu-orientation``)
+  published as the sensor's NED/FRD one, the rates and specific force left in FLU (a driver
+  that converts the measurements to REP-145 but not the orientation);
+* ``imu_yaw_relative``: that orientation's yaw relative to the first sample's, its covariance
+  still small (a 6-axis unit's yaw, or a driver's, that REP-145 would mark unknown).
 
 The log times stay as they were (the messages' arrival). A NaN altitude (a 2-D fix) is a fault:
 ``{kind: nan, topic: /gnss/fix, field: altitude}``.
@@ -35,19 +40,22 @@ import argparse
 import numpy as np
 
 from ins_gnss_ros import io
-from ins_gnss_ros.nav.rotations import dcm_from_euler
+from ins_gnss_ros.nav.rotations import dcm_from_euler, dcm_to_quat, quat_to_dcm
 
 QUIRKS = ("imu_stamps_unset", "gnss_stamps_unset", "imu_frd", "gnss_vel_twist", "imu_mounted_tf",
-          "installation_tf")
+          "installation_tf", "imu_orientation_ned", "imu_yaw_relative")
 #: The IMU's mounting of ``imu_mounted_tf``: roll, pitch, yaw in base_link, deg.
 MOUNTING_RPY_DEG = (180.0, 0.0, 90.0)
 #: The quirks that add an installation on /tf_static: quirk -> the IMU's mounting there, deg.
 TF_QUIRKS = {"imu_mounted_tf": MOUNTING_RPY_DEG, "installation_tf": (0.0, 0.0, 0.0)}
+#: ENU -> NED and FLU -> FRD, as rotation matrices.
+ENU_TO_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+FLU_TO_FRD = np.diag([1.0, -1.0, -1.0])
 
 
-def rewrite(msg, topic: str, quirk: str):
+def rewrite(msg, topic: str, quirk: str, first: dict):
     """One decoded message of ``topic`` (absolute name) with ``quirk`` applied (in place, or
-    a message of another type)."""
+    a message of another type); ``first`` keeps what a quirk needs of the first messages."""
     if quirk == "gnss_vel_twist" and topic == "/gnss/vel":
         from geometry_msgs.msg import TwistStamped
 
@@ -64,6 +72,17 @@ def rewrite(msg, topic: str, quirk: str):
         c_sb = dcm_from_euler(*np.radians(MOUNTING_RPY_DEG)).T  # base_link -> the IMU's axes
         for v in (msg.angular_velocity, msg.linear_acceleration):
             v.x, v.y, v.z = (float(x) for x in c_sb @ [v.x, v.y, v.z])
+    elif quirk in ("imu_orientation_ned", "imu_yaw_relative") and topic == "/imu/data_raw":
+        if msg.orientation_covariance[0] < 0.0:
+            raise ValueError(f"{quirk} needs the IMU's own orientation (--imu-orientation)")
+        o = msg.orientation
+        c_ns = quat_to_dcm(np.array([o.w, o.x, o.y, o.z]))
+        if quirk == "imu_orientation_ned":
+            c_ns = ENU_TO_NED @ c_ns @ FLU_TO_FRD
+        else:
+            yaw0 = first.setdefault("yaw", np.arctan2(c_ns[1, 0], c_ns[0, 0]))
+            c_ns = dcm_from_euler(0.0, 0.0, -yaw0) @ c_ns
+        o.w, o.x, o.y, o.z = (float(x) for x in dcm_to_quat(c_ns))
     return msg
 
 
@@ -84,7 +103,7 @@ def main(argv=None) -> int:
     parser.add_argument("out")
     parser.add_argument("quirk", choices=QUIRKS)
     args = parser.parse_args(argv)
-    frames = {}
+    frames, first = {}, {}
     with io.BagWriter(args.out) as out:
         for m in io.iter_bag(args.bag):
             if args.quirk in TF_QUIRKS and m.topic in ("/imu/data_raw", "/gnss/fix") \
@@ -95,7 +114,7 @@ def main(argv=None) -> int:
                                                             frames["/imu/data_raw"],
                                                             frames["/gnss/fix"],
                                                             TF_QUIRKS[args.quirk]), m.t_ns)
-            out.write(m.topic, rewrite(m.msg, m.topic, args.quirk), m.t_ns)
+            out.write(m.topic, rewrite(m.msg, m.topic, args.quirk, first), m.t_ns)
     return 0
 
 

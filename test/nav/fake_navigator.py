@@ -10,10 +10,12 @@ class RecordingNavigator:
                              static_speed=0.1)
     started = True
     solution = None  # (levelled: the gyros' azimuth projects on body z)
+    heading_by = None  # (a heading the motion has confirmed, or none)
 
     def __init__(self, heading_known: bool = True):
         self.measurements, self.heading_known = [], heading_known
         self.imu_rates_wrong = False
+        self.refuted_headings = {}
 
     def add_measurement(self, m):
         self.measurements.append(m)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections import deque
 from dataclasses import dataclass
 from typing import Callable
 
@@ -26,12 +27,13 @@ from .alignment import course_is_known
 from .course import CourseFromFixes
 from .ekf import ExtraState
 from .heading_noise import HeadingNoise
+from .heading_turns import HeadingTurns
 from .imu_timing import ImuTimingCheck
 from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
 from .local_frame import to_map
 from .rotations import quat_to_dcm
-from .measurement_types import GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, Rest, \
-    SpeedLog, StillImu, WheelOdometry, ZeroVelocity
+from .measurement_types import GnssFix, GnssVelocity, HeadingFix, HeadingRefuted, \
+    PhaseDifferences, Rest, SpeedLog, StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .navigator import REST_HOLD, Navigator
 from .rest_detector import RestDetector
@@ -205,6 +207,9 @@ REST_DECISION_S = 10.0
 
 #: Heading inputs -> the extra block of their own bias (None: a true heading, no bias).
 HEADING_SOURCES = {"gnss/heading": None, "mag/heading": "mag", "imu/heading": "ahrs"}
+#: Heading readings kept waiting for the increments to reach their stamps (a lost IMU stops
+#: them): a second of a 50 Hz compass.
+AWAITING_GYROS = 64
 
 #: What the filter waits for while it has fixes but no heading (ALIGNING), without gnss/vel
 #: and with it (a vehicle standing behind a receiver with velocity waits for motion).
@@ -323,6 +328,12 @@ class Aiding:
         # row of C_nb of the solution at the latest reading
         self.heading_noise: dict[str, HeadingNoise] = {}
         self._gyro_azimuth: tuple[list, list] | None = None
+        # Whether each heading source turns with the gyros (nav/heading_turns.py), by source,
+        # against the same gyro azimuth
+        self.heading_turns: dict[str, HeadingTurns] = {}
+        # heading readings (source, stamp s, azimuth rad) waiting for the increments to reach
+        # their stamps (an AHRS's readings are stamped with the sample an increment ends on)
+        self._awaiting_gyros: deque = deque(maxlen=AWAITING_GYROS)
         self._up_row = (0.0, 0.0, 1.0)
 
     def arrival(self, name: str, stamp_ns: int, arrival_ns: int | None) -> None:
@@ -633,8 +644,10 @@ class Aiding:
     def _course_velocity(self, t: float, lat: float, lon: float, h: float,
                          cov: np.ndarray) -> None:
         """Without any gnss/vel and before the heading is known, successive fixes give the
-        velocity that aligns the heading (nav/course.py)."""
-        if self._has_velocity() or self.navigator.heading_known:
+        velocity that aligns the heading (nav/course.py), or checks one a heading source
+        aligned."""
+        nav = self.navigator
+        if self._has_velocity() or (nav.heading_known and nav.heading_by is None):
             self._course.clear()
             return
         velocity = self._course.add(t, lat, lon, h, cov)
@@ -697,34 +710,69 @@ class Aiding:
         if not (math.isfinite(azimuth) and math.isfinite(variance) and variance > 0.0):
             self.report(f"{source} without a finite azimuth, declination and variance rejected")
             return self._seen(source, t, False)
+        if self._against_gyros(source, t, float(azimuth)):
+            self.report(f"{source} refused: it turns against the gyros")
+            return self._seen(source, t, False)
+        refuted = self.navigator.refuted_headings.get(HEADING_SOURCES[source])
+        if refuted is not None:
+            self.report(f"{source} refused: its alignment {refuted}: not a heading of the body "
+                        "(a yaw relative to where it started, whose covariance should say so, "
+                        "REP-145?)")
+            return self._seen(source, t, False)
         if source == "gnss/heading" and self.policy.phase_differences and \
                 self.navigator.heading_known:
             self.report("gnss/heading not fused: its phase double differences are", log=False)
             return self._seen(source, t, False)
         if HEADING_SOURCES[source] is not None:
-            variance = self._correlated_variance(source, t, float(azimuth), float(variance))
+            variance = self._correlated_variance(source, t, float(variance))
         self.navigator.add_measurement(HeadingFix(t, float(azimuth), float(variance),
                                                   bias=HEADING_SOURCES[source]))
         return self._seen(source, t, True)
 
-    def _correlated_variance(self, source: str, t: float, azimuth: float,
-                             variance: float) -> float:
-        """The variance to fuse a biased source's heading with: the reported one raised to
-        what the source's readings have been measured to carry (nav/heading_noise.py); the
-        reading that aligns the heading has its reported variance (one reading, nothing
-        averaged)."""
-        noise = self.heading_noise.get(source)
-        if noise is None:
-            noise = self.heading_noise[source] = HeadingNoise()
+    def _against_gyros(self, source: str, t: float, azimuth: float) -> bool:
+        """Take a heading reading at t (s) against the azimuth the gyros integrate from the
+        first heading reading on, once the increments reach its stamp (readings ahead of them
+        wait, older ones than the increments kept are left out): into its source's error
+        correlation (nav/heading_noise.py, a source with a bias of its own) and its turns
+        (nav/heading_turns.py). Returns whether ``source`` turns against the gyros: from that
+        verdict on its readings are refused, and the heading they may have aligned or steered is
+        aligned anew (on the course or another source: HeadingRefuted)."""
         solution = self.navigator.solution
         if solution is not None:
             self._up_row = tuple(quat_to_dcm(solution.q_nb)[2].tolist())
         if self._gyro_azimuth is None:
             self._gyro_azimuth = ([], [])
-        gyro = self._gyro_at(t)
-        if gyro is not None:  # (a reading beyond the increments kept is left out)
-            noise.add(t, azimuth - gyro)
-        effective = noise.variance(t, variance)
+        stamps = self._gyro_azimuth[0]
+        waiting = self._awaiting_gyros
+        waiting.append((source, t, azimuth))
+        while waiting and stamps and waiting[0][1] <= stamps[-1]:
+            name, t_reading, reading = waiting.popleft()
+            gyro = self._gyro_at(t_reading)
+            if gyro is None:
+                continue
+            if HEADING_SOURCES[name] is not None:
+                self._heading_noise(name).add(t_reading, reading - gyro)
+            turns = self.heading_turns.get(name)
+            if turns is None:
+                turns = self.heading_turns[name] = HeadingTurns()
+            if not turns.against and turns.add(t_reading, reading, gyro):
+                self.report(f"{name} {turns.summary()}: refused from now on, aligning again")
+                self.navigator.add_measurement(HeadingRefuted(t_reading))
+        turns = self.heading_turns.get(source)
+        return turns is not None and turns.against
+
+    def _heading_noise(self, source: str) -> HeadingNoise:
+        noise = self.heading_noise.get(source)
+        if noise is None:
+            noise = self.heading_noise[source] = HeadingNoise()
+        return noise
+
+    def _correlated_variance(self, source: str, t: float, variance: float) -> float:
+        """The variance to fuse a biased source's heading at t (s) with: the reported one
+        raised to what the source's readings have been measured to carry
+        (nav/heading_noise.py); the reading that aligns the heading has its reported variance
+        (one reading, nothing averaged)."""
+        effective = self._heading_noise(source).variance(t, variance)
         if not self.navigator.heading_known:
             return variance
         if effective > variance:
@@ -741,6 +789,8 @@ class Aiding:
             azimuths.clear()
             for noise in self.heading_noise.values():
                 noise.restart()
+            for turns in self.heading_turns.values():
+                turns.restart()
             previous = 0.0
         else:
             previous = azimuths[-1]

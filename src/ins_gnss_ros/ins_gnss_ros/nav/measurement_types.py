@@ -65,6 +65,14 @@ class HeadingFix:
 
 
 @dataclass(frozen=True)
+class HeadingRefuted:
+    """A heading source the filter took was found at time t to turn against the gyros
+    (nav/heading_turns.py): the heading it aligned or steered is no longer known."""
+
+    t: float
+
+
+@dataclass(frozen=True)
 class PhaseDifferences:
     """Fixed carrier-phase double differences between antennas of the body at GNSS time t:
     row j, ``value[j] = geometry[j] · (C_nb baseline_b[j])`` + noise (m), with ``baseline_b`` the

@@ -35,6 +35,7 @@ from .alignment import Levelling, couple_start_to_lever_arm, course_error_gain, 
     fixes_with_course, initial_covariance, levelled_state, restart_velocity, rotate_yaw, \
     take_static_gyro_bias, without_cross_track, yaw_error_from_course, yaw_error_from_heading, \
     yaw_error_from_motion
+from .conventions import wrap_pi
 from .earth import WGS84
 from .ekf import ErrorStateEKF, StateSpace
 from .error_model import make_layout
@@ -44,8 +45,8 @@ from .imu_gaps import BridgedGaps
 from .increments import SensorErrors
 from .integrity import Integrity, rejection_start
 from .lever_arm import lever_arm_position, point_velocity
-from .measurement_types import GNSS_TYPES, GnssFix, GnssVelocity, HeadingFix, PhaseDifferences, \
-    Rest, SatelliteRanges, SpeedLog, StillImu, WheelOdometry, ZeroVelocity
+from .measurement_types import GNSS_TYPES, GnssFix, GnssVelocity, HeadingFix, HeadingRefuted, \
+    PhaseDifferences, Rest, SatelliteRanges, SpeedLog, StillImu, WheelOdometry, ZeroVelocity
 from .modes import ALIGNING, NAVIGATING
 from .propagation import extrapolate, propagate
 from .recording import Recorder, published_covariance
@@ -60,6 +61,13 @@ from .vehicle_constraint import LearnedConstraint
 REST_HOLD = 0.5
 #: An INS velocity sigma beyond this fraction of the GNSS speed keeps no direction to align on.
 UNINFORMED_VELOCITY = 0.3
+#: Standard deviations by which a heading source's alignment may miss the first course before
+#: the source is refuted (Navigator._check_heading_on_course): once per source and run, so a
+#: true heading is refuted with a probability of 6e-5.
+HEADING_CONFIRM_SIGMAS = 4.0
+#: Largest sigma of a course that checks a heading source's alignment, rad: with the heading's
+#: few degrees, misses beyond about 25 deg are told.
+CONFIRM_COURSE_SIGMA = np.radians(5.0)
 #: Velocity sigma of a start with neither a GNSS speed nor rest known, m/s per axis.
 UNKNOWN_SPEED_SIGMA = 30.0
 #: Yaw variance published while the heading is not aligned, rad^2: that of a yaw spread evenly
@@ -112,6 +120,9 @@ class Navigator:
         # follower of the solution (the strapdown node) must hear of. Monotonic, neither reset
         # nor rewound: a re-run after a delayed measurement changes the solution again.
         self._revision = 0
+        # Heading sources (their bias blocks) whose heading the motion refuted, with what it
+        # showed: a property of the installation, neither reset nor rewound
+        self.refuted_headings: dict[str, str] = {}
         self.reset()
 
     # -- input -----------------------------------------------------------------------------
@@ -295,6 +306,8 @@ class Navigator:
     mode = _view("_state", "mode", "ALIGNING, NAVIGATING or DEAD_RECKONING (modes.py).")
     heading_known = _view("_state", "heading_known", "The heading has been aligned (until then "
                           "only roll and pitch are known).")
+    heading_by = _view("_state", "heading_by", "The bias block of the heading source the "
+                       "heading was aligned on until the motion confirms it, else None.")
     estimates = _view("_state", "estimates", "Running sensor, clock and extra-block estimates "
                       "by block name (not to be changed).")
     updates = _view("_recorder", "updates", "UpdateResult of every measurement kept, in "
@@ -338,9 +351,12 @@ class Navigator:
         fixes the filter follows (GnssFix.common_var: the filter's position is relative to
         them) and, until the heading is aligned, UNKNOWN_YAW_VAR on the yaw and what that
         unknown yaw does to the horizontal velocity and position (the IMU's offset from the
-        antenna the fixes pinned: :func:`unknown_direction_var`)."""
+        antenna the fixes pinned: :func:`unknown_direction_var`); the latter also while a
+        heading source's alignment waits for the motion to confirm it (its heading may be none
+        of the body's: _check_heading_on_course)."""
         aligned = self._state.heading_known
-        if not self._integrity.floors and not any(self._fix_common_var) and aligned:
+        confirmed = aligned and self._state.heading_by is None
+        if not self._integrity.floors and not any(self._fix_common_var) and confirmed:
             return self._no_var  # the usual case, asked at every epoch and update
         var = self._integrity.variances(self._space)
         east = self._space["pos"].start
@@ -349,6 +365,7 @@ class Navigator:
         var[east + 2] += vertical
         if not aligned:
             var[self._space["att"].start + 2] += UNKNOWN_YAW_VAR
+        if not confirmed:
             nav = self._state.nav
             velocity = self._space["vel"].start
             var[velocity:velocity + 2] += unknown_direction_var(np.hypot(*nav.v_enu[:2]))
@@ -485,9 +502,13 @@ class Navigator:
         return s.nav is not None
 
     def _start(self, nav, P0):
-        """Start the filter at solution nav with covariance P0 (the first epoch)."""
+        """Start the filter at solution nav with covariance P0 (the first epoch). The
+        levelled attitude is news to a follower: a compass that needs the roll and pitch waited
+        for the first update to bring it (the simulated car standing with fixes only: its first
+        mag/heading 5.0 s after the start of the data, 3.8 s after the levelling)."""
         s = self._state
         s.nav, s.ekf, s.t_epoch = nav, ErrorStateEKF(self._space, self.config.noise, P0), nav.t
+        self._revision += 1
         self._recorder.epoch(s, np.eye(self._space.size), P0, self._published_var())
 
     def _segment(self, i, j):
@@ -600,11 +621,14 @@ class Navigator:
         if frozen:
             self._recorder.add_update(rejected("gnss_pos", epoch, innov.z, innov.R, "frozen"))
             return
-        if self._update(innov, epoch).accepted:
+        if not self._update(innov, epoch).accepted:
+            self._heading_missed(innov, epoch)
+        else:
             s.t_fix_accepted = m.t
-            if not s.heading_known:
+            if not s.heading_known or (s.heading_by is not None and self._at_rest(epoch)):
                 # The corrected solution's antenna (a correction turned with the run would err
                 # by up to twice its size); the epoch's record publishes the offset from it.
+                # A heading not yet confirmed by the motion keeps it at the last rest.
                 here = extrapolate(s.nav, epoch - s.nav.t, s.a_enu)
                 s.pinned_antenna = lever_arm_position(here.lat, here.lon, here.h, here.q_nb,
                                                       self._lever)
@@ -614,6 +638,10 @@ class Navigator:
         s, cfg = self._state, self.config
         s.gnss_speed = float(np.hypot(*np.asarray(m.v_enu)[:2]))
         self._rest_noise.confirm(epoch, self._at_rest(epoch))
+        if s.heading_by is not None and s.gnss_speed >= cfg.align_speed and m.aligns:
+            self._check_heading_on_course(m, epoch)
+            if s.heading_known and m.fixes:  # a course of fixes checks; they are fixes
+                return
         aligned_by = None  # the INS velocity's course gradient where m turned the yaw against it
         if s.mode == ALIGNING and not s.heading_known and s.gnss_speed >= cfg.align_speed \
                 and m.aligns:
@@ -657,7 +685,51 @@ class Navigator:
             return
         if self._at_rest(epoch):
             self._zero_rate(st, epoch)
-        self._update(innov, epoch)
+        if not self._update(innov, epoch).accepted:
+            self._heading_missed(innov, epoch)
+
+    def _check_heading_on_course(self, m, epoch):
+        """A heading aligned on a source with a bias of its own (an AHRS's orientation, a
+        compass) against the first course that knows more than it: the INS velocity's
+        direction (the IMU turned it by that heading since the velocity was known; the body x
+        axis where it is not) and the course of the GNSS velocity m. A heading that misses it by
+        HEADING_CONFIRM_SIGMAS standard deviations of the three was not the body's: the
+        source is refuted (refused from now on, Aiding.heading) and the heading aligned again
+        on this course. A yaw relative to where a 6-axis unit started, its covariance small
+        against REP-145: on a simulated car the filter held a heading 107 deg off (NEES 7,400;
+        docs/results/product_path.md, "2026-12-06 (session 28)")."""
+        s = self._state
+        v = np.asarray(m.v_enu, float)
+        vel, yaw = self._space["vel"], self._space["att"].stop - 1
+        P_vv = s.ekf.P[vel, vel]
+        if np.sqrt(P_vv[0, 0]) < UNINFORMED_VELOCITY * s.gnss_speed:
+            delta, sigma, gain = yaw_error_from_motion(v, m.cov_enu, s.nav.v_enu, s.nav.q_nb)
+        else:
+            (delta, sigma), gain = yaw_error_from_course(v, m.cov_enu, s.nav.q_nb), None
+        if sigma > CONFIRM_COURSE_SIGMA:
+            return  # a faster course will tell more
+        variance = sigma * sigma + s.ekf.P[yaw, yaw] + (0.0 if gain is None else
+                                                       gain @ P_vv @ gain)
+        miss = wrap_pi(delta)
+        if abs(miss) <= HEADING_CONFIRM_SIGMAS * np.sqrt(variance):
+            s.heading_by = None
+            return
+        self._refute_heading(f"missed the course by {np.degrees(miss):+.0f} deg (sigma "
+                             f"{np.degrees(np.sqrt(variance)):.0f} deg)", epoch)
+
+    def _heading_missed(self, innov, epoch):
+        """A GNSS update refused in motion before the motion confirmed a heading source's
+        alignment: the INS has run off on that heading (an AHRS's yaw relative to its start: a
+        simulated car's fixes 7 m off within 3 s, flagged valid with a 0.1 m sigma, before a
+        course of fixes could check it), so the source is refuted there."""
+        if self._state.heading_by is not None and not self._at_rest(epoch):
+            self._refute_heading(f"missed {innov.name} beyond its gate", epoch)
+
+    def _refute_heading(self, what, epoch):
+        """The heading source the heading was aligned on is not an absolute heading: refused
+        from now on (Aiding.heading, with ``what`` it did), the heading aligned anew."""
+        self.refuted_headings[self._state.heading_by] = what + " as the vehicle moved off"
+        self._forget_heading()
 
     def _fixes_of_course(self, m, gain, delta, epoch):
         """After an alignment on a velocity made of fixes (nav/course.py), those of its fixes
@@ -709,17 +781,46 @@ class Navigator:
 
     def _heading(self, m, st, epoch):
         s = self._state
+        if m.bias in self.refuted_headings:  # (queued before the verdict)
+            self._refuse(m, epoch, "refuted")
+            return
         if not s.heading_known:
             # The alignment takes the source's bias uncertainty along (its block's variance).
             variance = m.variance + (s.ekf.P[self._space[m.bias], self._space[m.bias]][0, 0]
                                      if m.bias in self._space else 0.0)
             self._rotate_yaw(*yaw_error_from_heading(m.azimuth, variance, s.nav.q_nb))
+            s.heading_by = m.bias
         elif m.bias is not None:
             bias = s.estimates[m.bias][0] if m.bias in s.estimates else 0.0
             self._update(meas.biased_heading(self._space, st, m.azimuth, m.variance, bias,
                                              m.bias), epoch)
         else:
             self._update(meas.heading(self._space, st, m.azimuth, m.variance), epoch)
+
+    def _heading_refuted(self, m, st, epoch):
+        self._forget_heading()
+
+    def _forget_heading(self):
+        """Back to ALIGNING with the yaw out of P (as before the first alignment) and the
+        velocity unknown, the tilt, the sensor errors and the position kept: the next course
+        aligns the body's x axis on it and restarts the velocity (a start on the move), or a
+        heading source aligns it. The INS velocity's direction cannot align it again: the
+        fixes kept it on the course while the attitude erred."""
+        s = self._state
+        if not s.heading_known:
+            return
+        s.heading_by = None
+        P = s.ekf.P.copy()
+        for k in (self._space["att"].stop - 1, self._space["vel"]):
+            P[k, :] = 0.0
+            P[:, k] = 0.0
+        vel = self._space["vel"]
+        P[vel, vel] = np.eye(3) * UNKNOWN_SPEED_SIGMA ** 2
+        s.ekf.P = P
+        s.heading_known, s.mode = False, ALIGNING
+        s.t_model = -np.inf  # the system matrix holds the attitude: rebuilt at the next step
+        self._revision += 1  # the followers hear that the heading is unknown
+        self._recorder.correct(s, np.zeros(self._space.size), self._published_var())
 
     def _phase_differences(self, m, st, epoch):
         if not self._state.heading_known:  # linearised about the heading: a heading aligns
@@ -767,9 +868,10 @@ class Navigator:
 
     #: Measurement type -> handler(self, m, st, epoch).
     _HANDLERS = {GnssFix: _gnss_fix, GnssVelocity: _gnss_velocity, HeadingFix: _heading,
-                 PhaseDifferences: _phase_differences, SpeedLog: _speed_log,
-                 WheelOdometry: _wheel_odometry, ZeroVelocity: _zero_velocity, Rest: _rest,
-                 StillImu: _still_imu, SatelliteRanges: _satellite_ranges}
+                 HeadingRefuted: _heading_refuted, PhaseDifferences: _phase_differences,
+                 SpeedLog: _speed_log, WheelOdometry: _wheel_odometry,
+                 ZeroVelocity: _zero_velocity, Rest: _rest, StillImu: _still_imu,
+                 SatelliteRanges: _satellite_ranges}
 
     def _update(self, innov, epoch, aiding=True):
         """Gate and apply one measurement, forced in after `max_reject_time` s of continuous

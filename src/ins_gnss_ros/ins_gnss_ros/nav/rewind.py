@@ -52,6 +52,9 @@ class RunState:
         modes.py.
     heading_known : bool
         The yaw has been aligned; until then its variance is kept out of the filter.
+    heading_by : str or None
+        The bias block of the heading source that aligned the yaw ("ahrs", "mag"), until the
+        motion confirms it (Navigator._check_heading_on_course); None otherwise.
     t_epoch, t_model, t_nhc, t_last_aid : float
         The last filter epoch, model (F) refresh, non-holonomic update and accepted aiding.
     reject_since : dict of str to (float, float)
@@ -93,6 +96,7 @@ class RunState:
     estimates: dict = field(default_factory=dict)
     mode: str = ALIGNING
     heading_known: bool = False
+    heading_by: str | None = None
     t_epoch: float = -np.inf
     t_model: float = -np.inf
     t_nhc: float = -np.inf

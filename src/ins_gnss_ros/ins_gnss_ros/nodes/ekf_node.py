@@ -108,11 +108,12 @@ class EkfNode(EkfServices, NavNode):
             self.frames = FrameTree()
             self.subscribe(TFMessage, "/tf_static", self.on_tf_static, TF_STATIC_READ_QOS)
             self.raw_imu = self.subscribe_latest(Imu, "imu/data_raw", DRIVER_QOS, None)
-        # the turn check's verdict and what each biased heading source's readings carry
-        # (nav/heading_noise.py), at each /diagnostics publication
+        # the turn check's verdict, what each biased heading source's readings carry
+        # (nav/heading_noise.py) and whether each heading source turns with the gyros
+        # (nav/heading_turns.py), at each /diagnostics publication
         self.diag.before_publish.append(lambda: self.diag.set_value(
             "IMU time offset from turns", self.aiding.timing.verdict().summary))
-        self.diag.before_publish.append(self._report_heading_noise)
+        self.diag.before_publish.append(self._report_heading_sources)
         if not p["datum.from_first_fix"]:
             self.aiding.datum = (np.radians(p["datum.latitude_deg"]),
                                  np.radians(p["datum.longitude_deg"]), p["datum.altitude_m"])
@@ -241,9 +242,11 @@ class EkfNode(EkfServices, NavNode):
             f"{np.round(self.navigator.lever_arm_b, 4).tolist()} m FLU, {source}") + (
             f"; within +-{list(sigma)} m assumed (lever_arm_sigma_m)" if any(sigma) else ""))
 
-    def _report_heading_noise(self) -> None:
+    def _report_heading_sources(self) -> None:
         for source, noise in self.aiding.heading_noise.items():
             self.diag.set_value(f"{source} error correlation", noise.summary())
+        for source, turns in self.aiding.heading_turns.items():
+            self.diag.set_value(f"{source} turns", turns.summary())
 
     # -- synchronisation and outputs -----------------------------------------------------------
     def _state_of(self, data: bytes):
