@@ -720,7 +720,7 @@ class Navigator:
     def _heading_missed(self, innov, epoch):
         """A GNSS update refused in motion before the motion confirmed a heading source's
         alignment: the INS has run off on that heading (an AHRS's yaw relative to its start: a
-        simulated car's fixes 7 m off within 3 s, flagged valid with a 0.1 m sigma, before a
+        simulated car's fixes 7 m off within 3.6 s, flagged valid with a 0.1 m sigma, before a
         course of fixes could check it), so the source is refuted there."""
         if self._state.heading_by is not None and not self._at_rest(epoch):
             self._refute_heading(f"missed {innov.name} beyond its gate", epoch)
