@@ -710,14 +710,10 @@ class Aiding:
         if not (math.isfinite(azimuth) and math.isfinite(variance) and variance > 0.0):
             self.report(f"{source} without a finite azimuth, declination and variance rejected")
             return self._seen(source, t, False)
-        if self._against_gyros(source, t, float(azimuth)):
-            self.report(f"{source} refused: it turns against the gyros")
-            return self._seen(source, t, False)
+        self._against_gyros(source, t, float(azimuth))
         refuted = self.navigator.refuted_headings.get(HEADING_SOURCES[source])
         if refuted is not None:
-            self.report(f"{source} refused: its alignment {refuted}: not a heading of the body "
-                        "(a yaw relative to where it started, whose covariance should say so, "
-                        "REP-145?)")
+            self.report(f"{source} refused: {refuted}")
             return self._seen(source, t, False)
         if source == "gnss/heading" and self.policy.phase_differences and \
                 self.navigator.heading_known:
@@ -729,14 +725,14 @@ class Aiding:
                                                   bias=HEADING_SOURCES[source]))
         return self._seen(source, t, True)
 
-    def _against_gyros(self, source: str, t: float, azimuth: float) -> bool:
+    def _against_gyros(self, source: str, t: float, azimuth: float) -> None:
         """Take a heading reading at t (s) against the azimuth the gyros integrate from the
         first heading reading on, once the increments reach its stamp (readings ahead of them
         wait, older ones than the increments kept are left out): into its source's error
         correlation (nav/heading_noise.py, a source with a bias of its own) and its turns
-        (nav/heading_turns.py). Returns whether ``source`` turns against the gyros: from that
-        verdict on its readings are refused, and the heading they may have aligned or steered is
-        aligned anew (on the course or another source: HeadingRefuted)."""
+        (nav/heading_turns.py). A source found to turn against the gyros is refuted
+        (HeadingRefuted: its readings refused from then on, the heading they may have aligned
+        or steered aligned anew, on the course or another source)."""
         solution = self.navigator.solution
         if solution is not None:
             self._up_row = tuple(quat_to_dcm(solution.q_nb)[2].tolist())
@@ -757,9 +753,8 @@ class Aiding:
                 turns = self.heading_turns[name] = HeadingTurns()
             if not turns.against and turns.add(t_reading, reading, gyro):
                 self.report(f"{name} {turns.summary()}: refused from now on, aligning again")
-                self.navigator.add_measurement(HeadingRefuted(t_reading))
-        turns = self.heading_turns.get(source)
-        return turns is not None and turns.against
+                self.navigator.add_measurement(
+                    HeadingRefuted(t_reading, HEADING_SOURCES[name], turns.summary()))
 
     def _heading_noise(self, source: str) -> HeadingNoise:
         noise = self.heading_noise.get(source)

@@ -66,10 +66,14 @@ class HeadingFix:
 
 @dataclass(frozen=True)
 class HeadingRefuted:
-    """A heading source the filter took was found at time t to turn against the gyros
-    (nav/heading_turns.py): the heading it aligned or steered is no longer known."""
+    """A heading source (its bias block, as HeadingFix.bias) found at time t not to be a
+    heading of the body, and why (its turns against the gyros: nav/heading_turns.py): its
+    readings are refused from then on, and the heading it aligned or steered is no longer
+    known."""
 
     t: float
+    bias: str | None
+    why: str
 
 
 @dataclass(frozen=True)

@@ -120,8 +120,8 @@ class Navigator:
         # follower of the solution (the strapdown node) must hear of. Monotonic, neither reset
         # nor rewound: a re-run after a delayed measurement changes the solution again.
         self._revision = 0
-        # Heading sources (their bias blocks) whose heading the motion refuted, with what it
-        # showed: a property of the installation, neither reset nor rewound
+        # Heading sources (their bias blocks) found none of the body's, with why: a property
+        # of the installation, neither reset nor rewound
         self.refuted_headings: dict[str, str] = {}
         self.reset()
 
@@ -715,7 +715,7 @@ class Navigator:
             s.heading_by = None
             return
         self._refute_heading(f"missed the course by {np.degrees(miss):+.0f} deg (sigma "
-                             f"{np.degrees(np.sqrt(variance)):.0f} deg)", epoch)
+                             f"{np.degrees(np.sqrt(variance)):.0f} deg)")
 
     def _heading_missed(self, innov, epoch):
         """A GNSS update refused in motion before the motion confirmed a heading source's
@@ -723,12 +723,20 @@ class Navigator:
         simulated car's fixes 7 m off within 3.6 s, flagged valid with a 0.1 m sigma, before a
         course of fixes could check it), so the source is refuted there."""
         if self._state.heading_by is not None and not self._at_rest(epoch):
-            self._refute_heading(f"missed {innov.name} beyond its gate", epoch)
+            self._refute_heading(f"missed {innov.name} beyond its gate")
 
-    def _refute_heading(self, what, epoch):
-        """The heading source the heading was aligned on is not an absolute heading: refused
-        from now on (Aiding.heading, with ``what`` it did), the heading aligned anew."""
-        self.refuted_headings[self._state.heading_by] = what + " as the vehicle moved off"
+    def _refute_heading(self, what):
+        """The heading source the heading was aligned on is not an absolute heading (``what``
+        it did as the vehicle moved off)."""
+        self._refute(self._state.heading_by, f"its alignment {what} as the vehicle moved off: "
+                     "not a heading of the body (a yaw relative to where it started, whose "
+                     "covariance should say so, REP-145?)")
+
+    def _refute(self, bias, why):
+        """The heading source of bias block ``bias`` is none of the body's: refused from now
+        on (its readings here and in Aiding.heading, with ``why``), the heading it may have
+        aligned or steered aligned anew."""
+        self.refuted_headings[bias] = why
         self._forget_heading()
 
     def _fixes_of_course(self, m, gain, delta, epoch):
@@ -798,7 +806,7 @@ class Navigator:
             self._update(meas.heading(self._space, st, m.azimuth, m.variance), epoch)
 
     def _heading_refuted(self, m, st, epoch):
-        self._forget_heading()
+        self._refute(m.bias, m.why)
 
     def _forget_heading(self):
         """Back to ALIGNING with the yaw out of P (as before the first alignment) and the
