@@ -46,6 +46,7 @@ class Cell:
     name: str
     simulate: tuple  # extra `trial simulate` arguments
     previous_drive: float = 0.0  # s of an earlier drive whose magnetometer calibration is kept
+    scenario: str = "car"
 
 
 CELLS = [Cell(f"imu {rate:g} Hz, 2 ms jitter", ("--imu-rate", str(rate), "--imu-stamp-jitter",
@@ -80,7 +81,12 @@ CELLS += [Cell("fix only 1 Hz", ("--gnss-rate", "1", "--no-gnss-vel")),
           Cell("fix + velocity stamped on arrival, 50-150 ms late",
                ("--gnss-latency", "0.1", "--gnss-stamped-on-arrival")),
           Cell("fix only 5 Hz stamped on arrival, 50-150 ms late",
-               ("--gnss-latency", "0.1", "--gnss-stamped-on-arrival", "--no-gnss-vel"))]
+               ("--gnss-latency", "0.1", "--gnss-stamped-on-arrival", "--no-gnss-vel")),
+          Cell("slow robot (0.5-1.5 m/s), 2.5 Hz fixes of 1 m without velocity or covariance, "
+               "no heading source",
+               ("--imu-grade", "mems_adis16405", "--gnss-rate", "2.5", "--no-gnss-vel",
+                "--no-gnss-cov", "--gnss-sigma-h", "1.0", "--gnss-sigma-v", "2.0"),
+               scenario="robot")]
 SHORT = [CELLS[0], CELLS[3], CELLS[10]]
 
 
@@ -168,7 +174,7 @@ def judge(bag: Path, out: Path) -> dict:
 
 def _simulate_and_replay(cell: Cell, bag: Path, out: Path, duration: float, seed: int,
                          profile: Path) -> None:
-    subprocess.run(TRIAL + ["simulate", "--scenario", "car", "--duration", str(duration),
+    subprocess.run(TRIAL + ["simulate", "--scenario", cell.scenario, "--duration", str(duration),
                             "--seed", str(seed), *cell.simulate, "--out", str(bag)],
                    check=True, cwd=REPO, capture_output=True)
     subprocess.run(TRIAL + ["replay", str(bag), "--config", str(profile), "--out", str(out)],

@@ -25,3 +25,9 @@ class RecordingNavigator:
 
     def note_imu_rates_wrong(self, wrong):
         self.imu_rates_wrong = wrong
+
+    def attitude_at(self, t):
+        return (1.0, 0.0, 0.0, 0.0)  # levelled, facing east: the yaw a run of fixes takes
+
+    def yaw_rate_sigma(self):
+        return 0.0

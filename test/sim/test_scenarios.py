@@ -62,6 +62,20 @@ def test_sea_trial(sea):
     assert sea.shading == []
 
 
+def test_robot_runs_slowly_and_turns_square():
+    traj = scenarios.robot(duration=200.0, seed=2, rate=50.0).trajectory
+    speed = np.linalg.norm(traj.v_enu[:, :2], axis=1)
+    assert np.all(speed[traj.t < 30.0] == 0.0)  # the standstill
+    moving = traj.t > 40.0
+    assert 0.4 < speed[moving].min() and speed.max() < 1.6
+    # 90 deg turns: the heading, once straight between them, on a square grid
+    yaw = np.unwrap(np.arctan2(traj.v_enu[moving, 1], traj.v_enu[moving, 0]))
+    turned = np.degrees(yaw - yaw[0])
+    straight = np.abs(np.gradient(yaw, traj.t[moving])) < 1e-3
+    assert np.allclose(turned[straight] / 90.0, np.round(turned[straight] / 90.0), atol=0.02)
+    assert np.ptp(np.round(turned[straight] / 90.0)) >= 1
+
+
 def test_seed_determinism():
     a = scenarios.car(duration=60.0, seed=5, rate=50.0).trajectory
     b = scenarios.car(duration=60.0, seed=5, rate=50.0).trajectory
@@ -69,7 +83,7 @@ def test_seed_determinism():
     np.testing.assert_array_equal(a.dtheta, b.dtheta)
     np.testing.assert_array_equal(a.lat, b.lat)
     assert not np.allclose(a.q_nb, c.q_nb)
-    assert set(scenarios.SCENARIOS) == {"car", "sea", "aircraft"}
+    assert set(scenarios.SCENARIOS) == {"car", "robot", "sea", "aircraft"}
     d = scenarios.aircraft(duration=60.0, seed=5, rate=50.0).trajectory
     np.testing.assert_array_equal(d.lat, scenarios.aircraft(duration=60.0, seed=5,
                                                             rate=50.0).trajectory.lat)

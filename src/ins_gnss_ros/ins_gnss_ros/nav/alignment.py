@@ -378,7 +378,7 @@ def couple_start_to_lever_arm(P, space, q_nb):
         P[pos, pos] += np.outer(C[:, axis], column)
 
 
-def _yaw_of_x(q_nb):
+def yaw_of_x(q_nb):
     """Yaw of the body x axis [rad, counter-clockwise from East]."""
     x = quat_to_dcm(q_nb)[:, 0]
     return np.arctan2(x[1], x[0])
@@ -431,7 +431,7 @@ def yaw_error_from_course(v_gnss, cov_gnss, q_nb):
         (:func:`yaw_from_velocity`) and the body's side-slip angle (SIDE_SLIP_SIGMA).
     """
     course, sigma = yaw_from_velocity(v_gnss, cov_gnss)
-    return course - _yaw_of_x(q_nb), float(np.hypot(sigma, SIDE_SLIP_SIGMA))
+    return course - yaw_of_x(q_nb), float(np.hypot(sigma, SIDE_SLIP_SIGMA))
 
 
 def without_cross_track(innov, v_enu):
@@ -563,7 +563,7 @@ def yaw_error_from_heading(azimuth, variance, q_nb):
         Rotation about Up to apply, and the yaw standard deviation after it.
     """
     yaw, sigma = yaw_from_heading(azimuth, np.sqrt(variance))
-    return yaw - _yaw_of_x(q_nb), sigma
+    return yaw - yaw_of_x(q_nb), sigma
 
 
 def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, pivot=None, velocity_gain=None):

@@ -15,15 +15,27 @@ The velocity carries the fixes it was made of (GnssVelocity.fixes): its error is
 (e_1 - e_0) / dt, so it is correlated with the first fix's error by -W_0 / dt and with the
 last's by W_1 / dt (W the white covariances), and an alignment on it must not take those fixes
 for independent news (nav/alignment.py, fixes_with_course).
+
+A vehicle too slow for the chord (a wheeled robot at 1 m/s with 1 m fixes would need 20 m
+within two seconds) gets its velocity from a run of fixes instead (:func:`run_velocity`): a
+least-squares fit over up to RUN_S seconds in which the gyros carry the direction of motion
+(the INS's yaw at each fix, levelled but of any heading) and the speed may change at a constant
+rate, the velocity taken at the run's last fix. Its covariance holds what the fit leaves out:
+an error of the gyros' rate, a change of acceleration, and the fixes' slow error, which
+over tens of seconds no longer cancels.
 """
 from __future__ import annotations
 
 import bisect
+import functools
 from collections import deque
 
 import numpy as np
+from scipy.optimize import brentq
+from scipy.stats import ncx2
 
 from .earth import ecef_to_enu_matrix, geodetic_to_ecef
+from .gating import chi2_gate
 from .measurement_types import GnssFix, GnssVelocity
 
 #: Two fixes at most WINDOW_S apart whose horizontal displacement exceeds MIN_SIGMAS times its
@@ -43,6 +55,165 @@ ACCELERATION_CHANGE = 2.0
 SCATTER_SAMPLES, MIN_SCATTER_SAMPLES = 50, 10
 #: Median of a chi-square variable of one degree of freedom (a robust variance from squares).
 CHI2_1_MEDIAN = 0.4549
+#: A run of fixes (:func:`run_velocity`): at most RUN_S s long (a robot at 0.5 m/s with 1 m
+#: fixes at 2.5 Hz needs about 25 s), of at least MIN_RUN_FIXES (the fit's five unknowns and a
+#: few residuals to test it with).
+RUN_S, MIN_RUN_FIXES = 30.0, 6
+#: Largest 1 sigma of the course of a run's velocity [rad]: the chord's (a displacement of
+#: MIN_SIGMAS standard deviations of its length, each axis's half of it across the track).
+MAX_COURSE_SIGMA = 1.0 / (MIN_SIGMAS * np.sqrt(2.0))
+#: 1 sigma per horizontal axis of the mean rate of the fixes' slow error over a run, m/s: a
+#: single-point or SBAS receiver's error wanders by a metre or two over minutes (ionosphere,
+#: orbits, multipath of a slow vehicle); over two seconds the chord neglects it, over a run it
+#: is as large as the white noise's share of a robot's course.
+SLOW_ERROR_RATE = 0.03
+#: The fit's residuals beyond this quantile of their chi-square say the motion left the model
+#: (a change of acceleration or side slip the covariance does not hold): the run's older half
+#: is dropped.
+RESIDUAL_QUANTILE = 0.999
+#: The probability with which a change of motion counted as seen would be (Baarda's 80 %).
+DETECTION_POWER = 0.8
+
+
+@functools.lru_cache(maxsize=None)
+def detectable_noncentrality(dof: int) -> float:
+    """The noncentrality of a chi-square of ``dof`` degrees of freedom that the test at
+    RESIDUAL_QUANTILE detects with probability DETECTION_POWER."""
+    gate = chi2_gate(dof, RESIDUAL_QUANTILE)
+    return float(brentq(lambda lam: ncx2.sf(gate, dof, lam) - DETECTION_POWER, 1e-6, 1e4))
+
+
+def _worst_step(moves, a, gain, weight, dof, velocity_gain, u, tau):
+    """The largest velocity error (m/s) of steps of the acceleration at each fix that the
+    residual test would miss, at most ACCELERATION_CHANGE: moves (N, M) the fixes' rows moved
+    by a unit step at each fix's time, a (M, p) the fit's design, gain (p, M) its gain, weight
+    (M,) its rows' weights, velocity_gain the gain's velocity rows, u the step's direction."""
+    unfitted = moves - (moves @ gain.T) @ a.T
+    size = np.minimum(ACCELERATION_CHANGE, np.sqrt(
+        detectable_noncentrality(dof) / np.maximum((unfitted ** 2) @ weight, 1e-300)))
+    errors = size[:, None] * (moves @ velocity_gain.T + np.outer(tau, u))
+    return errors[np.argmax(np.linalg.norm(errors, axis=1))]
+
+
+def _from_each_to_last(f, tau):
+    """Integral of the samples f (N, ...) over time from each sample's tau (N,) to the last's
+    (trapezoidal): the last is 0."""
+    segments = 0.5 * (f[1:] + f[:-1]) * np.diff(tau).reshape((-1,) + (1,) * (f.ndim - 1))
+    return np.concatenate([np.cumsum(segments[::-1], axis=0)[::-1], np.zeros_like(f[:1])])
+
+
+def _turned(ic, js, v):
+    """The displacement (N, 2) of the integrals ic, js (N,) of cos and sin of the turn applied
+    to the horizontal vector v: the integral of R(theta) v."""
+    return np.stack([ic * v[0] - js * v[1], js * v[0] + ic * v[1]], axis=1)
+
+
+def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma):
+    """The velocity at the last of a run of fixes, from a fit in which the gyros carry the
+    direction of motion and the speed changes at a constant rate.
+
+    With theta(t) the INS's yaw at t less its yaw at the last fix (the velocity turns with the
+    body: a constant side slip), v the velocity at the last fix and k the speed's rate of change
+    over the speed, the fixes lie at p(t) = p_end - integral from t to t_end of
+    R(theta) (1 + k (t' - t_end)) v dt' (Gauss-Newton from the fit without k, which is linear).
+    The vertical is a quadratic in time.
+
+    Parameters
+    ----------
+    tau : (N,) ndarray
+        The fixes' times less the last's, s (increasing, the last 0).
+    d : (N, 3) ndarray
+        Their positions, ENU at the last fix, m.
+    yaw : (N,) ndarray
+        The INS's yaw of the body x axis at each, rad (counter-clockwise; any offset common).
+    white, vertical_var : (N,) ndarray
+        Their white variance per horizontal axis and their vertical variance, m^2.
+    yaw_rate_sigma : float
+        1 sigma of the error of the gyros' rate about the vertical, rad/s.
+
+    Returns
+    -------
+    (v (3,), cov (3, 3), gains (N, 3, 3), chi2, dof) or None
+        The velocity (m/s, ENU) and its covariance, the derivative of v with respect to each
+        fix's position, and the fit's weighted squared residuals with their degrees of
+        freedom; None for a run without motion.
+    """
+    n = len(tau)
+    theta = np.unwrap(yaw)
+    theta = theta - theta[-1]
+    c, s = np.cos(theta), np.sin(theta)
+    ic, js = _from_each_to_last(c, tau), _from_each_to_last(s, tau)
+    jc, jt = _from_each_to_last(tau * c, tau), _from_each_to_last(tau * s, tau)
+    weight = np.repeat(1.0 / white, 2)
+    y = d[:, :2].reshape(-1)
+
+    def design(v, k):
+        """The model's fixes (2N,) and its derivatives (2N, 5) at x = (p_end east, north; v
+        east, north; k = a / speed), each fix's east row, then its north row."""
+        cos_part, sin_part = ic + k * jc, js + k * jt
+        a = np.zeros((n, 2, 5))
+        a[:, 0, 0] = a[:, 1, 1] = 1.0
+        a[:, :, 2] = -_turned(cos_part, sin_part, (1.0, 0.0))
+        a[:, :, 3] = -_turned(cos_part, sin_part, (0.0, 1.0))
+        a[:, :, 4] = -_turned(jc, jt, v)
+        return (a[:, :, 2:4] @ v).reshape(-1), a.reshape(2 * n, 5)
+
+    def solve(a, r):
+        normal = np.linalg.inv(a.T @ (a * weight[:, None]))
+        gain = normal @ (a * weight[:, None]).T
+        return gain @ r, normal, gain
+
+    # without the acceleration the model is linear; Gauss-Newton from there (a few steps: the
+    # speed's rate of change is small against the speed over a run the fixes can follow)
+    _, a = design(np.zeros(2), 0.0)
+    x = np.append(solve(a[:, :4], y)[0], 0.0)
+    end = np.tile([0, 1], n)  # each row's p_end component
+    for _ in range(4):
+        if x[2] == 0.0 and x[3] == 0.0:
+            return None
+        moved, a = design(x[2:4], x[4])
+        x = x + solve(a, y - x[end] - moved)[0]
+    u = x[2:4] / np.hypot(x[2], x[3])
+    moved, a = design(x[2:4], x[4])
+    residual = y - x[end] - moved
+    _, normal, gain = solve(a, residual)
+    chi2 = float(residual @ (weight * residual))
+    cov = normal[2:4, 2:4] + SLOW_ERROR_RATE ** 2 * np.eye(2)
+    # What the fit leaves out, through its gain on the positions: an error of the gyros' rate
+    # (the turn errs by rate * (t - t_end): the fixes lie off by its integral on the turned
+    # velocity) and the worst single step of the acceleration along the track.
+    bias = gain[2:4] @ _turned(jc, jt, np.array([-x[3], x[2]])).reshape(-1)
+    cov += yaw_rate_sigma ** 2 * np.outer(bias, bias)
+    # vertical: p_end + v tau + a tau^2 / 2
+    a_up = np.stack([np.ones(n), tau, 0.5 * tau * tau], axis=1)
+    w_up = 1.0 / vertical_var
+    normal_up = np.linalg.inv(a_up.T @ (a_up * w_up[:, None]))
+    gain_up = normal_up @ (a_up * w_up[:, None]).T
+    residual_up = d[:, 2] - a_up @ (gain_up @ d[:, 2])
+    chi2 += float(residual_up @ (w_up * residual_up))
+    dof = 3 * n - 8
+    # A step of Δa in the speed's rate at t_k moves the last velocity by -Δa t_k u and each
+    # fix, relative to the last, by the integral from it (or from t_k) to t_end of
+    # -Δa (t - t_k) R(theta) u. Its size is ACCELERATION_CHANGE, or the largest the residual
+    # test misses (Baarda's minimal detectable bias: the step whose residuals reach the test's
+    # detectable noncentrality), whichever is smaller: over a long run the speed at its end is
+    # uncertain by what such steps could hide (its course is not: they move the fixes along
+    # the track).
+    later = np.maximum(np.arange(n)[None, :], np.arange(n)[:, None])  # (step at k, fix i)
+    moves = -_turned((jc[later] - tau[:, None] * ic[later]).reshape(-1),
+                     (jt[later] - tau[:, None] * js[later]).reshape(-1), u).reshape(n, 2 * n)
+    step = 0.5 * np.clip(tau[None, :] - tau[:, None], 0.0, None) ** 2  # the vertical's
+    worst = _worst_step(moves, a, gain, weight, dof, gain[2:4], u, tau)
+    worst_up = _worst_step(step, a_up, gain_up, w_up, dof, gain_up[1:2], [1.0], tau)
+    cov += np.outer(worst, worst)
+    v = np.array([x[2], x[3], gain_up[1] @ d[:, 2]])
+    full = np.zeros((3, 3))
+    full[:2, :2] = cov
+    full[2, 2] = normal_up[1, 1] + worst_up[0] ** 2
+    gains = np.zeros((n, 3, 3))
+    gains[:, :2, 0], gains[:, :2, 1] = gain[2:4, 0::2].T, gain[2:4, 1::2].T
+    gains[:, 2, 2] = gain_up[1]
+    return v, full, gains, chi2, dof
 
 
 class CourseFromFixes:
@@ -50,6 +221,7 @@ class CourseFromFixes:
 
     def __init__(self):
         self._window: list[tuple[np.ndarray, GnssFix]] = []  # ECEF, the fix
+        self._run: list[tuple[np.ndarray, float, GnssFix]] = []  # ECEF, the INS's yaw, the fix
         self._last3: deque = deque(maxlen=3)                           # t, ECEF
         # (east^2, north^2) of each, Python floats, m^2, and the same values kept sorted: every
         # fix asks for their median, and sorting a hundred values per fix cost more than the
@@ -59,8 +231,10 @@ class CourseFromFixes:
         self._white = None  # the white variance of the current values, once asked for
 
     def clear(self) -> None:
-        """Forget the fixes of the current window (the heading is known, or a velocity came)."""
+        """Forget the fixes of the current window and run (the heading is known, or a velocity
+        came)."""
         self._window.clear()
+        self._run.clear()
 
     def fix_to_fix(self, cov: np.ndarray) -> np.ndarray:
         """A fix's ENU covariance (m^2) for differences over a few seconds: its horizontal part
@@ -79,13 +253,34 @@ class CourseFromFixes:
         out[0, 1] = out[1, 0] = out[0, 2] = out[2, 0] = out[1, 2] = out[2, 1] = 0.0
         return out
 
-    def add(self, t: float, lat: float, lon: float, h: float, cov: np.ndarray):
+    def add(self, t: float, lat: float, lon: float, h: float, cov: np.ndarray,
+            yaw: float | None = None, yaw_rate_sigma: float = 0.0):
         """A fix at t (s; rad, rad, m) with its ENU covariance (m^2), already observed
-        (:meth:`observe`). Returns the velocity it completes, or None."""
+        (:meth:`observe`), and the INS's yaw of the body x axis then (rad, counter-clockwise;
+        None before the INS is levelled: no run is kept) with the sigma of its gyros' rate
+        error about the vertical (rad/s). Returns the velocity it completes (of the chord, else
+        of the run), or None."""
         r = geodetic_to_ecef(lat, lon, h)
         R = ecef_to_enu_matrix(lat, lon)
+        fix = GnssFix(t, lat, lon, h, cov)
+        if yaw is None:
+            self._run.clear()
+        else:
+            self._run = [f for f in self._run if t - f[2].t <= RUN_S]
+            self._run.append((r, yaw, fix))
+        velocity = self._chord(r, R, fix)
+        if velocity is None and len(self._run) >= MIN_RUN_FIXES:
+            velocity = self._run_velocity(R, yaw_rate_sigma)
+        if velocity is not None:  # the next velocity of fixes not in this one
+            self._window, self._run = self._window[-1:], self._run[-1:]
+        return velocity
+
+    def _chord(self, r: np.ndarray, R: np.ndarray, fix: GnssFix):
+        """The velocity of the window's first and this fix (ECEF r, at whose ENU axes R), once
+        beyond MIN_SIGMAS of their white noise."""
+        t, cov = fix.t, fix.cov_enu
         self._window = [f for f in self._window if t - f[1].t <= WINDOW_S]
-        self._window.append((r, GnssFix(t, lat, lon, h, cov)))
+        self._window.append((r, fix))
         r0, first = self._window[0]
         dt = t - first.t
         if dt <= 0.0:
@@ -102,8 +297,33 @@ class CourseFromFixes:
         cross = [np.zeros((3, 3))] * len(self._window)
         cross[0], cross[-1] = -white0 / dt, white1 / dt
         fixes = tuple(zip((f for _, f in self._window), cross))
-        self._window = [self._window[-1]]
         return GnssVelocity(0.5 * (first.t + t), d / dt, cov_v, fixes)
+
+    def _run_velocity(self, R: np.ndarray, yaw_rate_sigma: float):
+        """The velocity of the run at its last fix (:func:`run_velocity`, ENU axes R there),
+        once its course is known to MAX_COURSE_SIGMA; a run the fit does not hold loses its
+        older half."""
+        run = self._run
+        r_end, last = run[-1][0], run[-1][2]
+        tau = np.array([f.t - last.t for _, _, f in run])
+        d = (np.array([r for r, _, _ in run]) - r_end) @ R.T
+        white = [self.fix_to_fix(f.cov_enu) for _, _, f in run]
+        fit = run_velocity(tau, d, np.array([yaw for _, yaw, _ in run]),
+                           np.array([w[0, 0] for w in white]), np.array([w[2, 2] for w in white]),
+                           yaw_rate_sigma)
+        if fit is None:
+            return None
+        v, cov, gains, chi2, dof = fit
+        if chi2 > chi2_gate(dof, RESIDUAL_QUANTILE):
+            del run[:len(run) // 2]
+            return None
+        across = np.array([-v[1], v[0]])
+        if across @ cov[:2, :2] @ across > (MAX_COURSE_SIGMA * (v[0] ** 2 + v[1] ** 2)) ** 2:
+            return None
+        # the fixes within the chord's window, the navigator's to take after the alignment
+        fixes = tuple((f, gain @ w) for (_, _, f), gain, w in zip(run, gains, white)
+                      if last.t - f.t <= WINDOW_S)
+        return GnssVelocity(last.t, v, cov, fixes)
 
     def observe(self, t: float, lat: float, lon: float, h: float) -> None:
         """Every fix (t s; rad, rad, m), for the fix-to-fix noise of :meth:`fix_to_fix`."""

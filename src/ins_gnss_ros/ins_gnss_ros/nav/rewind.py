@@ -55,6 +55,9 @@ class RunState:
     heading_by : str or None
         The bias block of the heading source that aligned the yaw ("ahrs", "mag"), until the
         motion confirms it (Navigator._check_heading_on_course); None otherwise.
+    heading_steered_by : frozenset of str
+        The bias blocks of the heading sources that aligned the yaw or updated it since its
+        last alignment: a refuted source's verdict forgets the heading only where it is one.
     t_epoch, t_model, t_nhc, t_last_aid : float
         The last filter epoch, model (F) refresh, non-holonomic update and accepted aiding.
     reject_since : dict of str to (float, float)
@@ -97,6 +100,7 @@ class RunState:
     mode: str = ALIGNING
     heading_known: bool = False
     heading_by: str | None = None
+    heading_steered_by: frozenset = frozenset()
     t_epoch: float = -np.inf
     t_model: float = -np.inf
     t_nhc: float = -np.inf

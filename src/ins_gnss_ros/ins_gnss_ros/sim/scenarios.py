@@ -8,6 +8,9 @@
 * ``sea`` — Lab 2 (R/V "Azimut", Lake Ladoga): a vessel at 6–10 m/s changing course every one
   to two minutes, in a short-fetch lake sea (see :mod:`ins_gnss_ros.sim.waves`), with a water
   current for the speed log.
+* ``robot`` — a wheeled ground robot (issue 15's): after a standstill, straight runs of 15-30 s
+  at 0.5-1.5 m/s joined by 90° turns on the spot's scale (3 m radius), the slow motion whose
+  course the fixes of a single-point receiver show only over tens of seconds.
 * ``aircraft`` — seed 003's flight trials of the SAR micronavigation system: an aircraft at
   100-200 m/s flying straight survey legs (the synthetic apertures) with the small heading and
   pitch corrections of manual or autopilot flight (the trajectory instabilities the system
@@ -162,6 +165,21 @@ def car(duration: float = 600.0, seed: int = 0, rate: float = 200.0, static: flo
                     max_lateral_accel=route.max_lateral_accel)
 
 
+def robot(duration: float = 600.0, seed: int = 0, rate: float = 200.0, static: float = 30.0,
+          start=CAR_START, oversample: int = 4) -> Scenario:
+    """A wheeled ground robot: a standstill of ``static`` s (0: starting at a run's speed),
+    then straight runs of 15-30 s, each at 0.5-1.5 m/s (reached at 0.5 m/s^2), joined by
+    left or right turns of 90 deg on a 3 m radius. Parameters as :func:`car`'s."""
+    rng = np.random.default_rng(seed)
+    route = Route(yaw0=rng.uniform(-np.pi, np.pi), speed0=0.0 if static > 0 else 1.0)
+    route.hold(static)
+    while route.t < duration:
+        route.change_speed(rng.uniform(0.5, 1.5), 0.5).hold(rng.uniform(15.0, 30.0))
+        route.turn(np.pi / 2 * rng.choice([-1.0, 1.0]), radius=3.0)
+    traj = generate(CarMotion(route), *start, duration, rate, oversample)
+    return Scenario("robot", seed, traj, max_lateral_accel=route.max_lateral_accel)
+
+
 def sea(duration: float = 600.0, seed: int = 0, rate: float = 200.0,
         sea_state: waves.SeaState = waves.SeaState(),
         hull: waves.HullResponse = waves.HullResponse(), start=SEA_START,
@@ -231,4 +249,4 @@ def aircraft(duration: float = 600.0, seed: int = 0, rate: float = 200.0,
 
 
 #: Scenario factories by name, for ``trial simulate --scenario NAME``.
-SCENARIOS = {"car": car, "sea": sea, "aircraft": aircraft}
+SCENARIOS = {"car": car, "robot": robot, "sea": sea, "aircraft": aircraft}

@@ -1,6 +1,6 @@
 """``trial``: the project's main job on the command line (CONTRACT.md "Trial CLI").
 
-    trial simulate --scenario {car,sea} --duration S --seed N --out bags/NAME
+    trial simulate --scenario {car,robot,sea,aircraft} --duration S --seed N --out bags/NAME
     trial import {rtklib-drive,ubx,vessel-parquet} SRC --out bags/NAME
     trial replay bags/NAME --config config/PROFILE.yaml --out OUT [--outages LEN:PERIOD[:FIRST]]
                  [--init-from-truth] [--rate R --processes | --offline] [--faults FILE]
@@ -74,7 +74,7 @@ def _simulate_args(p):
                    "scale and offsets of a car installation drawn from VEHICLE_SEED (the same "
                    "car on another drive: the same VEHICLE_SEED; default: an ideal sensor)")
     p.add_argument("--static", type=float, default=None, metavar="S",
-                   help="car: standstill before the drive, s (0: rolling start; default 30)")
+                   help="car, robot: standstill before the drive, s (0: rolling start; default 30)")
     p.add_argument("--gnss-rate", type=float, default=SimOptions.gnss_rate, help="Hz")
     p.add_argument("--no-gnss-vel", action="store_true", help="fixes only, no gnss/vel")
     p.add_argument("--no-gnss-cov", action="store_true",

@@ -52,8 +52,10 @@ SIM_EPOCH_NS = 1_767_225_600 * 1_000_000_000
 TRANSPORT_DELAY_S = (1e-4, 1e-3)
 
 #: IMU grade per scenario when none is given: a MEMS unit in the car (seed 004 Lab 1 uses an
-#: ADIS16405-class prototype), a tactical-grade unit on the ship (seed 004 Lab 2).
-DEFAULT_GRADE = {"car": "mems_adis16405", "sea": "tactical", "aircraft": "navigation"}
+#: ADIS16405-class prototype), a consumer one on the robot (an ICM-20948 class, as such robots
+#: carry), a tactical-grade unit on the ship (seed 004 Lab 2).
+DEFAULT_GRADE = {"car": "mems_adis16405", "robot": "consumer_mems", "sea": "tactical",
+                 "aircraft": "navigation"}
 
 
 @dataclass(frozen=True)
@@ -71,8 +73,8 @@ class SimOptions:
         Half-width of the uniform error of the IMU message stamps, s: a USB/driver stamping the
         samples on arrival while the sensor samples on its own clock (the data stay uniform).
     start_static : float or None
-        Car scenario: the standstill before the drive, s (0: a rolling start; None: the
-        scenario's 30 s).
+        Car and robot scenarios: the standstill before the drive, s (0: a rolling start; None:
+        the scenario's 30 s).
     imu_orientation_sigma : float
         Write the IMU's own orientation into ``imu/data_raw`` (an AHRS), its yaw referred to
         magnetic north (the WMM declination) and off by a constant error of this 1-sigma plus
@@ -182,7 +184,7 @@ def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions
 
     Parameters
     ----------
-    scenario : {"car", "sea"}
+    scenario : {"car", "robot", "sea", "aircraft"}
     duration : float
         s (> 0).
     seed : int
@@ -214,8 +216,8 @@ def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions
     # ones as they were.
     seeds = np.random.SeedSequence(seed).generate_state(6)
     start = {} if options.start_static is None else {"static": options.start_static}
-    if start and scenario != "car":
-        raise ValueError("start_static is an option of the car scenario")
+    if start and scenario not in ("car", "robot"):
+        raise ValueError("start_static is an option of the car and robot scenarios")
     sc = scenarios.SCENARIOS[scenario](duration=duration, seed=seed,
                                        rate=trajectory_rate(options, scenario), **start)
     traj = sc.trajectory
