@@ -305,6 +305,8 @@ class Aiding:
         self.last_accepted_t = -math.inf  # newest accepted update, s
         self.forced: set[str] = set()  # kinds forced in since the filter last NAVIGATED
         self._course = CourseFromFixes()
+        # (heading known, the source it waits on) when the course last took the INS's yaw
+        self._course_heading = (False, None)
         self._white_share = None  # (stamp s, the fixes' white share averaged up to it)
         # the IMU's clock and rates against the fixes' course (for diagnostics and the
         # navigator's mode)
@@ -645,20 +647,26 @@ class Aiding:
                          cov: np.ndarray) -> None:
         """Without any gnss/vel and before the heading is known, successive fixes give the
         velocity that aligns the heading (nav/course.py), or checks one a heading source
-        aligned. The run of fixes (for a vehicle too slow for the chord) aligns an unknown
-        heading only: a heading source's check takes the chord's course (the INS's yaw over a
-        run is steered by the source checked, and a run of a car starting off re-aligned a
-        refuted AHRS's heading 8 deg off, 26 valid fixes beyond 5 sigma after it). It runs on
-        through what the fixes take for rest (restarted there, a robot at 0.5 m/s with 1 m
-        fixes aligned 47 s into its motion instead of 13 s)."""
+        aligned. The run of fixes (for a vehicle too slow for the chord) starts again where
+        the INS's yaw was turned (aligned, or forgotten); made while a heading source under
+        check steers that yaw, it only checks it (the run of a car starting off refuted a
+        NED-convention AHRS and re-aligned the heading on its own course, 8 deg off: 26 valid
+        fixes beyond 5 sigma after it). It runs on through what the fixes take for rest
+        (restarted there, a robot at 0.5 m/s with 1 m fixes aligned 47 s into its motion
+        instead of 13 s)."""
         nav = self.navigator
         if self._has_velocity() or (nav.heading_known and nav.heading_by is None):
             self._course.clear()
             return
+        heading = (nav.heading_known, nav.heading_by)
+        if heading != self._course_heading:
+            self._course.restart_run()
+            self._course_heading = heading
         yaw, rate_sigma = None, 0.0  # (None: the run is forgotten)
-        if nav.started and not nav.heading_known:
+        if nav.started:
             yaw, rate_sigma = yaw_of_x(nav.attitude_at(t)), nav.yaw_rate_sigma()
-        velocity = self._course.add(t, lat, lon, h, cov, yaw, rate_sigma)
+        velocity = self._course.add(t, lat, lon, h, cov, yaw, rate_sigma,
+                                    yaw_checked=nav.heading_by is not None)
         if velocity is not None:
             self.navigator.add_measurement(velocity)
 

@@ -253,13 +253,19 @@ class CourseFromFixes:
         out[0, 1] = out[1, 0] = out[0, 2] = out[2, 0] = out[1, 2] = out[2, 1] = 0.0
         return out
 
+    def restart_run(self) -> None:
+        """Forget the run: the INS's yaw was turned (aligned, or forgotten), its yaws before and
+        after not in one frame."""
+        self._run.clear()
+
     def add(self, t: float, lat: float, lon: float, h: float, cov: np.ndarray,
-            yaw: float | None = None, yaw_rate_sigma: float = 0.0):
+            yaw: float | None = None, yaw_rate_sigma: float = 0.0, yaw_checked: bool = False):
         """A fix at t (s; rad, rad, m) with its ENU covariance (m^2), already observed
         (:meth:`observe`), and the INS's yaw of the body x axis then (rad, counter-clockwise;
         None before the INS is levelled: no run is kept) with the sigma of its gyros' rate
-        error about the vertical (rad/s). Returns the velocity it completes (of the chord, else
-        of the run), or None."""
+        error about the vertical (rad/s); ``yaw_checked``: a heading source under check steers
+        that yaw (a run's velocity then only checks it: GnssVelocity.checks_only). Returns the
+        velocity it completes (of the chord, else of the run), or None."""
         r = geodetic_to_ecef(lat, lon, h)
         R = ecef_to_enu_matrix(lat, lon)
         fix = GnssFix(t, lat, lon, h, cov)
@@ -270,7 +276,7 @@ class CourseFromFixes:
             self._run.append((r, yaw, fix))
         velocity = self._chord(r, R, fix)
         if velocity is None and len(self._run) >= MIN_RUN_FIXES:
-            velocity = self._run_velocity(R, yaw_rate_sigma)
+            velocity = self._run_velocity(R, yaw_rate_sigma, yaw_checked)
         if velocity is not None:  # the next velocity of fixes not in this one
             self._window, self._run = self._window[-1:], self._run[-1:]
         return velocity
@@ -299,7 +305,7 @@ class CourseFromFixes:
         fixes = tuple(zip((f for _, f in self._window), cross))
         return GnssVelocity(0.5 * (first.t + t), d / dt, cov_v, fixes)
 
-    def _run_velocity(self, R: np.ndarray, yaw_rate_sigma: float):
+    def _run_velocity(self, R: np.ndarray, yaw_rate_sigma: float, checks_only: bool):
         """The velocity of the run at its last fix (:func:`run_velocity`, ENU axes R there),
         once its course is known to MAX_COURSE_SIGMA; a run the fit does not hold loses its
         older half."""
@@ -323,7 +329,7 @@ class CourseFromFixes:
         # the fixes within the chord's window, the navigator's to take after the alignment
         fixes = tuple((f, gain @ w) for (_, _, f), gain, w in zip(run, gains, white)
                       if last.t - f.t <= WINDOW_S)
-        return GnssVelocity(last.t, v, cov, fixes)
+        return GnssVelocity(last.t, v, cov, fixes, checks_only=checks_only)
 
     def observe(self, t: float, lat: float, lon: float, h: float) -> None:
         """Every fix (t s; rad, rad, m), for the fix-to-fix noise of :meth:`fix_to_fix`."""

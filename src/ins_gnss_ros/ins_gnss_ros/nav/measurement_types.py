@@ -42,13 +42,17 @@ class GnssVelocity:
     (GnssFix, X) with X (3, 3) the covariance of this velocity's error with the fix's error
     ((m^2)/s): the alignment on it uses them with that correlation, and the filter not again.
     ``aligns``: its course may align the heading (the front end says no while the IMU is still
-    and the course is not known beyond the receiver's noise: nav/aiding.py)."""
+    and the course is not known beyond the receiver's noise: nav/aiding.py).
+    ``checks_only``: a course of a run of fixes made with the INS's yaw while a heading source
+    not yet confirmed steered it (nav/course.py): it confirms or refutes that heading and
+    aligns none (refuted, the yaw it was made with followed the source)."""
 
     t: float
     v_enu: np.ndarray
     cov_enu: np.ndarray
     fixes: tuple = ()
     aligns: bool = True
+    checks_only: bool = False
 
 
 @dataclass(frozen=True)
