@@ -156,6 +156,7 @@ def test_run_velocity_follows_a_turn_the_gyros_carry_and_a_changing_speed():
     tau = np.arange(-20.0, 1e-9, 0.4)
     d, yaw = turning_run(tau)
     n = len(tau)
+    # (the INS's yaw with any offset: only its turns enter)
     v, cov, gains, chi2, dof = run_velocity(tau, d, yaw + 1.3, np.ones(n), np.full(n, 4.0),
                                             0.0)
     np.testing.assert_allclose(v, [1.0, 0.0, 0.0], atol=2e-3)
