@@ -710,10 +710,11 @@ class Navigator:
         direction (the IMU turned it by that heading since the velocity was known; the body x
         axis where it is not, and for a run of fixes: seconds into the motion, the fixes'
         updates have kept the INS velocity on their course whatever the heading) and the course
-        of the GNSS velocity m. A heading that misses it by
-        HEADING_CONFIRM_SIGMAS standard deviations of the three was not the body's: the
-        source is refuted (refused from now on, Aiding.heading) and the heading aligned again
-        on this course. A yaw relative to where a 6-axis unit started, its covariance small
+        of the GNSS velocity m. A heading that misses it by HEADING_CONFIRM_SIGMAS standard
+        deviations of the three was not the body's: the source is refuted (refused from now on,
+        Aiding.heading) and the heading aligned again on this course (on the next one where m
+        only checks: GnssVelocity.checks_only). A yaw relative to where a 6-axis unit started,
+        its covariance small
         against REP-145: on a simulated car the filter held a heading 107 deg off (NEES 7,400;
         docs/results/product_path.md, "2026-12-06 (session 28)")."""
         s = self._state
