@@ -16,6 +16,7 @@ from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, GnssFix, GnssVelocity, He
     PhaseDifferences, WheelOdometry, ZeroVelocity
 from ins_gnss_ros.nav.navigator import Navigator
 from ins_gnss_ros.nav.recording import published_covariance
+from ins_gnss_ros.nav.rotations import quat_to_euler
 from ins_gnss_ros.params import ParameterError, resolve
 
 from fake_navigator import RecordingNavigator
@@ -276,16 +277,51 @@ def test_one_fix_reported_smaller_is_split_as_the_receiver_s_others():
     assert last.cov_enu[0, 0] == white and last.common_var[0] == pytest.approx(2.7 ** 2 - white)
 
 
-def still_imu(front, t0, t1, bias, rate=100.0, seed=4):
-    """A standing, level IMU from t0 to t1 (s): gravity, a gyro bias and the filter's white
-    noise; no Earth rate (a static start cannot tell it from the bias: Levelling.gyro_bias)."""
+def still_imu(front, t0, t1, bias, rate=100.0, seed=4, accel_bias=np.zeros(3)):
+    """A standing, level IMU from t0 to t1 (s): gravity, a gyro and an accelerometer bias and
+    the filter's white noise; no Earth rate (a static start cannot tell it from the bias:
+    Levelling.gyro_bias)."""
     rng = np.random.default_rng(seed)
     noise = front.navigator.config.noise
     dt = 1.0 / rate
     for k in range(round(t0 * rate) + 1, round(t1 * rate) + 1):
-        f = np.array([0.0, 0.0, 9.80665]) + np.sqrt(noise.accel_psd / dt) * rng.standard_normal(3)
+        f = np.array([0.0, 0.0, 9.80665]) + accel_bias \
+            + np.sqrt(noise.accel_psd / dt) * rng.standard_normal(3)
         w = bias + np.sqrt(noise.gyro_psd / dt) * rng.standard_normal(3)
         front.increment(k * dt, w * dt, f * dt, dt)
+
+
+def test_a_standing_start_keeps_the_tilt_as_uncertain_as_the_accelerometers_make_it():
+    """Levelled on accelerometers 90 mg off along x, the start is pitched 5 deg: the filter
+    says so (the tilt as uncertain as the data sheet's 50 mg make it, correlated with the
+    biases), and the rest's updates, which see only the tilt and the biases' sum, leave the
+    horizontal biases as uncertain as they were (Navigator._held); the vertical one they
+    measure."""
+    nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_adis16405_datasheet"}),
+                                     record=True))  # config/default.yaml's
+    front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
+    accel_bias = np.array([0.09, 0.02, -0.015]) * 9.80665
+    rng = np.random.default_rng(6)
+    lat0, lon0 = 59.9, 30.3
+    sigma_b0 = nav.config.noise.blocks["ba"].sigma0
+    for k in range(1, 76):  # 30 s standing, fixes at 2.5 Hz with their covariance
+        t = k / 2.5
+        still_imu(front, t - 0.4, t, np.zeros(3), seed=k, accel_bias=accel_bias)
+        e, n = rng.standard_normal(2)
+        front.fix(t, lat0 + n / M_PER_DEG, lon0 + e / (M_PER_DEG * np.cos(np.radians(lat0))),
+                  10.0, np.diag([1.0, 1.0, 4.0]), 0, covariance_known=True)
+    assert nav.started
+    P = nav.covariance()
+    ba, att = nav.space["ba"], nav.space["att"]
+    sigma_b = np.sqrt(np.diag(P[ba, ba]))
+    assert np.all(sigma_b[:2] >= sigma_b0)   # held through the rest (their random walk added)
+    assert sigma_b[2] < 0.2 * sigma_b0                              # the vertical measured
+    np.testing.assert_array_equal(nav.estimates["ba"][:2], 0.0)
+    roll, pitch, _ = quat_to_euler(nav.solution.q_nb)
+    sigma_tilt = np.sqrt(np.diag(P[att, att])[:2])
+    assert abs(pitch) > np.radians(4.5) and abs(roll) > np.radians(0.9)  # as levelled
+    assert np.all(sigma_tilt > np.radians(2.8))  # the bias' 50 mg, and the levelling's 1 deg
+    assert abs(pitch) < 3.0 * sigma_tilt.max() and abs(roll) < 3.0 * sigma_tilt.max()
 
 
 def test_a_still_imu_starts_the_filter_at_once_and_the_fixes_rest_confirms_its_velocity():

@@ -234,6 +234,50 @@ def test_the_start_couples_the_imus_place_to_an_uncertain_lever_arm():
     assert np.linalg.eigvalsh(P).min() > -1e-12
 
 
+def test_the_levelled_tilt_errs_with_the_accelerometer_biases():
+    """Levelling on a standing IMU whose accelerometers err by b takes the attitude that makes
+    the measured specific force vertical: its tilt error (nav_error of the levelled against
+    the true attitude) is the biases', drawn here from the grade and compared with the start's
+    covariance of (tilt, bias)."""
+    from ins_gnss_ros.nav.ekf import StateSpace
+    from ins_gnss_ros.nav.error_model import make_layout, nav_error
+    from ins_gnss_ros.nav.strapdown import NavState
+
+    noise = se.filter_noise(se.MEMS_ADIS16405_DATASHEET, "rw")  # 50 mg
+    space = StateSpace(make_layout("15", noise))
+    att, ba = space["att"], space["ba"]
+    tilt = slice(att.start, att.start + 2)
+    lat, g = 0.9, normal_gravity(0.9, 0.0)
+    true_q = quat_from_euler(0.03, -0.05, 2.0)  # a vehicle standing on a slope, yawed
+    rng = np.random.default_rng(8)
+    sigma_level = 1.0 * DEG
+    draws = []
+    for _ in range(4000):
+        b = noise.blocks["ba"].sigma0 * rng.standard_normal(3)
+        f_b = quat_to_dcm(true_q).T @ [0.0, 0.0, g] + b
+        levelling = al.Levelling().add(np.zeros((1, 3)), f_b[None, :], 1.0)
+        est = al.levelled_state(levelling, lat, 0.1, 0.0, np.zeros(3), 0.0, 0.0)
+        # the levelled attitude carries no yaw: compare with the truth turned to its yaw
+        true = NavState(lat, 0.1, 0.0, np.zeros(3), quat_mul(
+            quat_from_euler(0.0, 0.0, -quat_to_euler(true_q)[2]), true_q), 0.0)
+        phi = nav_error(est, true)[2]
+        draws.append(np.concatenate([phi[:2] + sigma_level * rng.standard_normal(2), b]))
+    # the filter's bias state is the bias the estimate (zero) lacks: b
+    f_b = quat_to_dcm(true_q).T @ [0.0, 0.0, g]
+    est = al.levelled_state(al.Levelling().add(np.zeros((1, 3)), f_b[None, :], 1.0),
+                            lat, 0.1, 0.0, np.zeros(3), 0.0, 0.0)
+    P = al.initial_covariance(space, noise, 1.0, 0.1, sigma_level)
+    al.couple_tilt_to_accelerometers(P, space, est, f_b, sigma_level)
+    sample = np.cov(np.array(draws).T)
+    model = np.block([[P[tilt, tilt], P[tilt, ba]], [P[ba, tilt], P[ba, ba]]])
+    np.testing.assert_allclose(np.sqrt(np.diag(sample)), np.sqrt(np.diag(model)), rtol=0.05)
+    corr = sample[:2, 2:4] / np.sqrt(np.outer(np.diag(sample)[:2], np.diag(sample)[2:4]))
+    corr_model = model[:2, 2:4] / np.sqrt(np.outer(np.diag(model)[:2], np.diag(model)[2:4]))
+    np.testing.assert_allclose(corr, corr_model, atol=0.05)
+    assert abs(corr_model).max() > 0.9  # the tilt is the biases' to within the levelling's 1 deg
+    assert np.linalg.eigvalsh(P).min() > -1e-12
+
+
 def test_yaw_rotation_correlates_the_turned_velocity_and_distance_with_the_yaw():
     """An INS that ran from rest with its yaw off by a: turning it by a + eps (a slightly
     wrong alignment) leaves velocity and position errors that the covariance predicts from

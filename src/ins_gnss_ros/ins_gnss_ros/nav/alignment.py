@@ -33,6 +33,7 @@ import numpy as np
 from .conventions import wrap_pi
 from .course import ACCELERATION_CHANGE, WINDOW_S
 from .earth import WGS84, normal_gravity
+from .error_model import system_matrix
 from .lever_arm import lever_arm_position, lever_arm_velocity
 from .measurements import Innovation, gnss_position, position_residual_enu
 from .propagation import extrapolate
@@ -281,9 +282,13 @@ class Levelling:
             return None
         return self.dtheta_sum / self.time, WGS84.omega ** 2 + gyro_psd / self.time
 
+    def mean_specific_force(self):
+        """The mean specific force levelled on, body FLU [m/s^2]."""
+        return self.dv_sum / self.time
+
     def attitude(self):
         """Levelled attitude q_nb with yaw 0 (:func:`level` of the mean specific force)."""
-        roll, pitch = level(self.dv_sum / self.time)
+        roll, pitch = level(self.mean_specific_force())
         return quat_from_euler(roll, pitch, 0.0)
 
 
@@ -376,6 +381,36 @@ def couple_start_to_lever_arm(P, space, q_nb):
         column = C[:, axis] * P[j, j]
         P[pos, j] = P[j, pos] = column
         P[pos, pos] += np.outer(C[:, axis], column)
+
+
+def couple_tilt_to_accelerometers(P, space, nav, f_b, sigma_level):
+    """The start's covariance P (n, n; in place) with the levelled tilt's error that of the
+    accelerometers' biases: levelling makes the computed horizontal specific force zero, so
+    the tilt error is the one that cancels the biases' horizontal part, psi_h = M b (M from the
+    system matrix's velocity rows at the levelled state), plus the levelling's own error of
+    sigma_level (rad; vibration, the vehicle's own sway): P[tilt, tilt] = M P_bb M' +
+    sigma_level^2, P[tilt, ba] = M P_bb. Taken as independent, a tilt known to 1 deg held a
+    MEMS unit's 50 mg biases to 16 mg from the first rest on (docs/results/product_path.md,
+    "2026-12-06 (session 30)").
+
+    Parameters
+    ----------
+    nav : NavState
+        The levelled solution.
+    f_b : (3,) array_like
+        The mean specific force levelled on, body FLU [m/s^2].
+    """
+    if "ba" not in space:
+        return
+    F = system_matrix(space.layout, nav, f_b, np.zeros(3))
+    att, ba = space["att"], space["ba"]
+    vel_h = slice(space["vel"].start, space["vel"].start + 2)
+    tilt = slice(att.start, att.start + 2)
+    M = -np.linalg.solve(F[vel_h, tilt], F[vel_h, ba])
+    P_bb = P[ba, ba]
+    P[tilt, tilt] = M @ P_bb @ M.T + sigma_level ** 2 * np.eye(2)
+    P[tilt, ba] = M @ P_bb
+    P[ba, tilt] = P[tilt, ba].T
 
 
 def yaw_of_x(q_nb):

@@ -268,7 +268,7 @@ class ErrorStateEKF:
         self.predicted(F, phi, P)
         return phi
 
-    def update(self, name, t, z, H, R, gate_prob=DEFAULT_GATE_PROB, force=False):
+    def update(self, name, t, z, H, R, gate_prob=DEFAULT_GATE_PROB, force=False, held=None):
         """Measurement update with chi-square innovation gating.
 
         Parameters
@@ -286,12 +286,19 @@ class ErrorStateEKF:
             Chi-square gate probability; None disables gating.
         force : bool
             Update even if the gate rejects (the navigator's recovery after long rejections).
+        held : array_like of int, optional
+            States this update leaves as they are, beside the consider blocks': states the
+            data cannot tell from others at the moment (their gain rows zero, as a consider
+            block's; Navigator._held).
 
         Returns
         -------
         UpdateResult
         """
         z, H, R = _kernel_array(z, 1), _kernel_array(H, 2), _kernel_array(R, 2)
+        if held is not None and not self.joseph:
+            raise ValueError("held states need the Joseph form: (I - K H) P holds only for the "
+                             "optimal gain")
         m, n = len(z), len(self.x)
         gate = chi2_gate(m, gate_prob) if gate_prob is not None else np.inf
         # One compiled call for the whole update (innovation, S, NIS, gain, state, Joseph
@@ -300,7 +307,9 @@ class ErrorStateEKF:
         nu, s_diag, x, P = np.empty(m), np.empty(m), np.empty(n), np.empty((n, n))
         nis, applied = _kernels.kalman_update(
             np.ascontiguousarray(self.P, dtype=float), self.x, H, R, z, gate, force,
-            self.joseph, MIN_VARIANCE, self.space.consider, nu, s_diag, x, P)
+            self.joseph, MIN_VARIANCE,
+            self.space.consider if held is None else np.union1d(self.space.consider, held),
+            nu, s_diag, x, P)
         if applied:
             self.x, self.P = x, P
         ok = nis <= gate

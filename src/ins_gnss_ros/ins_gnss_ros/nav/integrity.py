@@ -116,7 +116,7 @@ class Integrity:
         self.rejecting = {}     # aiding kind -> (first, last) epoch of its current rejection
         self.imu_rates_wrong = False  # the turns show the IMU's rates wrong: degraded
 
-    def update(self, ekf, space, innov, epoch, rejected_since, widen_prior):
+    def update(self, ekf, space, innov, epoch, rejected_since, widen_prior, held=None):
         """Gate and apply one measurement, forced in after `max_reject_time` s of continuous
         rejection (since `rejected_since`, s, or None) or within its kind's floor.
 
@@ -131,6 +131,8 @@ class Integrity:
             Start of the kind's current continuous rejection (:func:`rejection_start`), s.
         widen_prior : callable (slice, variances)
             Told of each widening of a state block by a forced update (the record's P-).
+        held : array_like of int, optional
+            States the update leaves as they are (:meth:`ErrorStateEKF.update`).
 
         Returns
         -------
@@ -146,7 +148,8 @@ class Integrity:
         if force:
             self._force(ekf, space, innov, epoch, widen_prior)
             floor = self.floors[innov.name]
-        res = ekf.update(innov.name, epoch, innov.z, innov.H, innov.R, cfg.gate_prob, force)
+        res = ekf.update(innov.name, epoch, innov.z, innov.H, innov.R, cfg.gate_prob, force,
+                         held)
         if force:
             res = replace(res, reason="forced")
         if floor is not None:
