@@ -1,8 +1,9 @@
 """The navigator's time update of a segment (nav/propagation.py): its compiled loop
 (_kernels.mech_segment) against the two modules it stands for, SensorErrors.compensate and
-strapdown.run, the compiled sum of its steps against numpy's, and the whole compiled step
+strapdown.run, the compiled sum of its steps against numpy's, the whole compiled step
 (_kernels.time_update) against that loop and the filter's own prediction
-(ErrorStateEKF.predict)."""
+(ErrorStateEKF.predict), and the attitude variance of a turn (turn_noise) against the errors
+of drawn gyro triads."""
 import numpy as np
 
 from ins_gnss_ros.nav import _kernels
@@ -11,9 +12,9 @@ from ins_gnss_ros.nav.ekf import ErrorStateEKF, ExtraState, StateSpace
 from ins_gnss_ros.nav.error_model import make_layout
 from ins_gnss_ros.nav.imu_gaps import BridgedGaps
 from ins_gnss_ros.nav.increments import SensorErrors
-from ins_gnss_ros.nav.propagation import propagate
+from ins_gnss_ros.nav.propagation import TURN_TIME, propagate, turn_noise
 from ins_gnss_ros.nav.rewind import RunState
-from ins_gnss_ros.nav.sensor_errors import GRADES, filter_noise
+from ins_gnss_ros.nav.sensor_errors import GRADES, error_matrix, filter_noise
 from ins_gnss_ros.nav.strapdown import NavState, run
 
 
@@ -97,6 +98,8 @@ def test_the_compiled_time_update_is_the_segment_loop_then_the_filter_prediction
                                         WGS84.kernel_params, sums, track_ref)
     ekf = ErrorStateEKF(space, noise, P0)
     phi_ref = ekf.predict(start, sums[1] / T, sums[0] / T, T)
+    # then the turn's attitude variance of the gyros' cross-axis errors (no "ng" block here)
+    turn_noise(RunState(nav=s.nav, ekf=ekf, omega=sums[0] / T, omega_time=T), noise, space)
     assert (s.nav.lat, s.nav.lon, s.nav.h, s.nav.t) == (lat, lon, h, t[-1])
     assert np.array_equal(s.nav.v_enu, v) and np.array_equal(s.nav.q_nb, q)
     assert np.array_equal(s.a_enu, (v - start.v_enu) / T)
@@ -127,3 +130,47 @@ def test_a_bridged_gap_adds_its_variance_over_the_time_spent_in_it():
     np.testing.assert_allclose(a, [4e-8, 4e-8, 0.0])
     gaps.add(30.0, 30.01, horizon=25.0, angle_var=1e-8, velocity_var=1e-6)
     assert [g[0] for g in gaps.gaps] == [30.0]    # those ended before the horizon forgotten
+
+
+def test_a_turn_adds_the_attitude_error_its_gyros_scale_and_cross_axis_errors_make():
+    """A 90 deg turn about body z, then a 20 deg roll to and fro, against the attitude errors
+    the gyros' drawn scale-factor and cross-axis errors make over the same rotations (the
+    error matrix times the rotation, body axes; level, yaw 0, so body = nav)."""
+
+    noise = filter_noise(GRADES["consumer_mems"], "rw")
+    space = StateSpace(make_layout("15", noise))
+    att = space["att"]
+    s = RunState.initial(space)
+    s.nav = NavState(0.9, 0.5, 0.0, np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), 0.0)
+    s.ekf = ErrorStateEKF(space, noise, np.zeros((space.size, space.size)))
+    s.heading_known = True
+
+    def turn(rate, seconds, steps=200):
+        s.omega, s.omega_time = np.asarray(rate, float), seconds / steps
+        for _ in range(steps):
+            turn_noise(s, noise, space)
+
+    theta = np.pi / 2
+    turn([0.0, 0.0, theta / 4.0], 4.0)                 # 90 deg in 4 s, against TURN_TIME 10 s
+    var = np.diag(s.ekf.P[att, att]).copy()
+    rng = np.random.default_rng(3)
+    g = GRADES["consumer_mems"].gyro
+    M = error_matrix(g.scale_sigma * rng.standard_normal((20000, 3)),
+                     g.misalign_sigma * rng.standard_normal((20000, 6)))
+    errors = M @ np.array([0.0, 0.0, theta])            # what each drawn unit turns by
+    # the whole turn's error, less what the memory lets go of during its 4 s
+    truth = errors.var(axis=0)
+    assert np.all(var <= 1.05 * truth) and np.all(var >= 0.95 * np.exp(-4.0 / TURN_TIME) * truth)
+    # (yaw from the z gyro's 1.5 % scale, the tilts from the x and y gyros' 2 % cross-axis)
+    # a roll of 20 deg to and fro: each swing adds what it turns, not the time spent rolling
+    before = np.diag(s.ekf.P[att, att]).copy()
+    for _ in range(5):
+        turn([np.radians(20.0), 0.0, 0.0], 1.0, 20)
+        turn([-np.radians(20.0), 0.0, 0.0], 1.0, 20)
+    swing = (g.misalign_sigma * np.radians(20.0)) ** 2
+    assert np.diag(s.ekf.P[att, att])[1] - before[1] < 10 * swing
+    # with the heading unknown the yaw stays out of P
+    s.ekf.P[:] = 0.0
+    s.heading_known = False
+    turn([0.0, 0.0, theta / 4.0], 4.0)
+    assert s.ekf.P[att, att][2, 2] == 0.0 and s.ekf.P[att, att][0, 0] > 0.0

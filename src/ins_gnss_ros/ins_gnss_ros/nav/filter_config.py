@@ -21,7 +21,7 @@ __all__ = ["PARAMS", "navigator_config", "noise_model"]
 #: The ekf node's parameters (the names the profiles' ``ekf`` sections use).
 PARAMS = (
     Param("layout", "15", "error-state layout (error_model.LAYOUTS key)", choices=tuple(LAYOUTS)),
-    Param("imu_grade", "mems_adis16405_datasheet",
+    Param("imu_grade", "mems_uncalibrated",
           "IMU noise model preset (sensor_errors.GRADES)", choices=tuple(GRADES)),
     Param("bias_model", "rw", "bias process: rw (a random walk carrying the in-run "
           "instability) or gm (constant + Gauss-Markov states: in a layout that has them, e.g. "

@@ -74,6 +74,8 @@ class RunState:
     rest_dtheta, rest_time : (3,) ndarray, float
         The gyros' angle increments (as measured, before the running estimates' compensation)
         summed over the segments at rest since the last ZARU, rad, and their length, s.
+    turn : (3,) ndarray
+        The rotation of the current manoeuvre, body FLU, rad (propagation.turn_noise).
     pinned_antenna : tuple of 3 float or None
         (lat, lon, h) of the antenna at the last fix the filter took while the heading was
         unknown (the first fix included): the solution, run with a yaw that may be anything,
@@ -112,6 +114,7 @@ class RunState:
     omega_smooth: np.ndarray = field(default_factory=lambda: np.zeros(3))
     rest_dtheta: np.ndarray = field(default_factory=lambda: np.zeros(3))
     rest_time: float = 0.0
+    turn: np.ndarray = field(default_factory=lambda: np.zeros(3))
     pinned_antenna: tuple | None = None
     last_fix: tuple | None = None
     last_velocity: tuple | None = None

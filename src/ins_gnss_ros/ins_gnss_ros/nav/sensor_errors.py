@@ -129,6 +129,19 @@ CONSUMER_MEMS = ImuGrade(
                       scale_sigma=5000 * PPM, misalign_sigma=0.02),
     g_sensitivity_sigma=0.1 * DEG / 9.80665)
 
+#: A MEMS unit nobody calibrated, of any make (config/default.yaml): the ADIS16405 data sheet's
+#: turn-on biases and noise (:data:`MEMS_ADIS16405_DATASHEET`) with the consumer parts'
+#: scale-factor and cross-axis tolerances and g-sensitivity (:data:`CONSUMER_MEMS`), the wider
+#: of the two; the filter takes the gyros' scale and cross-axis errors into its attitude
+#: variance in turns (propagation.turn_noise).
+MEMS_UNCALIBRATED = ImuGrade(
+    "mems_uncalibrated",
+    gyro=replace(MEMS_ADIS16405_DATASHEET.gyro, scale_sigma=CONSUMER_MEMS.gyro.scale_sigma,
+                 misalign_sigma=CONSUMER_MEMS.gyro.misalign_sigma),
+    accel=replace(MEMS_ADIS16405_DATASHEET.accel, scale_sigma=CONSUMER_MEMS.accel.scale_sigma,
+                  misalign_sigma=CONSUMER_MEMS.accel.misalign_sigma),
+    g_sensitivity_sigma=CONSUMER_MEMS.g_sensitivity_sigma)
+
 #: Tactical grade (ring-laser / good FOG, ~1 °/h class).
 TACTICAL = ImuGrade(
     "tactical",
@@ -149,8 +162,8 @@ NAVIGATION = ImuGrade(
                       gm_sigma=10 * MICRO_G, gm_tau=3600.0, rw_density=0.0,
                       scale_sigma=50 * PPM, misalign_sigma=10e-6))
 
-GRADES = {g.name: g for g in (MEMS_ADIS16405, MEMS_ADIS16405_DATASHEET, CONSUMER_MEMS, TACTICAL,
-                              NAVIGATION)}
+GRADES = {g.name: g for g in (MEMS_ADIS16405, MEMS_ADIS16405_DATASHEET, CONSUMER_MEMS,
+                              MEMS_UNCALIBRATED, TACTICAL, NAVIGATION)}
 
 
 def error_matrix(scale, misalign):
