@@ -297,7 +297,7 @@ def test_a_standing_start_keeps_the_tilt_as_uncertain_as_the_accelerometers_make
     biases), and the rest's updates, which see only the tilt and the biases' sum, leave the
     horizontal biases as uncertain as they were (Navigator._held); the vertical one they
     measure."""
-    nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_adis16405_datasheet"}),
+    nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_uncalibrated"}),
                                      record=True))  # config/default.yaml's
     front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
     accel_bias = np.array([0.09, 0.02, -0.015]) * 9.80665
@@ -327,7 +327,7 @@ def test_a_standing_start_keeps_the_tilt_as_uncertain_as_the_accelerometers_make
 def test_a_still_imu_starts_the_filter_at_once_and_the_fixes_rest_confirms_its_velocity():
     """The ground robot: IMU still, fixes without covariance (1 m white, a 3 m offset common to
     all) at 2.5 Hz, a heading source; the product's navigator behind the front end."""
-    nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_adis16405_datasheet"}),
+    nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_uncalibrated"}),
                                      record=True))  # config/default.yaml's
     front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
     bias = np.radians([0.3, -0.2, 0.1])  # deg/s, a MEMS turn-on bias
@@ -408,7 +408,7 @@ def test_the_rate_update_at_rest_averages_all_of_the_rest_to_the_white_noise_lim
     earth = earth_rate_enu(np.radians(lat0))  # body axes = ENU: levelled with yaw 0
     normalised = []
     for draw in range(8):
-        nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_adis16405_datasheet"}),
+        nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_uncalibrated"}),
                                          record=True))
         front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
         noise = nav.config.noise
