@@ -716,9 +716,8 @@ class Navigator:
         deviations of the three was not the body's: the source is refuted (refused from now on,
         Aiding.heading) and the heading aligned again on this course (on the next one where m
         only checks: GnssVelocity.checks_only). A yaw relative to where a 6-axis unit started,
-        its covariance small
-        against REP-145: on a simulated car the filter held a heading 107 deg off (NEES 7,400;
-        docs/results/product_path.md, "2026-12-06 (session 28)")."""
+        its covariance small against REP-145: on a simulated car the filter held a heading
+        107 deg off (NEES 7,400; docs/results/product_path.md, "2026-12-06 (session 28)")."""
         s = self._state
         v = np.asarray(m.v_enu, float)
         vel, yaw = self._space["vel"], self._space["att"].stop - 1
