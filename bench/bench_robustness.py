@@ -24,7 +24,7 @@ Usage::
     .venv/bin/python bench/bench_robustness.py            # the full matrix (~15 min)
     .venv/bin/python bench/bench_robustness.py --short    # three cells
     .venv/bin/python bench/bench_robustness.py --cells 9 --seeds 3 4 5 6 7   # over seeds
-    (test/trial/test_robustness.py runs seven of the cells, 60 s each, in CI)
+    (test/trial/test_robustness.py runs eight of the cells, 60 s each, in CI)
 """
 from __future__ import annotations
 
