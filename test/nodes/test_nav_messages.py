@@ -5,7 +5,7 @@ from sensor_msgs.msg import NavSatStatus
 
 from ins_gnss_ros.gnss.observations import NmeaFix
 from ins_gnss_ros.nodes.gnss_messages import fix_from_gga
-from ins_gnss_ros.nodes.nav_messages import fix_status
+from ins_gnss_ros.nodes.nav_messages import OutputSchedule, fix_status
 
 S = NavSatStatus
 
@@ -26,6 +26,35 @@ def test_gga_rtk_fixed_is_gbas_and_float_is_not():
     assert [status(q) for q in (0, 1, 2, 4, 5)] == [S.STATUS_NO_FIX, S.STATUS_FIX,
                                                      S.STATUS_SBAS_FIX, S.STATUS_GBAS_FIX,
                                                      S.STATUS_SBAS_FIX]
+
+
+def _published(stamps, rate_hz=10.0, skip=()):
+    """The stamps an OutputSchedule publishes of these states (those in ``skip`` cannot be)."""
+    schedule, out = OutputSchedule(rate_hz), []
+    for t in stamps:
+        if schedule.due(t) and t not in skip:
+            schedule.published(t)
+            out.append(t)
+    return out
+
+
+def test_the_solution_keeps_its_rate_from_jittered_states_at_any_imu_rate():
+    """A 10 Hz output from states whose stamps scatter 0.1 ms (drivers' stamps): every state
+    of a 10 Hz IMU (a strict "a period since the last" took every other one), every tenth of a
+    100 Hz one, every third of a 30 Hz one; once the due state cannot be published (not yet
+    corrected) the next one is, and the output goes on a period from it."""
+    import numpy as np
+
+    rng = np.random.default_rng(1)
+    for rate, every in ((10, 1), (30, 3), (100, 10), (1000, 100)):
+        stamps = (np.arange(20 * rate) / rate + rng.uniform(-1e-4, 1e-4, 20 * rate)).tolist()
+        intervals = np.diff(_published(stamps))
+        assert np.allclose(intervals, every / rate, atol=3e-4), rate
+    stamps = (np.arange(100) / 20).tolist()
+    assert np.allclose(np.diff(_published(stamps, skip={stamps[10]})),
+                       [0.1] * 4 + [0.15] + [0.1] * 44)
+    # a looped bag starts the output again
+    assert _published([0.0, 0.1, 0.2, 0.0, 0.1]) == [0.0, 0.1, 0.2, 0.0, 0.1]
 
 
 def _epochs(k, seed=0):

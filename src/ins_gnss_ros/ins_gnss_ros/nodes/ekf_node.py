@@ -25,8 +25,10 @@ Outputs: ``nav/odom`` (ENU ``map`` frame around a datum, covariance from the fil
 not a fix; else the augmentation of the fixes it navigates on), ``nav/imu`` (the INS
 orientation as sensor_msgs/Imu), ``nav/status`` (mode, coupling, every update with innovation,
 NIS and verdict), ``nav/datum`` (latched) and, with ``publish_tf``, ``/tf`` map -> base_link
-and ``/tf_static`` base_link -> gnss_0 (REP-105, nodes/tf_messages.py);
-/diagnostics says why the filter is not navigating (what it waits for), the datum and, per
+and ``/tf_static`` base_link -> gnss_0 (REP-105, nodes/tf_messages.py). The solution topics
+come at ``output_rate_hz`` (:class:`.nav_messages.OutputSchedule`) from the strapdown's
+``ins/state`` that carry every correction sent, or lack only the last one, which the node
+applies to them; /diagnostics says why the filter is not navigating (what it waits for), the datum and, per
 aiding input, its rate, staleness and refusals. The mode on nav/status and in nav/fix is the
 filter's, but ALIGNING from its heading alignment until the strapdown's ``ins/state`` carries the
 correction made after it (``StrapdownSync.mode``): the outputs agree about when the solution is
@@ -71,15 +73,15 @@ from ..nav.error_model import LAYOUTS
 from ..nav.filter_config import PARAMS, navigator_config
 from ..nav.frame_tree import FrameTree
 from ..nav.odom_frame import OdomTrack
-from ..nav.strapdown import NavState
+from ..nav.strapdown import NavState, apply_correction
 from ..nav.strapdown_sync import StrapdownSync
 from .base import DRIVER_QOS, LATCHED_QOS, SENSOR_QOS, STATE_QOS, TF_QOS, TF_STATIC_QOS, \
     TF_STATIC_READ_QOS, NavNode, ParameterError, run
 from .convert import MODE_VALUES, increment_of, nav_state_from_msg, sensor_errors_of, set_vector3
 from .ekf_inputs import EkfInputs
 from .ekf_services import EkfServices
-from .nav_messages import datum_msg, fix_payload, fix_status, imu_payload, odom_payload, \
-    status_msg
+from .nav_messages import OutputSchedule, datum_msg, fix_payload, fix_status, imu_payload, \
+    odom_payload, status_msg
 from .tf_messages import FRAME_PARAMS, solution_tf, static_tf
 
 #: QoS of the inputs that are not sensor streams (EkfInputs.handlers gives the topics).
@@ -130,7 +132,8 @@ class EkfNode(EkfServices, NavNode):
         self.awaiting_state = False
         self.accepted = 0
         self.rejected = 0
-        self.last_output_t = -np.inf
+        self.output = OutputSchedule(p["output_rate_hz"])
+        self.last_correction = None  # the last ins/correction sent (a Correction)
         self.last_status_t = -np.inf
         self.published_datum = None
         self.converging = False  # re-synchronising the strapdown onto a set pose
@@ -194,11 +197,22 @@ class EkfNode(EkfServices, NavNode):
         if self.awaiting_state:
             self.after_filter()
         t = stamp * 1e-9
-        if self.navigator.started and self.sync.current(sequence) \
-                and t - self.last_output_t >= 1.0 / self.p["output_rate_hz"]:
-            self.last_output_t = t
-            msg = self._decode_state(data)
-            self.publish_solution(nav_state_from_msg(msg), msg)
+        if self.navigator.started and self.output.due(t):
+            # A state lacking only the last correction, made on it (which waited for it) or on
+            # a state before it while it was on its way, is with it the filter's solution (to
+            # the correction's change over the interval between them, second order): at an IMU
+            # rate near the output rate (10 Hz) skipping it lost most fix epochs' output.
+            last = self.last_correction
+            lacks_last = last is not None and stamp >= last.t_ns \
+                and sequence == last.sequence - 1 == self.sync.sequence - 1
+            if lacks_last or self.sync.current(sequence):
+                msg = self._decode_state(data)
+                st = nav_state_from_msg(msg)
+                if lacks_last:
+                    st = apply_correction(st, last.position_error, last.velocity_error,
+                                          last.attitude_error)
+                self.output.published(t)
+                self.publish_solution(st, msg)
         # The mode is reported even when nothing updates, and at once when this state is the
         # first to carry the alignment.
         if t - self.last_status_t >= 1.0 or (self.sync.alignment_applied and not was_applied):
@@ -310,6 +324,7 @@ class EkfNode(EkfServices, NavNode):
         set_vector3(corr.gyro_scale_factor, c.sensor.gyro_scale)
         set_vector3(corr.accel_scale_factor, c.sensor.accel_scale)
         self.pub_correction.publish(corr)
+        self.last_correction = c
 
     def report_updates(self) -> None:
         nav = self.navigator

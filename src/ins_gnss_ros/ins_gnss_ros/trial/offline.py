@@ -405,15 +405,18 @@ class _OutputRows:
         ``output_rate_hz`` from those states, each with the covariance of the epoch before it
         (the filter's when that sample arrives). Of a solution without samples (the smoothed
         one): everything at every epoch."""
+        from ins_gnss_ros.nodes.nav_messages import OutputSchedule
+
         samples = getattr(result, "samples", None)
         if samples is None:
             n = len(result.t)
             return cls(result, np.arange(n), np.ones(n, bool))
         outputs = np.zeros(len(samples.t), bool)
-        last, period = -np.inf, 1.0 / output_rate_hz
+        schedule = OutputSchedule(output_rate_hz)  # as the ekf node's on_ins_state
         for i, t in enumerate(samples.t.tolist()):
-            if t - last >= period:  # as the ekf node's on_ins_state
-                outputs[i], last = True, t
+            if schedule.due(t):
+                outputs[i] = True
+                schedule.published(t)
         return cls(samples, samples.epoch - 1, outputs)
 
 
