@@ -395,6 +395,40 @@ def test_a_still_imu_starts_the_filter_at_once_and_the_fixes_rest_confirms_its_v
     np.testing.assert_allclose(published_covariance(out.P[-1], out.published_var[-1])[:2, :2], P)
 
 
+@pytest.mark.parametrize("reported", [0.1, 2.0])
+def test_a_placeholder_fix_covariance_is_refuted_by_the_fixes_scatter_at_rest(reported):
+    """2 m fixes whose driver reports 0.1 m (a placeholder), at rest: once ten second
+    differences of fixes taken while the IMU is still measure their scatter, they are taken as
+    fixes without covariance (the status's 5 m, followed with the measured white noise); taken
+    as reported, they were refused at the gate, then forced in, and a whole simulated drive
+    was degraded (docs/results/product_path.md, "2026-12-06 (session 32)"). Reported as 2 m,
+    they are taken as reported."""
+    nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_uncalibrated"})))
+    events = []
+    front = Aiding(nav, AidingPolicy(), lambda text, log=True: events.append(text))
+    rng = np.random.default_rng(6)
+    lat0, lon0 = 59.9, 30.3
+    taken = []
+    for k in range(1, 101):  # 20 s at 5 Hz
+        t = k / 5.0
+        still_imu(front, t - 0.2, t, np.zeros(3), seed=k)
+        e, n, u = 2.0 * rng.standard_normal(3)
+        front.fix(t, lat0 + n / M_PER_DEG, lon0 + e / (M_PER_DEG * np.cos(np.radians(lat0))),
+                  10.0 + 2.0 * u, np.diag([reported ** 2, reported ** 2, 4.0 * reported ** 2]),
+                  0, covariance_known=True)
+        taken.append(nav.covariance()[0, 0] if nav.started else np.nan)
+    refuted = [e for e in events if "covariance refuted" in e]
+    if reported == 2.0:
+        assert not refuted
+        return
+    assert refuted and "5 m assumed" in refuted[0]
+    # the filter's horizontal sigma keeps the assumed 5 m's shared part: not the 0.1 m
+    assert np.sqrt(taken[-1]) > 2.0
+    lat, lon = np.degrees(nav.solution.lat), np.degrees(nav.solution.lon)
+    err = np.array([(lon - lon0) * M_PER_DEG * np.cos(np.radians(lat0)), (lat - lat0) * M_PER_DEG])
+    assert err @ np.linalg.solve(nav.covariance()[:2, :2], err) < 25.0
+
+
 def test_a_fix_without_an_altitude_is_taken_with_the_height_left_to_the_ins():
     """NavSatFix's altitude is NaN where none is available (a 2-D fix): such fixes were all
     refused as non-finite, and nothing navigated. Now the horizontal is taken; the height is the

@@ -216,6 +216,43 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma):
     return v, full, gains, chi2, dof
 
 
+class WhiteNoise:
+    """The fixes' white variance per horizontal axis from their differences: the median of the
+    last SCATTER_SAMPLES squared east and north components over the chi-square median and the
+    difference's gain (a second difference r2 - 2 r1 + r0 of equally spaced fixes has six times
+    their variance, a third difference twenty), which the few large ones of a vehicle's
+    accelerations among them do not move."""
+
+    def __init__(self, gain: float = 6.0):
+        self.gain = gain
+        # (east^2, north^2) of each, Python floats, m^2, and the same values kept sorted: every
+        # fix asks for their median, and sorting a hundred values per fix cost more than the
+        # rest of a fix's front end (the median of the sorted list is statistics.median's).
+        self._second_differences: deque = deque(maxlen=SCATTER_SAMPLES)
+        self._sorted: list[float] = []
+        self._white = None  # the white variance of the current values, once asked for
+
+    def add(self, pair: tuple) -> None:
+        """One second difference's squared (east, north) components, m^2."""
+        if len(self._second_differences) == SCATTER_SAMPLES:
+            for x in self._second_differences[0]:  # the pair the append below drops
+                del self._sorted[bisect.bisect_left(self._sorted, x)]
+        self._second_differences.append(pair)
+        for x in pair:
+            bisect.insort(self._sorted, x)
+        self._white = None
+
+    def variance(self) -> float | None:
+        """The white variance per horizontal axis, m^2, or None before MIN_SCATTER_SAMPLES."""
+        if len(self._second_differences) < MIN_SCATTER_SAMPLES:
+            return None
+        if self._white is None:
+            values, n = self._sorted, len(self._sorted)
+            median = values[n // 2] if n % 2 else (values[n // 2 - 1] + values[n // 2]) / 2
+            self._white = median / CHI2_1_MEDIAN / self.gain
+        return self._white
+
+
 class CourseFromFixes:
     """Turns successive fixes into velocities (:class:`GnssVelocity`)."""
 
@@ -223,12 +260,7 @@ class CourseFromFixes:
         self._window: list[tuple[np.ndarray, GnssFix]] = []  # ECEF, the fix
         self._run: list[tuple[np.ndarray, float, GnssFix]] = []  # ECEF, the INS's yaw, the fix
         self._last3: deque = deque(maxlen=3)                           # t, ECEF
-        # (east^2, north^2) of each, Python floats, m^2, and the same values kept sorted: every
-        # fix asks for their median, and sorting a hundred values per fix cost more than the
-        # rest of a fix's front end (the median of the sorted list is statistics.median's).
-        self._second_differences: deque = deque(maxlen=SCATTER_SAMPLES)
-        self._sorted: list[float] = []
-        self._white = None  # the white variance of the current values, once asked for
+        self._noise = WhiteNoise()
 
     def clear(self) -> None:
         """Forget the fixes of the current window and run (the heading is known, or a velocity
@@ -239,14 +271,11 @@ class CourseFromFixes:
     def fix_to_fix(self, cov: np.ndarray) -> np.ndarray:
         """A fix's ENU covariance (m^2) for differences over a few seconds: its horizontal part
         no larger than the white variance the fixes show (once enough of them came)."""
-        if len(self._second_differences) < MIN_SCATTER_SAMPLES:
+        white = self._noise.variance()
+        if white is None:
             return cov
-        if self._white is None:
-            values, n = self._sorted, len(self._sorted)
-            median = values[n // 2] if n % 2 else (values[n // 2 - 1] + values[n // 2]) / 2
-            self._white = median / CHI2_1_MEDIAN / 6.0
         out = cov.copy()
-        out[0, 0] = out[1, 1] = min(self._white, 0.5 * (cov[0, 0] + cov[1, 1]))
+        out[0, 0] = out[1, 1] = min(white, 0.5 * (cov[0, 0] + cov[1, 1]))
         # (a variance: never NaN or negative, as np.eye(2) * it); the white part's covariance
         # with the vertical is not measured, and the given one could leave the matrix
         # indefinite beside the smaller horizontal variance
@@ -331,24 +360,20 @@ class CourseFromFixes:
                       if last.t - f.t <= WINDOW_S)
         return GnssVelocity(last.t, v, cov, fixes, checks_only=checks_only)
 
-    def observe(self, t: float, lat: float, lon: float, h: float) -> None:
-        """Every fix (t s; rad, rad, m), for the fix-to-fix noise of :meth:`fix_to_fix`."""
+    def observe(self, t: float, lat: float, lon: float, h: float) -> np.ndarray | None:
+        """Every fix (t s; rad, rad, m), for the fix-to-fix noise of :meth:`fix_to_fix`.
+        Returns the (east, north) second difference it ends, m, or None (no fix before it
+        equally spaced)."""
         r = geodetic_to_ecef(lat, lon, h)
         if self._last3 and (t <= self._last3[-1][0] or np.array_equal(r, self._last3[-1][1])):
-            return  # a repeat (duplicated, or republished while frozen) has no noise of its own
+            return None  # a repeat (duplicated, or republished while frozen) has no noise
         self._last3.append((t, r))
         if len(self._last3) < 3:
-            return
+            return None
         (t0, r0), (t1, r1), (t2, r2) = self._last3
         if abs((t2 - t1) - (t1 - t0)) > 0.1 * (t2 - t0):
-            return  # a dropped fix: not equally spaced
+            return None  # a dropped fix: not equally spaced
         # (the array's dot: the same BLAS product as @, at half the cost on a 3-vector)
         s = ecef_to_enu_matrix(lat, lon).dot(r2 - 2.0 * r1 + r0)[:2]
-        pair = tuple((s * s).tolist())
-        if len(self._second_differences) == SCATTER_SAMPLES:
-            for x in self._second_differences[0]:  # the pair the append below drops
-                del self._sorted[bisect.bisect_left(self._sorted, x)]
-        self._second_differences.append(pair)
-        for x in pair:
-            bisect.insort(self._sorted, x)
-        self._white = None
+        self._noise.add(tuple((s * s).tolist()))
+        return s

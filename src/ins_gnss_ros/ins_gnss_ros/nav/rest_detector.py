@@ -67,6 +67,8 @@ class RestDetector:
         self._reference = None      # block means (f, w) at the start of the still run
         self._any_block = False     # a block has been judged
         self.still_since = math.nan  # start of the current run of still blocks, s
+        # the same, whatever the fixes say of it (motion they see ends the run, not this), s
+        self.blocks_still_since = math.nan
         self.at_rest = False         # the fixes of this run confirmed rest
         self.still_until = -math.inf  # end of the last still block, s
         self._fixes = None           # least-squares sums of the run's fixes
@@ -85,6 +87,12 @@ class RestDetector:
         """The IMU alone has been still for ``MIN_STILL_S`` by t (s): at rest or in steady
         straight motion, which only the fixes tell apart."""
         return t - self.still_since >= MIN_STILL_S  # False while still_since is NaN
+
+    def blocks_still(self, t: float) -> bool:
+        """The IMU's blocks have been still for ``MIN_STILL_S`` by t (s), whatever the fixes
+        said meanwhile: the vehicle's acceleration is constant (rest, steady straight motion or
+        a steady acceleration), so that the fixes' third differences are their noise alone."""
+        return t - self.blocks_still_since >= MIN_STILL_S  # False while NaN
 
     def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray, dt: float) -> bool:
         """Add an IMU increment over dt (s) ending at t (s). Returns True when it closed a
@@ -113,10 +121,13 @@ class RestDetector:
             self.still_until = t
             if math.isnan(self.still_since):
                 self.still_since = b[0]
+            if math.isnan(self.blocks_still_since):
+                self.blocks_still_since = b[0]
             for v_east, v_north in pending:
                 self._add_velocity(v_east, v_north)
             return self.at_rest
         self._end_run()
+        self.blocks_still_since = math.nan
         return False
 
     def _still(self, b) -> bool:

@@ -85,6 +85,9 @@ def _simulate_args(p):
                    help="vertical position noise, m")
     p.add_argument("--gnss-sigma-vel", type=float, default=SimOptions.gnss_sigma_vel,
                    help="velocity noise per axis, m/s")
+    p.add_argument("--gnss-sigma-h-reported", type=float, default=None,
+                   help="horizontal sigma gnss/fix reports, m, the vertical in proportion "
+                        "(default: the true ones)")
     p.add_argument("--gnss-sigma-vel-reported", type=float, default=None,
                    help="velocity sigma per axis gnss/vel reports, m/s (default: the true one)")
     p.add_argument("--wheel-odometry", action="store_true",
@@ -284,6 +287,7 @@ def cmd_simulate(args) -> int:
                                gnss_covariance=not args.no_gnss_cov,
                                gnss_sigma_h=args.gnss_sigma_h, gnss_sigma_v=args.gnss_sigma_v,
                                gnss_sigma_vel=args.gnss_sigma_vel,
+                               gnss_sigma_h_reported=args.gnss_sigma_h_reported,
                                gnss_sigma_vel_reported=args.gnss_sigma_vel_reported,
                                wheel_odometry=args.wheel_odometry,
                                wheel_scale_error=args.wheel_scale_error,

@@ -91,6 +91,9 @@ class SimOptions:
         and an all-zero velocity covariance).
     gnss_sigma_h, gnss_sigma_v : float
         White position noise per horizontal axis and vertical, m.
+    gnss_sigma_h_reported : float or None
+        The horizontal sigma ``gnss/fix`` reports, m, the vertical in the same proportion
+        (None: the true ones; a driver's placeholder covariance otherwise).
     gnss_sigma_vel : float
         White velocity noise per axis, m/s.
     gnss_sigma_vel_reported : float or None
@@ -154,6 +157,7 @@ class SimOptions:
     gnss_covariance: bool = True
     gnss_sigma_h: float = 0.5
     gnss_sigma_v: float = 1.0
+    gnss_sigma_h_reported: float | None = None
     gnss_sigma_vel: float = 0.05
     gnss_sigma_vel_reported: float | None = None
     gnss_latency: float = 0.0
@@ -212,6 +216,9 @@ def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions
         raise ValueError(f"antennas must be 0 to 4, got {options.antennas}")
     if options.broadcast_residuals and not options.antennas:
         raise ValueError("broadcast residuals need the raw GNSS of antennas >= 1")
+    if options.gnss_sigma_h_reported is not None and not options.gnss_sigma_h > 0.0:
+        raise ValueError("a reported fix sigma needs gnss_sigma_h > 0 (its vertical in "
+                         "proportion)")
     # Words of one SeedSequence: a fifth (the wheels), a sixth (the raw GNSS) leave the first
     # ones as they were.
     seeds = np.random.SeedSequence(seed).generate_state(6)
@@ -311,6 +318,8 @@ def _write_gnss(writer, traj, options, rng, latency_rng):
     reported = options.gnss_sigma_vel if options.gnss_sigma_vel_reported is None \
         else options.gnss_sigma_vel_reported
     var, var_v = sigma ** 2, [reported ** 2] * 3
+    if options.gnss_sigma_h_reported is not None:
+        var = var * (options.gnss_sigma_h_reported / options.gnss_sigma_h) ** 2
     arrival = t_ns
     if options.gnss_latency > 0.0:
         arrival = t_ns + bag.sec_to_ns(options.gnss_latency
