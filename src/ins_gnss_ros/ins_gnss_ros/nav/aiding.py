@@ -86,16 +86,25 @@ MOVING_SIGMAS = 3.0
 #: times its sigma while the IMU is still (an honest one's does so with 10 degrees of freedom
 #: with probability P(chi2_10 > 40) = 2e-5): a driver's placeholder covariance, taken as it
 #: was, let 0.3 m/s of noise reported as 0.03 align the heading in the standstill 20 sigma off.
-#: Its fixes' covariance likewise, by their third differences while the IMU is still (the
-#: vehicle at rest or in steady straight motion, or a steady acceleration a smooth vehicle's
-#: IMU may pass as still, which leaves second differences but no third ones: the differences
-#: are the fixes' noise alone): 2 m fixes reported as 0.1 m were refused at the gate, then
-#: forced in, and a whole simulated drive was degraded with no valid nav/fix. A refuted fix is
-#: taken as one without covariance, so a false refutation costs little: fixes reporting just
-#: their white noise are refuted on 2e-4 of the fixes of a standstill (Monte Carlo, 2000
-#: standstills of 30 s at 5 Hz, 1 % with one such fix; most where ten differences first make
-#: the median).
+#: Its fixes' covariance likewise, by their scatter about the vehicle's motion (2 m fixes
+#: reported as 0.1 m were refused at the gate, then forced in, and a whole simulated drive was
+#: degraded with no valid nav/fix): their second differences less what the receiver's
+#: velocities say the acceleration made of them, or without those, while the IMU is still
+#: (rest, steady straight motion, or a steady acceleration a smooth vehicle's IMU may pass as
+#: still, which leaves second differences but no third ones) their third differences. A refuted
+#: fix is taken as one without covariance, so a false refutation costs little: fixes reporting
+#: just their white noise are refuted by third differences on 2e-4 of the fixes of a
+#: standstill (Monte Carlo, 2000 standstills of 30 s at 5 Hz, 1 % of them with one such fix;
+#: most where ten differences first make the median).
 COVARIANCE_REFUTED = 2.0
+#: A vehicle's largest fourth derivative of position, m/s^4 (a car turning in: its lateral
+#: acceleration's jerk of a few m/s^3 changing within a second). A second difference of fixes
+#: dt apart less dt (v2 - v0) / 2 keeps snap dt^4 / 12 of the motion: the velocities measure a
+#: reported sigma only where that is below half of it (a 1 Hz receiver's 2 cm: no; its 5 Hz
+#: ones' 2 cm, 1 mm: yes).
+MAX_SNAP = 5.0
+#: Receiver velocities kept to be paired with the fixes of their epochs.
+RECENT_VELOCITIES = 8
 #: Heights this filter navigates at, m (a fix outside is corrupt; the integrity logic would
 #: otherwise force it in after a while).
 HEIGHT_RANGE = (-1000.0, 1e5)
@@ -314,10 +323,15 @@ class Aiding:
         self.last_accepted_t = -math.inf  # newest accepted update, s
         self.forced: set[str] = set()  # kinds forced in since the filter last NAVIGATED
         self._course = CourseFromFixes()
-        # the white noise of the fixes of each NavSatStatus status while the IMU is still, and
-        # the (status, second difference) of the last fix if it came then
-        self._still_fix_noise: dict[int, WhiteNoise] = {}
+        # The fixes' scatter in units of their reported variance per NavSatStatus status
+        # (_fix_covariance_refuted); the (status, second difference) of the last fix if the
+        # IMU was still then; the last fix's difference, judged at the next fix (by which the
+        # velocity of its epoch has come: _add_scatter's arguments); the latest gnss/vel
+        # (stamp s, east and north m/s, horizontal variance per axis m^2/s^2).
+        self._fix_scatter: dict[int, WhiteNoise] = {}
         self._still_second_difference = None
+        self._pending_difference = None
+        self._recent_velocities: deque = deque(maxlen=RECENT_VELOCITIES)
         # (heading known, the source it waits on) when the course last took the INS's yaw
         self._course_heading = (False, None)
         self._white_share = None  # (stamp s, the fixes' white share averaged up to it)
@@ -554,18 +568,20 @@ class Aiding:
             self.report("gnss/fix at 0 N 0 E rejected (a driver's placeholder)")
             return self._seen("gnss/fix", t, False)
         assumed = not covariance_known or _unknown(cov)
-        if assumed or self._fix_covariance_refuted(status, cov):
+        reported_var = None if assumed else \
+            max(0.5 * float(cov[0, 0] + cov[1, 1]), self.policy.position_sigma_floor ** 2)
+        if assumed or self._fix_covariance_refuted(status):
             sigma = UNKNOWN_FIX_SIGMA[min(status, 2)]
             cov = np.diag([sigma ** 2, sigma ** 2, (2.0 * sigma) ** 2])
             why = "without covariance" if assumed else \
-                "covariance refuted by the fixes' scatter while the IMU is still"
+                "covariance refuted by the fixes' own scatter"
             self.report(f"gnss/fix {why}: {sigma:g} m assumed from its status, weighted by the "
                         "fixes' measured fix-to-fix noise", log=False)
         cov = _floored(cov, self.policy.position_sigma_floor)
         lat, lon = math.radians(lat_deg), math.radians(lon_deg)
         if self.datum is None:
             self.datum = (lat, lon, h)
-        self._note_still_scatter(t, status, self._course.observe(t, lat, lon, h))
+        self._note_scatter(t, status, reported_var, self._course.observe(t, lat, lon, h))
         east, north, _ = to_map(self.datum, lat, lon, h).tolist()
         self.timing.fix(t, east, north)
         self.navigator.note_imu_rates_wrong(self.timing.verdict().rates_wrong)
@@ -613,26 +629,57 @@ class Aiding:
         self._course_velocity(t, lat, lon, h, cov)
         return self._seen("gnss/fix", t, True)
 
-    def _note_still_scatter(self, t: float, status: int, second_difference) -> None:
-        """The third difference a fix at t (s) ends while the IMU is still, for
-        :meth:`_fix_covariance_refuted`: the change of the fixes' second difference (m, east
-        and north; None after a gap or a repeat) since the fix before, of the same status."""
+    def _note_scatter(self, t: float, status: int, reported_var: float | None,
+                      observed: tuple | None) -> None:
+        """A fix at t (s) of this status and reported horizontal variance per axis (m^2, None:
+        none reported) with the second difference it ends (CourseFromFixes.observe: the stamp
+        of its first fix and the difference, or None): the last fix's difference is judged now,
+        this one's at the next fix."""
+        pending, self._pending_difference = self._pending_difference, None
+        if pending is not None:
+            self._add_scatter(*pending)
         previous, self._still_second_difference = self._still_second_difference, None
-        if second_difference is None or not (self._rest_wanted() and self._rest.blocks_still(t)):
+        if observed is None or reported_var is None:
             return
-        self._still_second_difference = (status, second_difference)
-        if previous is not None and previous[0] == status:
-            d = second_difference - previous[1]
-            self._still_fix_noise.setdefault(status, WhiteNoise(gain=20.0)).add(
-                tuple((d * d).tolist()))
+        t0, second = observed
+        third = None
+        if self._rest_wanted() and self._rest.blocks_still(t):
+            self._still_second_difference = (status, second)
+            if previous is not None and previous[0] == status:
+                third = second - previous[1]
+        self._pending_difference = (status, reported_var, t0, t, second, third)
 
-    def _fix_covariance_refuted(self, status: int, cov: np.ndarray) -> bool:
+    def _add_scatter(self, status: int, reported_var: float, t0: float, t2: float,
+                     second: np.ndarray, third: np.ndarray | None) -> None:
+        """One difference of the fixes' noise alone, in units of their reported variance: the
+        second difference of the fixes t0 .. t2 (s) less dt (v2 - v0) / 2 (dt = (t2 - t0) / 2,
+        the receiver's velocities at its ends: the acceleration's part) where the motion's
+        snap leaves less than half the reported sigma (MAX_SNAP), else the third difference the
+        fixes made while the IMU was still."""
+        dt = 0.5 * (t2 - t0)
+        ends = self._velocity_at(t0), self._velocity_at(t2)
+        if None not in ends and MAX_SNAP * dt ** 4 / 12.0 < 0.5 * math.sqrt(reported_var):
+            (v0, var0), (v2, var2) = ends
+            difference = second - 0.5 * dt * (v2 - v0)
+            gain = 6.0 * reported_var + 0.25 * dt * dt * (var0 + var2)
+        elif third is not None:
+            difference, gain = third, 20.0 * reported_var
+        else:
+            return
+        self._fix_scatter.setdefault(status, WhiteNoise()).add(difference, gain)
+
+    def _velocity_at(self, t: float):
+        """The gnss/vel stamped t (s, to 1 ms) as (east and north, m/s; its horizontal variance
+        per axis, m^2/s^2), or None."""
+        return next(((v, var) for stamp, v, var in reversed(self._recent_velocities)
+                     if abs(stamp - t) < 1e-3), None)
+
+    def _fix_covariance_refuted(self, status: int) -> bool:
         """The fixes of this status scattered more than COVARIANCE_REFUTED times the horizontal
-        sigma this one reports (floored) while the IMU was still: a driver's placeholder."""
-        noise = self._still_fix_noise.get(status)
-        white = None if noise is None else noise.variance()
-        reported = max(0.5 * float(cov[0, 0] + cov[1, 1]), self.policy.position_sigma_floor ** 2)
-        return white is not None and white > COVARIANCE_REFUTED ** 2 * reported
+        sigma they report (floored): a driver's placeholder."""
+        noise = self._fix_scatter.get(status)
+        ratio = None if noise is None else noise.variance()
+        return ratio is not None and ratio > COVARIANCE_REFUTED ** 2
 
     def _height_of_2d_fix(self) -> float:
         """The height given a fix without one: the solution's, or before it the first fix's
@@ -743,6 +790,8 @@ class Aiding:
         aligns = t - self._rest.still_until > REST_HOLD or \
             (not math.isnan(scatter) and course_is_known(v_enu, cov))
         cov = _floored(cov, self.policy.velocity_sigma_floor)
+        self._recent_velocities.append((t, np.array(v_enu[:2], float),
+                                        0.5 * float(cov[0, 0] + cov[1, 1])))
         self.navigator.add_measurement(
             GnssVelocity(t - self.policy.velocity_delay, v_enu, cov, aligns=aligns))
         return self._seen("gnss/vel", t, True)

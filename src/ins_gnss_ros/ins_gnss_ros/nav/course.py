@@ -218,38 +218,40 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma):
 
 class WhiteNoise:
     """The fixes' white variance per horizontal axis from their differences: the median of the
-    last SCATTER_SAMPLES squared east and north components over the chi-square median and the
-    difference's gain (a second difference r2 - 2 r1 + r0 of equally spaced fixes has six times
-    their variance, a third difference twenty), which the few large ones of a vehicle's
-    accelerations among them do not move."""
+    last SCATTER_SAMPLES squared east and north components, each over its difference's gain,
+    over the chi-square median, which the few large ones of a vehicle's accelerations among
+    them do not move. The gain is the difference's variance over the fixes' (six for a second
+    difference r2 - 2 r1 + r0 of equally spaced fixes, twenty for a third difference); given in
+    the fixes' reported variance as well, the estimate is their scatter in units of it."""
 
-    def __init__(self, gain: float = 6.0):
-        self.gain = gain
-        # (east^2, north^2) of each, Python floats, m^2, and the same values kept sorted: every
-        # fix asks for their median, and sorting a hundred values per fix cost more than the
-        # rest of a fix's front end (the median of the sorted list is statistics.median's).
-        self._second_differences: deque = deque(maxlen=SCATTER_SAMPLES)
+    def __init__(self):
+        # (east^2, north^2) / gain of each, Python floats, and the same values kept sorted:
+        # every fix asks for their median, and sorting a hundred values per fix cost more than
+        # the rest of a fix's front end (the median of the sorted list is statistics.median's).
+        self._differences: deque = deque(maxlen=SCATTER_SAMPLES)
         self._sorted: list[float] = []
         self._white = None  # the white variance of the current values, once asked for
 
-    def add(self, pair: tuple) -> None:
-        """One second difference's squared (east, north) components, m^2."""
-        if len(self._second_differences) == SCATTER_SAMPLES:
-            for x in self._second_differences[0]:  # the pair the append below drops
+    def add(self, difference: np.ndarray, gain: float = 6.0) -> None:
+        """One difference of the fixes (east, north, m) whose variance is ``gain`` times
+        theirs."""
+        if len(self._differences) == SCATTER_SAMPLES:
+            for x in self._differences[0]:  # the pair the append below drops
                 del self._sorted[bisect.bisect_left(self._sorted, x)]
-        self._second_differences.append(pair)
+        pair = tuple((difference * difference / gain).tolist())
+        self._differences.append(pair)
         for x in pair:
             bisect.insort(self._sorted, x)
         self._white = None
 
     def variance(self) -> float | None:
-        """The white variance per horizontal axis, m^2, or None before MIN_SCATTER_SAMPLES."""
-        if len(self._second_differences) < MIN_SCATTER_SAMPLES:
+        """The white variance per horizontal axis, or None before MIN_SCATTER_SAMPLES."""
+        if len(self._differences) < MIN_SCATTER_SAMPLES:
             return None
         if self._white is None:
             values, n = self._sorted, len(self._sorted)
             median = values[n // 2] if n % 2 else (values[n // 2 - 1] + values[n // 2]) / 2
-            self._white = median / CHI2_1_MEDIAN / self.gain
+            self._white = median / CHI2_1_MEDIAN
         return self._white
 
 
@@ -360,10 +362,10 @@ class CourseFromFixes:
                       if last.t - f.t <= WINDOW_S)
         return GnssVelocity(last.t, v, cov, fixes, checks_only=checks_only)
 
-    def observe(self, t: float, lat: float, lon: float, h: float) -> np.ndarray | None:
+    def observe(self, t: float, lat: float, lon: float, h: float) -> tuple | None:
         """Every fix (t s; rad, rad, m), for the fix-to-fix noise of :meth:`fix_to_fix`.
-        Returns the (east, north) second difference it ends, m, or None (no fix before it
-        equally spaced)."""
+        Returns the stamp of the first fix of the second difference it ends and that
+        difference (east, north, m), or None (no two fixes before it equally spaced)."""
         r = geodetic_to_ecef(lat, lon, h)
         if self._last3 and (t <= self._last3[-1][0] or np.array_equal(r, self._last3[-1][1])):
             return None  # a repeat (duplicated, or republished while frozen) has no noise
@@ -375,5 +377,5 @@ class CourseFromFixes:
             return None  # a dropped fix: not equally spaced
         # (the array's dot: the same BLAS product as @, at half the cost on a 3-vector)
         s = ecef_to_enu_matrix(lat, lon).dot(r2 - 2.0 * r1 + r0)[:2]
-        self._noise.add(tuple((s * s).tolist()))
-        return s
+        self._noise.add(s)
+        return t0, s
