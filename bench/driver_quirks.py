@@ -8,6 +8,8 @@ Quirks:
 * ``gnss_stamps_unset``: the same for every ``gnss/*`` message;
 * ``imu_frd``: ``imu/data_raw`` in FRD axes (y and z of the rates and specific force negated:
   a driver that keeps the sensor's NED-convention axes);
+* ``imu_reversed``: ``imu/data_raw`` in the axes of an IMU mounted backwards (yawed 180 deg:
+  x and y negated) with nothing in the recording to say so;
 * ``gnss_vel_twist``: ``gnss/vel`` as a ``geometry_msgs/TwistStamped`` (nmea_navsat_driver's
   ``vel``: no covariance);
 * ``imu_mounted_tf``: ``imu/data_raw`` in the axes of an IMU mounted rolled 180 deg and yawed
@@ -42,8 +44,8 @@ import numpy as np
 from ins_gnss_ros import io
 from ins_gnss_ros.nav.rotations import dcm_from_euler, dcm_to_quat, quat_to_dcm
 
-QUIRKS = ("imu_stamps_unset", "gnss_stamps_unset", "imu_frd", "gnss_vel_twist", "imu_mounted_tf",
-          "installation_tf", "imu_orientation_ned", "imu_yaw_relative")
+QUIRKS = ("imu_stamps_unset", "gnss_stamps_unset", "imu_frd", "imu_reversed", "gnss_vel_twist",
+          "imu_mounted_tf", "installation_tf", "imu_orientation_ned", "imu_yaw_relative")
 #: The IMU's mounting of ``imu_mounted_tf``: roll, pitch, yaw in base_link, deg.
 MOUNTING_RPY_DEG = (180.0, 0.0, 90.0)
 #: The quirks that add an installation on /tf_static: quirk -> the IMU's mounting there, deg.
@@ -66,6 +68,11 @@ def rewrite(msg, topic: str, quirk: str, first: dict):
     elif quirk == "imu_frd" and topic == "/imu/data_raw":
         for v in (msg.angular_velocity, msg.linear_acceleration):
             v.y, v.z = -v.y, -v.z
+    elif quirk == "imu_reversed" and topic == "/imu/data_raw":
+        if msg.orientation_covariance[0] >= 0.0:
+            raise ValueError("imu_reversed turns rates and specific force, not orientation")
+        for v in (msg.angular_velocity, msg.linear_acceleration):
+            v.x, v.y = -v.x, -v.y
     elif quirk == "imu_mounted_tf" and topic == "/imu/data_raw":
         if msg.orientation_covariance[0] >= 0.0:
             raise ValueError("imu_mounted_tf rotates rates and specific force, not orientation")

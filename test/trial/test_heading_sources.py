@@ -17,6 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ins_gnss_ros import io as bagio
+from ins_gnss_ros.nav.conventions import wrap_pi
+from ins_gnss_ros.nav.rotations import quat_to_euler
 from ins_gnss_ros.trial.offline import replay_offline
 from ins_gnss_ros.trial.report import evaluate_run
 from ins_gnss_ros.trial.simulate import SimOptions, simulate
@@ -83,3 +86,28 @@ def test_a_slow_robot_confirms_its_ahrs_on_a_run_of_fixes(tmp_path):
     fixes = io.read_bag(tmp_path / "out" / "bag", ["/nav/fix"])
     # the fixes' assumed 5 m, no more
     assert np.sqrt(fixes[-1].msg.position_covariance[0]) < 6.0
+
+
+def test_a_start_on_the_move_with_the_imu_mounted_backwards_turns_the_heading_round(tmp_path):
+    """A drive recorded on the move (fix + velocity) whose IMU is mounted backwards with nothing
+    to say so (bench/driver_quirks.py imu_reversed): the heading aligned on the course takes
+    the body x axis for the direction of motion, 180 deg off; the first manoeuvre shows the
+    INS's own velocity change against the receiver's, and the heading is turned round
+    (Navigator._check_course_direction). Before, the filter never recovered (docs/results/
+    product_path.md, "2026-12-06 (session 32)"). As simulated, the direction stands."""
+    sim = simulate("car", 60.0, 3, tmp_path / "sim", SimOptions(start_static=0.0))
+    subprocess.run([sys.executable, str(REPO / "bench" / "driver_quirks.py"), str(sim),
+                    str(tmp_path / "reversed"), "imu_reversed"], check=True, cwd=REPO)
+    for bag, turned in ((sim, False), (tmp_path / "reversed", True)):
+        out = tmp_path / f"out_{turned}"
+        replay_offline(bag, REPO / "config" / "default.yaml", out)
+        said = [u.reason for m in bagio.read_bag(out / "bag", ["/nav/status"])
+                for u in m.msg.updates if u.name == "course_on_x"]
+        assert len(said) == turned and all("against the motion" in r for r in said), said
+        judged = bench_robustness.judge(bag, out)
+        assert judged["valid_early"] == 0, judged
+        # at the end, the IMU's x axis: the car's heading, or its opposite
+        q = [m.msg.orientation for m in bagio.read_bag(out / "bag", ["/ins/state"])][-1]
+        t = [m.msg.orientation for m in bagio.read_bag(bag, ["/truth/state"])][-1]
+        yaw, true_yaw = (quat_to_euler(np.array([o.w, o.x, o.y, o.z]))[2] for o in (q, t))
+        assert abs(np.degrees(wrap_pi(yaw - true_yaw - (np.pi if turned else 0.0)))) < 5.0

@@ -36,7 +36,7 @@ from .alignment import Levelling, couple_start_to_lever_arm, couple_tilt_to_acce
     rotate_yaw, take_static_gyro_bias, without_cross_track, yaw_error_from_course, \
     yaw_error_from_heading, yaw_error_from_motion
 from .conventions import wrap_pi
-from .earth import WGS84
+from .earth import WGS84, normal_gravity
 from .ekf import ErrorStateEKF, StateSpace
 from .error_model import make_layout
 from .gating import rejected
@@ -70,6 +70,12 @@ HEADING_CONFIRM_SIGMAS = 4.0
 CONFIRM_COURSE_SIGMA = np.radians(5.0)
 #: Velocity sigma of a start with neither a GNSS speed nor rest known, m/s per axis.
 UNKNOWN_SPEED_SIGMA = 30.0
+#: The receiver's velocity change, m/s, from which the INS's own one tells which way the body x
+#: axis aligned on a course points (Navigator._check_course_direction), over at most the last
+#: COURSE_WINDOW s: the first seconds of a manoeuvre, before a wrong direction's error grows
+#: (a car accelerating at 2.6 m/s^2 was 8 m off 1.8 s into it), over which the accelerometers'
+#: drift stays small.
+COURSE_CHECK_DV, COURSE_WINDOW = 3.0, 3.0
 #: Yaw variance published while the heading is not aligned, rad^2: that of a yaw spread evenly
 #: over the circle (pi^2 / 3). The filter keeps the yaw out of P until then (alignment.
 #: initial_covariance), so P's yaw variance is only the gyro noise since the start: published
@@ -526,6 +532,7 @@ class Navigator:
             s.pinned_antenna = (m.lat, m.lon, m.h)
             nav = levelled_state(s.levelling, m.lat, m.lon, m.h, self._lever,
                                  0.0 if at_rest else s.gnss_speed, float(buf.time(k - 1)))
+            s.started_on_x = bool(np.any(nav.v_enu))
             couple_tilt_to_accelerometers(P0, self._space, nav, s.levelling.mean_specific_force(),
                                           cfg.sigma_tilt0)
             couple_start_to_lever_arm(P0, self._space, nav.q_nb)
@@ -685,6 +692,9 @@ class Navigator:
                 return
         if m.checks_only:
             return
+        if s.course_check is not None and s.heading_known and \
+                self._check_course_direction(m, st, epoch):
+            return
         aligned_by = None  # the INS velocity's course gradient where m turned the yaw against it
         if s.mode == ALIGNING and not s.heading_known and s.gnss_speed >= cfg.align_speed \
                 and m.aligns:
@@ -704,6 +714,10 @@ class Navigator:
             if restart:
                 s.nav, s.ekf.P = restart_velocity(s.nav, s.ekf.P, self._space, v, m.cov_enu,
                                                   gain)
+            if (restart or s.started_on_x) and not m.fixes:
+                # the body x axis taken for the direction of motion (a course of fixes comes no
+                # more once the heading is known: nothing checks it there)
+                s.course_check = (((epoch, v[:2], s.nav.v_enu[:2].copy()),), np.zeros(3))
             if m.fixes:
                 self._fixes_of_course(m, gain, delta, epoch)
                 return
@@ -769,6 +783,48 @@ class Navigator:
             return
         self._refute_heading(f"missed the course by {np.degrees(miss):+.0f} deg (sigma "
                              f"{np.degrees(np.sqrt(variance)):.0f} deg)")
+
+    def _check_course_direction(self, m, st, epoch):
+        """Whether the body x axis a start on the move aligned on the course points along the
+        motion: the INS's own velocity change over the last COURSE_WINDOW s (its velocity less
+        the updates' corrections, st at the epoch of the receiver's velocity m) against the
+        receiver's, once that is COURSE_CHECK_DV and twice the drift the tilt and the
+        accelerometer biases (their sigmas now) leave in the INS's over it. More than 90 deg
+        apart, the axis points backwards (reversing when the recording started, or an IMU
+        mounted backwards and nobody said; a simulated car so replayed aligned 180 deg off,
+        published 7 valid fixes beyond 5 sigma and never recovered: docs/results/
+        product_path.md, "2026-12-06 (session 32)"): the heading is turned 180 deg and the
+        velocity restarted on m, which is so taken (True), and checked again; else the
+        direction stands."""
+        s = self._state
+        history, corrections = s.course_check
+        v, own = np.asarray(m.v_enu, float)[:2], st.v_enu[:2] - corrections[:2]
+        history = tuple(h for h in history if epoch - h[0] <= COURSE_WINDOW) + ((epoch, v, own),)
+        s.course_check = (history, corrections)
+        t0, v0, own0 = history[0]
+        dv, dv_ins = v - v0, own - own0
+        P, S = s.ekf.P, self._space
+        att = S["att"].start
+        drift = normal_gravity(st.lat, st.h) * np.sqrt(max(P[att, att], P[att + 1, att + 1]))
+        if "ba" in S:
+            ba = S["ba"].start
+            drift += np.sqrt(max(P[ba, ba], P[ba + 1, ba + 1]))
+        drift *= epoch - t0
+        if np.hypot(*dv) < max(COURSE_CHECK_DV, 2.0 * drift):
+            return False
+        if dv @ dv_ins >= 0.0:
+            s.course_check = None
+            return False
+        yaw = S["att"].stop - 1
+        self._rotate_yaw(np.pi, np.sqrt(P[yaw, yaw]), pivot=False)  # (the fixes kept it)
+        gain = course_error_gain(s.nav, S, np.asarray(m.v_enu, float), restarted=True)
+        s.nav, s.ekf.P = restart_velocity(s.nav, s.ekf.P, S, m.v_enu, m.cov_enu, gain)
+        s.course_check = (((epoch, v, s.nav.v_enu[:2].copy()),), np.zeros(3))
+        self._recorder.add_update(rejected(
+            "course_on_x", epoch, dv_ins, np.eye(2) * drift ** 2,
+            "the body x axis pointed against the motion (reversing at the start, or the IMU "
+            "mounted backwards): heading turned 180 deg"))
+        return True
 
     def _heading_missed(self, innov, epoch):
         """A GNSS update refused in motion before the motion confirmed a heading source's
@@ -993,15 +1049,20 @@ class Navigator:
         estimates = s.estimates
         for name, value in estimates.items():
             estimates[name] = value + dx[S[name]]
+        if s.course_check is not None:
+            history, corrections = s.course_check
+            s.course_check = (history, corrections - dx[S["vel"]])
         if "vd" in s.estimates:  # projected onto its physical range (measurements.py)
             s.estimates["vd"] = np.clip(s.estimates["vd"], *meas.VELOCITY_LATENCY_RANGE)
         self._recorder.correct(s, dx, self._published_var())
 
-    def _rotate_yaw(self, delta, sigma, velocity_gain=None):
-        """The heading alignment (alignment.rotate_yaw): from here on NAVIGATING."""
+    def _rotate_yaw(self, delta, sigma, velocity_gain=None, pivot=True):
+        """The heading alignment (alignment.rotate_yaw; ``pivot``: about the pinned antenna,
+        else about the solution itself): from here on NAVIGATING."""
         s = self._state
         s.nav, s.ekf.P = rotate_yaw(s.nav, s.ekf.P, self._space, delta, sigma,
-                                    self.config.sigma_yaw_align, s.pinned_antenna, velocity_gain)
+                                    self.config.sigma_yaw_align,
+                                    s.pinned_antenna if pivot else None, velocity_gain)
         s.heading_known, s.mode, s.t_last_aid = True, NAVIGATING, s.nav.t
         s.heading_steered_by = frozenset()
         s.t_model = -np.inf  # the system matrix holds the attitude: rebuilt at the next step

@@ -89,6 +89,16 @@ class RunState:
     t_fixes_aligned : float
         GNSS time of the last fix of the course the heading was aligned on: the fixes up to it
         are in the alignment (alignment.fixes_with_course), not applied again.
+    started_on_x : bool
+        The filter started on the move, its velocity along the body x axis
+        (alignment.levelled_state): the heading aligned against it takes that axis for the
+        direction of motion.
+    course_check : tuple or None
+        After a start on the move aligned the body x axis on a receiver velocity's course, until
+        the motion tells which way that axis points (Navigator._check_course_direction): the
+        last seconds' (epoch s, the receiver's and the INS's own horizontal velocity, m/s), and
+        the velocity corrections the updates have applied since the alignment (ENU, m/s), by
+        which the INS's velocity less them is its own; replaced, never changed in place.
     """
 
     next_sample: int = 0
@@ -120,6 +130,8 @@ class RunState:
     last_velocity: tuple | None = None
     t_fix_accepted: float = -np.inf
     t_fixes_aligned: float = -np.inf
+    started_on_x: bool = False
+    course_check: tuple | None = None
 
     @classmethod
     def initial(cls, space):
