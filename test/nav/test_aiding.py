@@ -460,6 +460,36 @@ def test_fixes_refute_their_covariance_by_their_scatter_about_the_receiver_s_vel
         assert last.cov_enu[0, 0] + last.common_var[0] > 1.0  # not the 0.1 m
 
 
+def test_a_start_on_the_move_while_accelerating_is_as_tilted_as_the_acceleration_makes_it():
+    """A car accelerating at 1.5 m/s^2 along its x axis when the data begin (fix + velocity
+    at 5 Hz): levelled on the specific force, which holds the acceleration, the start is
+    pitched by a / g (8.7 deg); the start's tilt sigma now says so (the receiver's velocities
+    over the levelling, Navigator._levelling_tilt_sigma), where it said 2.3 deg for a car's
+    8.5 deg (docs/results/product_path.md, "2026-12-06 (session 32)")."""
+    nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_uncalibrated"})))
+    lat0, lon0, g, a, v0 = 59.9, 30.3, 9.81, 1.5, 5.0
+    dt = 0.01
+    sigmas = []
+    for k in range(1, 501):  # 5 s
+        t = k * dt
+        nav.add_imu(t, np.zeros(3), np.array([a, 0.0, g]) * dt)
+        if k % 20 == 0:
+            east = v0 * t + 0.5 * a * t * t
+            nav.add_measurement(GnssVelocity(t, np.array([v0 + a * t, 0.0, 0.0]),
+                                             np.eye(3) * 0.05 ** 2))
+            nav.add_measurement(GnssFix(t, np.radians(lat0), np.radians(lon0 + east / (
+                M_PER_DEG * np.cos(np.radians(lat0)))), 10.0, np.eye(3) * 0.25))
+            if nav.started:
+                att = nav.space["att"].start
+                sigmas.append(np.sqrt(np.diag(nav.covariance())[att:att + 2]))
+    # at the start, levelled on the acceleration: as uncertain as it makes the tilt
+    assert np.all(sigmas[0] >= 0.9 * a / g), np.degrees(sigmas[0])
+    # and the filter takes the tilt out with the receiver's velocities: level, within it
+    roll, pitch, _ = quat_to_euler(nav.solution.q_nb)
+    assert abs(roll) < 3.0 * sigmas[-1][0] and abs(pitch) < 3.0 * sigmas[-1][1]
+    assert abs(pitch) < 0.3 * a / g
+
+
 def test_a_fix_without_an_altitude_is_taken_with_the_height_left_to_the_ins():
     """NavSatFix's altitude is NaN where none is available (a 2-D fix): such fixes were all
     refused as non-finite, and nothing navigated. Now the horizontal is taken; the height is the

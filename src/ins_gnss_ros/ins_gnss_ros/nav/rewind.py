@@ -89,6 +89,9 @@ class RunState:
     t_fixes_aligned : float
         GNSS time of the last fix of the course the heading was aligned on: the fixes up to it
         are in the alignment (alignment.fixes_with_course), not applied again.
+    levelling_velocities : tuple or None
+        The first and the last receiver velocity while levelling before the start: (epoch s,
+        (east, north) m/s) each.
     started_on_x : bool
         The filter started on the move, its velocity along the body x axis
         (alignment.levelled_state): the heading aligned against it takes that axis for the
@@ -130,6 +133,7 @@ class RunState:
     last_velocity: tuple | None = None
     t_fix_accepted: float = -np.inf
     t_fixes_aligned: float = -np.inf
+    levelling_velocities: tuple | None = None
     started_on_x: bool = False
     course_check: tuple | None = None
 
