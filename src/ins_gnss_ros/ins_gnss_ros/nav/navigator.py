@@ -73,8 +73,8 @@ UNKNOWN_SPEED_SIGMA = 30.0
 #: The receiver's velocity change, m/s, from which the INS's own one tells which way the body x
 #: axis aligned on a course points (Navigator._check_course_direction), over at most the last
 #: COURSE_WINDOW s: the first seconds of a manoeuvre, before a wrong direction's error grows
-#: (a car accelerating at 2.6 m/s^2 was 8 m off 1.8 s into it), over which the accelerometers'
-#: drift stays small.
+#: (a car accelerating at about 1 m/s^2 was 8 m off 2 s into it), over which the
+#: accelerometers' drift stays small.
 COURSE_CHECK_DV, COURSE_WINDOW = 3.0, 3.0
 #: Yaw variance published while the heading is not aligned, rad^2: that of a yaw spread evenly
 #: over the circle (pi^2 / 3). The filter keeps the yaw out of P until then (alignment.
