@@ -28,11 +28,12 @@ NIS and verdict), ``nav/datum`` (latched) and, with ``publish_tf``, ``/tf`` map 
 and ``/tf_static`` base_link -> gnss_0 (REP-105, nodes/tf_messages.py). The solution topics
 come at ``output_rate_hz`` (:class:`.nav_messages.OutputSchedule`) from the strapdown's
 ``ins/state`` that carry every correction sent, or lack only the last one, which the node
-applies to them; /diagnostics says why the filter is not navigating (what it waits for), the datum and, per
-aiding input, its rate, staleness and refusals. The mode on nav/status and in nav/fix is the
-filter's, but ALIGNING from its heading alignment until the strapdown's ``ins/state`` carries the
-correction made after it (``StrapdownSync.mode``): the outputs agree about when the solution is
-aligned, and nav/status says NAVIGATING with the first such ins/state.
+applies to them; /diagnostics says why the filter is not navigating (what it waits for), the
+datum and, per aiding input, its rate, staleness and refusals. The mode on nav/status and in
+nav/fix is the filter's, but ALIGNING from its heading alignment until the strapdown's
+``ins/state`` carries the correction made after it (``StrapdownSync.mode``): the outputs agree
+about when the solution is aligned, and nav/status says NAVIGATING with the first such
+ins/state.
 
 Inputs are translated by :class:`.ekf_inputs.EkfInputs`, as the offline replay translates
 them. Where ``lever_arm`` is zero (not known), ``/tf_static`` places the antenna until the
