@@ -66,6 +66,9 @@ def test_sync_corrects_against_the_matching_state_and_falls_back_when_out_of_ste
     assert np.array_equal(c.sensor.gyro_bias, estimates["bg"])
     assert np.array_equal(c.sensor.accel_scale, np.zeros(3))  # no such block: zero
     assert not sync.due(1.06, 1) and not sync.current(0) and sync.current(1)
+    # the state it was made on, and later ones still without it, lack only it; earlier not
+    assert sync.lacking(1_050_000_000, 0) is c and sync.lacking(1_090_000_000, 0) is c
+    assert sync.lacking(1_040_000_000, 0) is None and sync.lacking(1_090_000_000, 1) is None
     # nothing carries sequence 1 yet: no match until resend_after, then the newest state
     assert sync.correction(1.5, lambda t: solution, estimates, 2, NAVIGATING) is None
     c, resent = sync.correction(2.2, lambda t: solution, estimates, 2, NAVIGATING)
@@ -76,6 +79,7 @@ def test_sync_corrects_against_the_matching_state_and_falls_back_when_out_of_ste
     # GNSS outage that may be its end).
     sync.invalidate()
     assert not sync.current(2) and sync.due(3.0, 2)
+    assert sync.lacking(1_090_000_000, 1) is None  # it lacks the invalidation as well
     c, resent = sync.correction(3.0, lambda t: solution, estimates, 2, NAVIGATING)
     assert resent and c.sequence == 4 and c.t_ns == 1_090_000_000  # the newest state, at once
 

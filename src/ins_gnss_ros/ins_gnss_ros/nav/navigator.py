@@ -818,7 +818,8 @@ class Navigator:
         direction stands."""
         s = self._state
         history, corrections = s.course_check
-        v, own = np.asarray(m.v_enu, float)[:2], st.v_enu[:2] - corrections[:2]
+        v_enu = np.asarray(m.v_enu, float)
+        v, own = v_enu[:2], st.v_enu[:2] - corrections[:2]
         history = tuple(h for h in history if epoch - h[0] <= COURSE_WINDOW) + ((epoch, v, own),)
         s.course_check = (history, corrections)
         t0, v0, own0 = history[0]
@@ -837,8 +838,8 @@ class Navigator:
             return False
         yaw = S["att"].stop - 1
         self._rotate_yaw(np.pi, np.sqrt(P[yaw, yaw]), pivot=False)  # (the fixes kept it)
-        gain = course_error_gain(s.nav, S, np.asarray(m.v_enu, float), restarted=True)
-        s.nav, s.ekf.P = restart_velocity(s.nav, s.ekf.P, S, m.v_enu, m.cov_enu, gain)
+        gain = course_error_gain(s.nav, S, v_enu, restarted=True)
+        s.nav, s.ekf.P = restart_velocity(s.nav, s.ekf.P, S, v_enu, m.cov_enu, gain)
         s.course_check = (((epoch, v, s.nav.v_enu[:2].copy()),), np.zeros(3))
         self._recorder.add_update(rejected(
             "course_on_x", epoch, dv_ins, np.eye(2) * drift ** 2,

@@ -244,6 +244,7 @@ class StrapdownSync:
         self.last_match_t = -np.inf
         self.synced_revision = 0
         self.aligned_sequence = None  # the first correction made after the filter aligned
+        self.last = None  # the last Correction made
         self.alignment_applied = False  # a strapdown state has acknowledged that correction
 
     def add_state(self, t_ns: int, sequence: int, item) -> None:
@@ -265,6 +266,18 @@ class StrapdownSync:
         one (a strapdown that has not been corrected yet carries sequence 0: its state is its
         start-up parameters, not the filter's solution)."""
         return sequence == self.sequence > 0
+
+    def lacking(self, t_ns: int, sequence: int):
+        """The one correction a state (stamp ns, carrying ``sequence``) lacks to be the filter's
+        solution, or None (it lacks none, or more): the last one, made on it (which waited for
+        it) or on a state before it while it was on its way. With it applied the state is the
+        solution, to the correction's change over the interval between them (second order): at
+        an IMU rate near the output rate (10 Hz) the states skipped for it lost most fix
+        epochs' output (docs/results/product_path.md, "2026-12-06 (session 32)")."""
+        last = self.last
+        if last is None or last.sequence != self.sequence or t_ns < last.t_ns:
+            return None
+        return last if sequence == last.sequence - 1 else None
 
     def aligning(self) -> None:
         """The filter aligns (again): its solution is not an aligned one until the first
@@ -369,5 +382,6 @@ class StrapdownSync:
             self.aligned_sequence = self.sequence
         self.synced_revision = revision
         self.last_sync_t = t
-        return Correction(match[0], self.sequence, dp, dv, phi, SensorErrors(**sensor),
-                          mode), resent
+        self.last = Correction(match[0], self.sequence, dp, dv, phi, SensorErrors(**sensor),
+                               mode)
+        return self.last, resent

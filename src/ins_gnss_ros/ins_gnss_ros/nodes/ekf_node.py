@@ -134,7 +134,6 @@ class EkfNode(EkfServices, NavNode):
         self.accepted = 0
         self.rejected = 0
         self.output = OutputSchedule(p["output_rate_hz"])
-        self.last_correction = None  # the last ins/correction sent (a Correction)
         self.last_status_t = -np.inf
         self.published_datum = None
         self.converging = False  # re-synchronising the strapdown onto a set pose
@@ -199,19 +198,13 @@ class EkfNode(EkfServices, NavNode):
             self.after_filter()
         t = stamp * 1e-9
         if self.navigator.started and self.output.due(t):
-            # A state lacking only the last correction, made on it (which waited for it) or on
-            # a state before it while it was on its way, is with it the filter's solution (to
-            # the correction's change over the interval between them, second order): at an IMU
-            # rate near the output rate (10 Hz) skipping it lost most fix epochs' output.
-            last = self.last_correction
-            lacks_last = last is not None and stamp >= last.t_ns \
-                and sequence == last.sequence - 1 == self.sync.sequence - 1
-            if lacks_last or self.sync.current(sequence):
+            lacking = self.sync.lacking(stamp, sequence)
+            if lacking is not None or self.sync.current(sequence):
                 msg = self._decode_state(data)
                 st = nav_state_from_msg(msg)
-                if lacks_last:
-                    st = apply_correction(st, last.position_error, last.velocity_error,
-                                          last.attitude_error)
+                if lacking is not None:
+                    st = apply_correction(st, lacking.position_error, lacking.velocity_error,
+                                          lacking.attitude_error)
                 self.output.published(t)
                 self.publish_solution(st, msg)
         # The mode is reported even when nothing updates, and at once when this state is the
@@ -325,7 +318,6 @@ class EkfNode(EkfServices, NavNode):
         set_vector3(corr.gyro_scale_factor, c.sensor.gyro_scale)
         set_vector3(corr.accel_scale_factor, c.sensor.accel_scale)
         self.pub_correction.publish(corr)
-        self.last_correction = c
 
     def report_updates(self) -> None:
         nav = self.navigator
