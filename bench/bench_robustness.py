@@ -25,7 +25,7 @@ Usage::
     .venv/bin/python bench/bench_robustness.py            # the full matrix (~15 min)
     .venv/bin/python bench/bench_robustness.py --short    # three cells
     .venv/bin/python bench/bench_robustness.py --cells 9 --seeds 3 4 5 6 7   # over seeds
-    (test/trial/test_robustness.py runs ten of the cells, 60 s each, in CI)
+    (test/trial/test_robustness.py runs eleven of the cells, 60 s each, in CI)
 """
 from __future__ import annotations
 
@@ -96,7 +96,10 @@ CELLS += [Cell("fix only 1 Hz", ("--gnss-rate", "1", "--no-gnss-vel")),
           Cell("imu 10 Hz, 2 ms jitter", ("--imu-rate", "10", "--imu-stamp-jitter", "0.002")),
           Cell("single-point fixes of 2 m whose driver reports 0.1 m (a placeholder), "
                "fix + velocity", ("--gnss-sigma-h", "2.0", "--gnss-sigma-v", "4.0",
-                                  "--gnss-sigma-h-reported", "0.1"))]
+                                  "--gnss-sigma-h-reported", "0.1")),
+          Cell("rolling start, single-point fixes only of 2 m whose driver reports 0.1 m",
+               ("--static", "0", "--no-gnss-vel", "--gnss-sigma-h", "2.0", "--gnss-sigma-v",
+                "4.0", "--gnss-sigma-h-reported", "0.1"))]
 SHORT = [CELLS[0], CELLS[3], CELLS[10]]
 
 

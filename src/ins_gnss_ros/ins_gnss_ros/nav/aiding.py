@@ -24,7 +24,7 @@ import numpy as np
 
 from ..magnetic.wmm import decimal_year, field_elements
 from .alignment import course_is_known, yaw_of_x
-from .course import CourseFromFixes, WhiteNoise
+from .course import MIN_SCATTER_SAMPLES, CourseFromFixes, WhiteNoise
 from .ekf import ExtraState
 from .heading_noise import HeadingNoise
 from .heading_turns import HeadingTurns
@@ -89,13 +89,14 @@ MOVING_SIGMAS = 3.0
 #: Its fixes' covariance likewise, by their scatter about the vehicle's motion (2 m fixes
 #: reported as 0.1 m were refused at the gate, then forced in, and a whole simulated drive was
 #: degraded with no valid nav/fix): their second differences less what the receiver's
-#: velocities say the acceleration made of them, or without those, while the IMU is still
-#: (rest, steady straight motion, or a steady acceleration a smooth vehicle's IMU may pass as
-#: still, which leaves second differences but no third ones) their third differences. A refuted
-#: fix is taken as one without covariance, so a false refutation costs little: fixes reporting
-#: just their white noise are refuted by third differences on 2e-4 of the fixes of a
-#: standstill (Monte Carlo, 2000 standstills of 30 s at 5 Hz, 1 % of them with one such fix;
-#: most where ten differences first make the median).
+#: velocities say the acceleration made of them, or without those their third differences,
+#: while the IMU is still (rest, steady straight motion, or a steady acceleration a smooth
+#: vehicle's IMU may pass as still, which leaves second differences but no third ones) or where
+#: a vehicle's jerk leaves them the noise (MAX_JERK). A refuted fix is taken as one without
+#: covariance, so a false refutation costs little: fixes reporting just their white noise are
+#: refuted by third differences on 2e-4 of the fixes of a standstill (Monte Carlo, 2000
+#: standstills of 30 s at 5 Hz, 1 % of them with one such fix; most where ten differences
+#: first make the median).
 COVARIANCE_REFUTED = 2.0
 #: A vehicle's largest fourth derivative of position, m/s^4 (a car turning in: its lateral
 #: acceleration's jerk of a few m/s^3 changing within a second). A second difference of fixes
@@ -103,6 +104,18 @@ COVARIANCE_REFUTED = 2.0
 #: reported sigma only where that is below half of it (a 1 Hz receiver's 2 cm: no; its 5 Hz
 #: ones' 2 cm, 1 mm: yes).
 MAX_SNAP = 5.0
+#: A vehicle's largest third derivative of position, m/s^3 (a car turning in or braking at
+#: 0.4 g within a second). The third difference of fixes dt apart keeps jerk dt^3 of the
+#: motion: in motion, without the receiver's velocities, it measures a reported sigma where that
+#: is below half of it (5 Hz fixes' 0.1 m: yes; 1 Hz ones' 0.5 m: no).
+MAX_JERK = 5.0
+#: The first fixes of a recording, as many as the test of their reported covariance takes
+#: (MIN_SCATTER_SAMPLES third differences, the last judged at the next fix), make no course
+#: before it: 2 m fixes reported as 0.1 m aligned a start on the move 30 sigma off on the chord
+#: of two of them (11 valid nav/fix beyond 5 sigma; docs/results/product_path.md, "2026-12-06
+#: (session 33)"). Fixes too irregularly spaced for the test by then (stamped on arrival) do
+#: not wait for it.
+FIXES_TO_TEST = MIN_SCATTER_SAMPLES + 4
 #: Receiver velocities kept to be paired with the fixes of their epochs.
 RECENT_VELOCITIES = 8
 #: Heights this filter navigates at, m (a fix outside is corrupt; the integrity logic would
@@ -324,12 +337,13 @@ class Aiding:
         self.forced: set[str] = set()  # kinds forced in since the filter last NAVIGATED
         self._course = CourseFromFixes()
         # The fixes' scatter in units of their reported variance per NavSatStatus status
-        # (_fix_covariance_refuted); the (status, second difference) of the last fix if the
-        # IMU was still then; the last fix's difference, judged at the next fix (by which the
-        # velocity of its epoch has come: _add_scatter's arguments); the latest gnss/vel
-        # (stamp s, east and north m/s, horizontal variance per axis m^2/s^2).
+        # (_fix_covariance_refuted); the (status, second difference) of the last fix if a
+        # third difference ending at the next would be the fixes' noise (_third_measures);
+        # the last fix's difference, judged at the next fix (by which the velocity of its
+        # epoch has come: _add_scatter's arguments); the latest gnss/vel (stamp s, east and
+        # north m/s, horizontal variance per axis m^2/s^2).
         self._fix_scatter: dict[int, WhiteNoise] = {}
-        self._still_second_difference = None
+        self._last_second_difference = None
         self._pending_difference = None
         self._recent_velocities: deque = deque(maxlen=RECENT_VELOCITIES)
         # (heading known, the source it waits on) when the course last took the INS's yaw
@@ -581,6 +595,7 @@ class Aiding:
         lat, lon = math.radians(lat_deg), math.radians(lon_deg)
         if self.datum is None:
             self.datum = (lat, lon, h)
+        on_test = self._fix_covariance_on_test(t, status, reported_var)
         self._note_scatter(t, status, reported_var, self._course.observe(t, lat, lon, h))
         east, north, _ = to_map(self.datum, lat, lon, h).tolist()
         self.timing.fix(t, east, north)
@@ -626,7 +641,8 @@ class Aiding:
                         log=False)
         self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov, common_var,
                                                height_known=not no_altitude))
-        self._course_velocity(t, lat, lon, h, cov)
+        if not on_test:
+            self._course_velocity(t, lat, lon, h, cov)
         return self._seen("gnss/fix", t, True)
 
     def _note_scatter(self, t: float, status: int, reported_var: float | None,
@@ -638,24 +654,44 @@ class Aiding:
         pending, self._pending_difference = self._pending_difference, None
         if pending is not None:
             self._add_scatter(*pending)
-        previous, self._still_second_difference = self._still_second_difference, None
+        previous, self._last_second_difference = self._last_second_difference, None
         if observed is None or reported_var is None:
             return
         t0, second = observed
         third = None
-        if self._rest_wanted() and self._rest.blocks_still(t):
-            self._still_second_difference = (status, second)
+        if self._third_measures(0.5 * (t - t0), t, reported_var):
+            self._last_second_difference = (status, second)
             if previous is not None and previous[0] == status:
                 third = second - previous[1]
         self._pending_difference = (status, reported_var, t0, t, second, third)
+
+    def _third_measures(self, dt: float, t: float, reported_var: float) -> bool:
+        """A third difference of fixes dt (s) apart ending at t (s) is their noise alone: the
+        IMU was still (the vehicle's acceleration constant) or a vehicle's jerk leaves less
+        than half their reported sigma (MAX_JERK; reported_var per axis, m^2)."""
+        return MAX_JERK * dt ** 3 < 0.5 * math.sqrt(reported_var) or \
+            (self._rest_wanted() and self._rest.blocks_still(t))
+
+    def _fix_covariance_on_test(self, t: float, status: int, reported_var: float | None) -> bool:
+        """The covariance a fix at t (s) of this status reports (its horizontal variance per
+        axis, m^2, None: none) waits for the fixes' scatter, which a course from it must not
+        precede: one of the recording's first FIXES_TO_TEST, too few of their differences yet
+        (WhiteNoise's MIN_SCATTER_SAMPLES), and their interval lets third differences measure
+        it (_third_measures; at the first fix, not known yet)."""
+        noise = self._fix_scatter.get(status)
+        if reported_var is None or (noise is not None and noise.variance() is not None):
+            return False
+        stats = self.inputs.get("gnss/fix")
+        return stats is None or (stats.received < FIXES_TO_TEST and
+                                 self._third_measures(t - stats.last_t, t, reported_var))
 
     def _add_scatter(self, status: int, reported_var: float, t0: float, t2: float,
                      second: np.ndarray, third: np.ndarray | None) -> None:
         """One difference of the fixes' noise alone, in units of their reported variance: the
         second difference of the fixes t0 .. t2 (s) less dt (v2 - v0) / 2 (dt = (t2 - t0) / 2,
         the receiver's velocities at its ends: the acceleration's part) where the motion's
-        snap leaves less than half the reported sigma (MAX_SNAP), else the third difference the
-        fixes made while the IMU was still."""
+        snap leaves less than half the reported sigma (MAX_SNAP), else the third difference
+        (_third_measures)."""
         dt = 0.5 * (t2 - t0)
         ends = self._velocity_at(t0), self._velocity_at(t2)
         if None not in ends and MAX_SNAP * dt ** 4 / 12.0 < 0.5 * math.sqrt(reported_var):
