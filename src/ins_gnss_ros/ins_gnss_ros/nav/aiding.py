@@ -300,6 +300,12 @@ def _unknown(cov: np.ndarray) -> bool:
     return not all(v > 0.0 for v in cov.diagonal().tolist())
 
 
+def _jerk_below_noise(dt: float, reported_var: float) -> bool:
+    """A vehicle's jerk (MAX_JERK) leaves less than half the reported sigma (reported_var per
+    axis, m^2) in a third difference of fixes dt (s) apart."""
+    return MAX_JERK * dt ** 3 < 0.5 * math.sqrt(reported_var)
+
+
 def _floored(cov: np.ndarray, sigma_floor: float) -> np.ndarray:
     """cov with its variances raised to sigma_floor^2 (each diagonal element gets
     max(floor - variance, 0) added, element by element: np.diag and np.maximum on a 3 x 3
@@ -667,9 +673,9 @@ class Aiding:
 
     def _third_measures(self, dt: float, t: float, reported_var: float) -> bool:
         """A third difference of fixes dt (s) apart ending at t (s) is their noise alone: the
-        IMU was still (the vehicle's acceleration constant) or a vehicle's jerk leaves less
-        than half their reported sigma (MAX_JERK; reported_var per axis, m^2)."""
-        return MAX_JERK * dt ** 3 < 0.5 * math.sqrt(reported_var) or \
+        IMU was still (the vehicle's acceleration constant) or the motion leaves them the
+        noise (_jerk_below_noise; reported_var per axis, m^2)."""
+        return _jerk_below_noise(dt, reported_var) or \
             (self._rest_wanted() and self._rest.blocks_still(t))
 
     def _fix_covariance_on_test(self, t: float, status: int, reported_var: float | None) -> bool:
@@ -677,13 +683,15 @@ class Aiding:
         axis, m^2, None: none) waits for the fixes' scatter, which a course from it must not
         precede: one of the recording's first FIXES_TO_TEST, too few of their differences yet
         (WhiteNoise's MIN_SCATTER_SAMPLES), and their interval lets third differences measure
-        it (_third_measures; at the first fix, not known yet)."""
+        it in motion (_jerk_below_noise; at the first fix, not known yet). A standstill's fixes
+        make no course, and where their third differences measure only at rest, the course
+        made of them at the start of the motion is as before."""
         noise = self._fix_scatter.get(status)
         if reported_var is None or (noise is not None and noise.variance() is not None):
             return False
         stats = self.inputs.get("gnss/fix")
         return stats is None or (stats.received < FIXES_TO_TEST and
-                                 self._third_measures(t - stats.last_t, t, reported_var))
+                                 _jerk_below_noise(t - stats.last_t, reported_var))
 
     def _add_scatter(self, status: int, reported_var: float, t0: float, t2: float,
                      second: np.ndarray, third: np.ndarray | None) -> None:
