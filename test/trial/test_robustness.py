@@ -7,9 +7,10 @@ a consumer unit, 2 cm RTK fixes on the seed whose road tilts the antenna 1.5 m a
 while default.yaml knows its height to a metre, and 2 m fixes whose driver reports 0.1 m, with
 the receiver's velocities and (a start on the move) without (bench/bench_robustness.py, the
 full matrix is the bench): each must align within 30 s of the start of motion (the drives but
-the third and the last stand still for their first 30 s; 5 s with a heading source), reach a horizontal RMS after alignment of at most half the raw fixes' (0.8 with fixes
-only, 2 with RTK), and publish no fix flagged valid before alignment or beyond 5 sigma of its
-own covariance; after alignment nav/fix comes at the ekf's 10 Hz whatever the IMU's rate.
+the third and the last stand still for their first 30 s; 5 s with a heading source), reach a
+horizontal RMS after alignment of at most half the raw fixes' (0.8 with fixes only, 2 with
+RTK), and publish no fix flagged valid before alignment or beyond 5 sigma of its own
+covariance; after alignment nav/fix comes at the ekf's 10 Hz whatever the IMU's rate.
 """
 from __future__ import annotations
 

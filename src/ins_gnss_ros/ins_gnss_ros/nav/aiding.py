@@ -111,10 +111,10 @@ MAX_SNAP = 5.0
 MAX_JERK = 5.0
 #: The first fixes of a recording, as many as the test of their reported covariance takes
 #: (MIN_SCATTER_SAMPLES third differences, the last judged at the next fix), make no course
-#: before it: 2 m fixes reported as 0.1 m aligned a start on the move 30 sigma off on the chord
-#: of two of them (11 valid nav/fix beyond 5 sigma; docs/results/product_path.md, "2026-12-06
-#: (session 33)"). Fixes too irregularly spaced for the test by then (stamped on arrival) do
-#: not wait for it.
+#: before it where it measures in motion (_jerk_below_noise): 2 m fixes reported as 0.1 m
+#: aligned a start on the move 30 sigma off on the chord of two of them (11 valid nav/fix
+#: beyond 5 sigma; docs/results/product_path.md, "2026-12-06 (session 33)"). Fixes too
+#: irregularly spaced for the test by then (stamped on arrival) do not wait for it.
 FIXES_TO_TEST = MIN_SCATTER_SAMPLES + 4
 #: Receiver velocities kept to be paired with the fixes of their epochs.
 RECENT_VELOCITIES = 8
