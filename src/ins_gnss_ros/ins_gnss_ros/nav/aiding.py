@@ -300,6 +300,12 @@ def _unknown(cov: np.ndarray) -> bool:
     return not all(v > 0.0 for v in cov.diagonal().tolist())
 
 
+def _snap_below_noise(dt: float, reported_var: float) -> bool:
+    """A vehicle's snap (MAX_SNAP) leaves less than half the reported sigma (reported_var per
+    axis, m^2) in a second difference of fixes dt (s) apart less dt (v2 - v0) / 2."""
+    return MAX_SNAP * dt ** 4 / 12.0 < 0.5 * math.sqrt(reported_var)
+
+
 def _jerk_below_noise(dt: float, reported_var: float) -> bool:
     """A vehicle's jerk (MAX_JERK) leaves less than half the reported sigma (reported_var per
     axis, m^2) in a third difference of fixes dt (s) apart."""
@@ -698,11 +704,11 @@ class Aiding:
         """One difference of the fixes' noise alone, in units of their reported variance: the
         second difference of the fixes t0 .. t2 (s) less dt (v2 - v0) / 2 (dt = (t2 - t0) / 2,
         the receiver's velocities at its ends: the acceleration's part) where the motion's
-        snap leaves less than half the reported sigma (MAX_SNAP), else the third difference
+        snap leaves the noise (_snap_below_noise), else the third difference
         (_third_measures)."""
         dt = 0.5 * (t2 - t0)
         ends = self._velocity_at(t0), self._velocity_at(t2)
-        if None not in ends and MAX_SNAP * dt ** 4 / 12.0 < 0.5 * math.sqrt(reported_var):
+        if None not in ends and _snap_below_noise(dt, reported_var):
             (v0, var0), (v2, var2) = ends
             difference = second - 0.5 * dt * (v2 - v0)
             gain = 6.0 * reported_var + 0.25 * dt * dt * (var0 + var2)
