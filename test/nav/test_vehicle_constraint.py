@@ -104,3 +104,31 @@ def test_the_learned_constraint_bounds_a_simulated_outage_like_the_configured_on
     # of the per-outage maxima (docs/results/product_path.md).
     assert errors["learned"] < 0.85 * errors["off"], errors
     assert abs(errors["learned"] - errors["configured"]) < 0.25 * errors["configured"], errors
+
+
+def test_the_held_side_slip_tells_nothing_of_the_yaw_at_first_and_keeps_p_positive():
+    """hold_side_slip: the boresight yaw takes the slip a course alignment put into the yaw
+    error (minus it): a lateral constraint, which sees v (phi_U + slip) at speed v along the
+    body x axis (measurements.nonholonomic), sees only the yaw error's other part at first."""
+    rng = np.random.default_rng(4)
+    A = rng.standard_normal((8, 8))
+    yaw, slip, slip_var = 5, 7, np.radians(3.0) ** 2
+    for var_yaw in (np.radians(5.0) ** 2, np.radians(2.0) ** 2):  # above and below slip_var
+        P = A @ A.T * 1e-4
+        P[yaw, :] *= np.sqrt(var_yaw / P[yaw, yaw])
+        P[:, yaw] = P[yaw, :]
+        P[yaw, yaw] = var_yaw
+        held = vc.hold_side_slip(P, yaw, slip, slip_var)
+        assert np.linalg.eigvalsh(held)[0] > 0.0
+        assert np.array_equal(np.delete(np.delete(held, slip, 0), slip, 1),
+                              np.delete(np.delete(P, slip, 0), slip, 1))
+        h = np.zeros(8)
+        h[[yaw, slip]] = 10.0  # m/s: the lateral row's yaw and boresight-yaw columns
+        c = min(slip_var, vc.SLIP_SHARE * var_yaw)
+        expected = 100.0 * (var_yaw + slip_var - 2.0 * c + vc.SLIP_OWN_SIGMA ** 2)
+        assert np.isclose(h @ held @ h, expected, rtol=1e-12)
+    block = slice(6, 8)
+    forgotten = vc.forget_boresight(held, block)
+    assert np.array_equal(forgotten[block, :6], np.zeros((2, 6)))
+    assert np.allclose(forgotten[block, block],
+                       np.radians(vc.BORESIGHT_SIGMA_DEG) ** 2 * np.eye(2))

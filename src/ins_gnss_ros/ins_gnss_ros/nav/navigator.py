@@ -31,10 +31,10 @@ import numpy as np
 from . import _kernels
 from . import measurements as meas
 from . import modes
-from .alignment import Levelling, couple_start_to_lever_arm, couple_tilt_to_accelerometers, \
-    course_error_gain, fixes_with_course, initial_covariance, levelled_state, restart_velocity, \
-    rotate_yaw, take_static_gyro_bias, without_cross_track, yaw_error_from_course, \
-    yaw_error_from_heading, yaw_error_from_motion
+from .alignment import SIDE_SLIP_SIGMA, Levelling, couple_start_to_lever_arm, \
+    couple_tilt_to_accelerometers, course_error_gain, fixes_with_course, initial_covariance, \
+    levelled_state, restart_velocity, rotate_yaw, take_static_gyro_bias, without_cross_track, \
+    yaw_error_from_course, yaw_error_from_heading, yaw_error_from_motion
 from .conventions import wrap_pi
 from .earth import WGS84, normal_gravity
 from .ekf import ErrorStateEKF, StateSpace
@@ -54,7 +54,8 @@ from .rest_noise import RestNoise
 from .rotations import quat_from_rotvec, quat_rotate, quat_to_dcm
 from .rewind import Rewind, RunState
 from .strapdown import apply_error_state
-from .vehicle_constraint import LearnedConstraint
+from .vehicle_constraint import LEARN_S, SLIP_HOLD_SIGMA, SLIP_MIN_SPEED, SLIP_RATE, \
+    SLIP_RATE_ARM, LearnedConstraint, forget_boresight, hold_side_slip
 
 #: A zero-velocity update tells the vehicle at rest for this long after its epoch, s (the
 #: front end sends one per still IMU block, nav/rest_detector.py).
@@ -330,7 +331,12 @@ class Navigator:
         """What the learned non-holonomic constraint has seen (vehicle_constraint.py), or None
         where it is configured or off."""
         self._catch_up()
-        return None if self._learned_nhc is None else self._learned_nhc.summary()
+        if self._learned_nhc is None:
+            return None
+        summary = self._learned_nhc.summary()
+        if self._state.slip_held:
+            summary += "; meanwhile the side slip of the heading aligned on the course is held"
+        return summary
 
     def velocity_latency(self):
         """The GNSS velocity's latency estimate and its sigma (s, "vd" state), or None."""
@@ -591,6 +597,8 @@ class Navigator:
             s.rest_time += s.omega_time
         s.next_sample = j
         self._recorder.epoch(s, phi, s.ekf.P, self._published_var())  # stored as a copy
+        if s.slip_held:
+            self._slip_update()
         if s.mode != ALIGNING:
             learned = self._learned_nhc
             nhc_sigma = cfg.nhc_sigma if learned is None else learned.sigma
@@ -718,6 +726,10 @@ class Navigator:
             if restart:
                 s.nav, s.ekf.P = restart_velocity(s.nav, s.ekf.P, self._space, v, m.cov_enu,
                                                   gain)
+            if (restart or s.started_on_x) and self._learned_nhc is not None and \
+                    self._learned_nhc.moving < LEARN_S and "nhc" in self._space:
+                # the body x axis taken for the direction of motion: its side slip is held
+                s.slip_held, s.t_slip = True, np.nan
             if (restart or s.started_on_x) and not m.fixes:
                 # the body x axis taken for the direction of motion (a course of fixes comes no
                 # more once the heading is known: nothing checks it there)
@@ -1077,10 +1089,47 @@ class Navigator:
             s.estimates["vd"] = np.clip(s.estimates["vd"], *meas.VELOCITY_LATENCY_RANGE)
         self._recorder.correct(s, dx, self._published_var())
 
+    def _slip_update(self):
+        """The side slip a heading aligned on the course assumed (alignment.SIDE_SLIP_SIGMA),
+        held as a lateral constraint on the vehicle's own axes until the learned constraint
+        has decided (vehicle_constraint.hold_side_slip): started on the first epoch after the
+        alignment, ended with the heading, at that decision or at the first rejection."""
+        s, cfg, S = self._state, self.config, self._space
+        learned = self._learned_nhc
+        if not s.heading_known or learned.moving >= LEARN_S:
+            self._end_slip_hold()
+            return
+        if np.isnan(s.t_slip):
+            # after the alignment's own changes to P (the course's fixes included)
+            s.ekf.P = hold_side_slip(s.ekf.P, S["att"].stop - 1, S["nhc"].start + 1,
+                                     SIDE_SLIP_SIGMA ** 2)
+            s.estimates["nhc"] = np.zeros(2)
+            s.t_slip = s.nav.t
+            return
+        if s.nav.t - s.t_slip < cfg.nhc_interval - 1e-9 or \
+                np.hypot(*s.nav.v_enu[:2]) < SLIP_MIN_SPEED:
+            return
+        s.ekf.P[S["nhc"].start + 1, S["nhc"].start + 1] += SLIP_RATE ** 2 * (s.nav.t - s.t_slip)
+        s.t_slip = s.nav.t
+        sigma = np.hypot(SLIP_HOLD_SIGMA, SLIP_RATE_ARM * s.omega[2])
+        innov = meas.nonholonomic(S, s.nav, sigma, 1.0, s.omega, boresight=s.estimates["nhc"])
+        lateral = meas.Innovation("slip", innov.z[:1], innov.H[:1], innov.R[:1, :1])
+        if not self._update(lateral, s.nav.t, aiding=False).accepted:
+            self._end_slip_hold()
+
+    def _end_slip_hold(self):
+        """Back to the boresight state's prior: the learned axes (or none) take over."""
+        s = self._state
+        s.slip_held = False
+        s.ekf.P = forget_boresight(s.ekf.P, self._space["nhc"])
+        s.estimates["nhc"] = np.zeros(2)
+
     def _rotate_yaw(self, delta, sigma, velocity_gain=None, pivot=True):
         """The heading alignment (alignment.rotate_yaw; ``pivot``: about the pinned antenna,
         else about the solution itself): from here on NAVIGATING."""
         s = self._state
+        if s.slip_held:
+            self._end_slip_hold()
         s.nav, s.ekf.P = rotate_yaw(s.nav, s.ekf.P, self._space, delta, sigma,
                                     self.config.sigma_yaw_align,
                                     s.pinned_antenna if pivot else None, velocity_gain)

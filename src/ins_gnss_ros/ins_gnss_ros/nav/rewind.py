@@ -102,6 +102,9 @@ class RunState:
         last seconds' (epoch s, the receiver's and the INS's own horizontal velocity, m/s), and
         the velocity corrections the updates have applied since the alignment (ENU, m/s), by
         which the INS's velocity less them is its own; replaced, never changed in place.
+    slip_held, t_slip : bool, float
+        The side slip of a heading aligned on the course is held (Navigator._slip_update), and
+        the epoch of its last update (NaN until the first epoch after the alignment).
     """
 
     next_sample: int = 0
@@ -136,6 +139,8 @@ class RunState:
     levelling_velocities: tuple | None = None
     started_on_x: bool = False
     course_check: tuple | None = None
+    slip_held: bool = False
+    t_slip: float = -np.inf
 
     @classmethod
     def initial(cls, space):

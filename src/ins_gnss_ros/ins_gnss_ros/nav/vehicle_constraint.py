@@ -25,6 +25,16 @@ they carry its attitude error of the time, which a constraint on them as exact w
 confidence (a simulated car: heading 2.2 deg off, attitude NEES 162; with the state 1.1 deg,
 4.0). The velocity across the boresight-turned axes beyond ``DISABLE_RMS`` over
 ``RELEASE_MEMORY_S`` of motion releases it again.
+
+Until the constraint has decided, a heading aligned on the course over ground (a start on the
+move without a heading source: alignment.yaw_error_from_course) assumes the body x axis along
+the motion, within ``alignment.SIDE_SLIP_SIGMA``. :func:`hold_side_slip` keeps that assumption
+for those first seconds as a lateral constraint on the body axes with the slip as the
+boresight yaw, a random walk of ``SLIP_RATE``: the gyros' z bias then shows in the yaw's drift
+from the course in straight driving. Without it the default profile's gyro-bias uncertainty
+(3 deg/s) let the yaw sigma of a simulated rolling start grow to 28 deg in 15 s, where the
+linearised filter ran the yaw 95 deg off (docs/results/product_path.md, "2026-12-06 (session
+34)").
 """
 from __future__ import annotations
 
@@ -59,6 +69,20 @@ MOUNTING_HINT_DEG = 3.0
 #: Initial sigma of the filter's boresight state ("nhc": pitch and yaw of the vehicle's axes
 #: from the learned ones), deg: the solution's attitude error when they were learned.
 BORESIGHT_SIGMA_DEG = 3.0
+#: The held side slip (:func:`hold_side_slip`): its random walk, rad/sqrt(s) (a car's slip
+#: changes by a degree or two over a turn); the lateral constraint's noise, m/s, widened by
+#: the yaw rate times ``SLIP_RATE_ARM`` m (an IMU up to that far from the rear axle slips
+#: sideways in turns); the least speed it is applied at, m/s (slower, a walker's or a
+#: manoeuvring robot's body turns freely against its course).
+SLIP_RATE = np.radians(1.0)
+SLIP_HOLD_SIGMA = 0.5
+SLIP_RATE_ARM = 2.0
+SLIP_MIN_SPEED = 3.0
+#: The largest share of the yaw variance the held slip takes: a yaw aligned with a sigma near
+#: the slip's keeps a part of its error its own, so that P stays positive definite.
+SLIP_SHARE = 0.9
+#: The held slip's own uncertainty beyond the yaw's, rad.
+SLIP_OWN_SIGMA = np.radians(0.5)
 
 
 class LearnedConstraint:
@@ -180,3 +204,31 @@ def mounting_from_travel(forward: np.ndarray):
     cos_yaw = np.copysign(np.hypot(forward[0], forward[2]), forward[0])
     pitch = np.arctan2(forward[2] / cos_yaw, forward[0] / cos_yaw)
     return pitch, np.arctan2(-forward[1], cos_yaw)
+
+
+def hold_side_slip(P, yaw, slip, slip_var):
+    """The covariance P with the boresight-yaw state (index ``slip``) made the side slip a
+    course alignment took into the yaw error (index ``yaw``) with variance ``slip_var``
+    (alignment.SIDE_SLIP_SIGMA^2, rad^2): the yaw error then holds minus the slip (the body x
+    axis was put on the course), so the slip is regressed on the yaw error,
+    cov(slip, x) = -c P[yaw, x] / P[yaw, yaw] with c = slip_var (at most ``SLIP_SHARE`` of the
+    yaw's variance), plus its own ``SLIP_OWN_SIGMA``. A lateral constraint on the body axes
+    turned by that boresight then tells nothing of the yaw at first (the two errors cancel in
+    it), and the yaw's drift against the course thereafter."""
+    P = P.copy()
+    var_yaw = P[yaw, yaw]
+    c = min(slip_var, SLIP_SHARE * var_yaw)
+    P[slip, :] = -c / var_yaw * P[yaw, :]
+    P[:, slip] = P[slip, :]
+    P[slip, slip] = slip_var + SLIP_OWN_SIGMA ** 2
+    return P
+
+
+def forget_boresight(P, block):
+    """The covariance P with the boresight block (a slice) back at its prior,
+    ``BORESIGHT_SIGMA_DEG`` each and uncorrelated: the learned axes that follow are new."""
+    P = P.copy()
+    P[block, :] = 0.0
+    P[:, block] = 0.0
+    P[block, block] = np.radians(BORESIGHT_SIGMA_DEG) ** 2 * np.eye(block.stop - block.start)
+    return P
