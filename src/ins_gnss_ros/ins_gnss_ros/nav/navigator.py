@@ -1101,15 +1101,17 @@ class Navigator:
             return
         if np.isnan(s.t_slip):
             # after the alignment's own changes to P (the course's fixes included)
-            s.ekf.P = hold_side_slip(s.ekf.P, S["att"].stop - 1, S["nhc"].start + 1,
-                                     SIDE_SLIP_SIGMA ** 2)
-            s.estimates["nhc"] = np.zeros(2)
+            self._reset_boresight(hold_side_slip(s.ekf.P, S["att"].stop - 1,
+                                                 S["nhc"].start + 1, SIDE_SLIP_SIGMA ** 2))
             s.t_slip = s.nav.t
             return
         if s.nav.t - s.t_slip < cfg.nhc_interval - 1e-9 or \
                 np.hypot(*s.nav.v_enu[:2]) < SLIP_MIN_SPEED:
             return
-        s.ekf.P[S["nhc"].start + 1, S["nhc"].start + 1] += SLIP_RATE ** 2 * (s.nav.t - s.t_slip)
+        slip = slice(S["nhc"].start + 1, S["nhc"].stop)
+        walk = SLIP_RATE ** 2 * (s.nav.t - s.t_slip)
+        s.ekf.P[slip, slip] += walk
+        self._recorder.widen_prior(slip, [walk])  # this epoch's process noise for the smoother
         s.t_slip = s.nav.t
         sigma = np.hypot(SLIP_HOLD_SIGMA, SLIP_RATE_ARM * s.omega[2])
         innov = meas.nonholonomic(S, s.nav, sigma, 1.0, s.omega, boresight=s.estimates["nhc"])
@@ -1119,10 +1121,17 @@ class Navigator:
 
     def _end_slip_hold(self):
         """Back to the boresight state's prior: the learned axes (or none) take over."""
+        self._state.slip_held = False
+        self._reset_boresight(forget_boresight(self._state.ekf.P, self._space["nhc"]))
+
+    def _reset_boresight(self, P):
+        """The boresight estimate back to zero with the covariance P, recorded as a correction
+        of the epoch (the smoother's P+ and dx)."""
         s = self._state
-        s.slip_held = False
-        s.ekf.P = forget_boresight(s.ekf.P, self._space["nhc"])
-        s.estimates["nhc"] = np.zeros(2)
+        dx = np.zeros(self._space.size)
+        dx[self._space["nhc"]] = -s.estimates["nhc"]
+        s.ekf.P, s.estimates["nhc"] = P, np.zeros(2)
+        self._recorder.correct(s, dx, self._published_var())
 
     def _rotate_yaw(self, delta, sigma, velocity_gain=None, pivot=True):
         """The heading alignment (alignment.rotate_yaw; ``pivot``: about the pinned antenna,
