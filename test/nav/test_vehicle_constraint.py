@@ -128,7 +128,7 @@ def test_the_held_side_slip_tells_nothing_of_the_yaw_at_first_and_keeps_p_positi
         expected = 100.0 * (var_yaw + slip_var - 2.0 * c + vc.SLIP_OWN_SIGMA ** 2)
         assert np.isclose(h @ held @ h, expected, rtol=1e-12)
     block = slice(6, 8)
-    forgotten = vc.forget_boresight(held, block)
+    forgotten = vc.forget_boresight(held, block, np.radians(vc.BORESIGHT_SIGMA_DEG))
     assert np.array_equal(forgotten[block, :6], np.zeros((2, 6)))
     assert np.allclose(forgotten[block, block],
                        np.radians(vc.BORESIGHT_SIGMA_DEG) ** 2 * np.eye(2))

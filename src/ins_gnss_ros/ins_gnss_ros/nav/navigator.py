@@ -1122,7 +1122,8 @@ class Navigator:
     def _end_slip_hold(self):
         """Back to the boresight state's prior: the learned axes (or none) take over."""
         self._state.slip_held = False
-        self._reset_boresight(forget_boresight(self._state.ekf.P, self._space["nhc"]))
+        self._reset_boresight(forget_boresight(self._state.ekf.P, self._space["nhc"],
+                                               self._space.extras["nhc"].sigma0))
 
     def _reset_boresight(self, P):
         """The boresight estimate back to zero with the covariance P, recorded as a correction
