@@ -522,6 +522,34 @@ def test_a_start_on_the_move_while_accelerating_is_as_tilted_as_the_acceleration
     assert abs(pitch) < 0.3 * a / g
 
 
+def test_a_start_on_the_move_without_velocities_takes_the_acceleration_as_unknown():
+    """The same car with fixes alone: nothing measures the acceleration the start levels on,
+    so the start's tilt sigma holds init.moving_accel_sigma_mps2 (1 m/s^2: 5.8 deg) over g, and
+    the 8.7 deg its pitch is off lies within twice it; at the configured 1 deg the start took
+    such a tilt for accelerometer bias (a simulated car's roll 2 deg off for the rest of its
+    drive: docs/results/product_path.md, "2026-12-06 (session 35)")."""
+    params = resolve(PARAMS, {"imu_grade": "mems_uncalibrated"})
+    nav = Navigator(navigator_config(params))
+    lat0, lon0, g, a, v0 = 59.9, 30.3, 9.81, 1.5, 5.0
+    dt = 0.01
+    for k in range(1, 201):  # 2 s
+        t = k * dt
+        nav.add_imu(t, np.zeros(3), np.array([a, 0.0, g]) * dt)
+        if k % 20 == 0:
+            east = v0 * t + 0.5 * a * t * t
+            nav.add_measurement(GnssFix(t, np.radians(lat0), np.radians(lon0 + east / (
+                M_PER_DEG * np.cos(np.radians(lat0)))), 10.0, np.eye(3) * 0.25))
+            if nav.started:
+                break
+    assert nav.started
+    att = nav.space["att"].start
+    sigma = np.sqrt(np.diag(nav.covariance())[att:att + 2])
+    assert np.all(sigma >= params["init.moving_accel_sigma_mps2"] / g), np.degrees(sigma)
+    _, pitch, _ = quat_to_euler(nav.solution.q_nb)
+    assert abs(pitch) == pytest.approx(a / g, rel=0.05)
+    assert abs(pitch) < 2.0 * sigma[1]
+
+
 def test_a_fix_without_an_altitude_is_taken_with_the_height_left_to_the_ins():
     """NavSatFix's altitude is NaN where none is available (a 2-D fix): such fixes were all
     refused as non-finite, and nothing navigated. Now the horizontal is taken; the height is the

@@ -130,6 +130,10 @@ PARAMS = (
     Param("init.position_sigma_m", 1.0, "initial position sigma at the first fix, m", 0.0, 1e4),
     Param("init.velocity_sigma_mps", 0.1, "initial velocity sigma, m/s", 0.0, 100.0),
     Param("init.tilt_sigma_deg", 1.0, "initial roll/pitch sigma, deg", 0.0, 90.0),
+    Param("init.moving_accel_sigma_mps2", 1.0, "a start on the move that no two gnss/vel "
+          "measure (a still IMU aside): sigma of the vehicle's mean horizontal acceleration "
+          "over the levelling, which the levelled roll and pitch take for gravity, m/s^2",
+          0.0, 20.0),
     Param("align.speed_mps", 0.5, "GNSS speed at which the heading is taken from motion, m/s",
           0.0, 50.0),
     Param("align.static_speed_mps", 0.1, "GNSS speed below which the vehicle is at rest, m/s",
@@ -230,7 +234,8 @@ def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
         layout=p["layout"], extras=extras, lever_arm_b=np.array(p["lever_arm"], float),
         cov_interval=p["covariance_interval_s"], gate_prob=p["gate_probability"],
         sigma_pos0=p["init.position_sigma_m"], sigma_vel0=p["init.velocity_sigma_mps"],
-        sigma_tilt0=np.radians(p["init.tilt_sigma_deg"]), align_speed=p["align.speed_mps"],
+        sigma_tilt0=np.radians(p["init.tilt_sigma_deg"]),
+        moving_accel_sigma=p["init.moving_accel_sigma_mps2"], align_speed=p["align.speed_mps"],
         static_speed=p["align.static_speed_mps"], dr_timeout=p["dead_reckoning_after_s"],
         nhc_sigma=nhc if min(nhc) > 0.0 else None, nhc_learn=learn_nhc,
         nhc_lever_b=np.array(p["nonholonomic.lever_arm"], float),

@@ -530,14 +530,16 @@ class Navigator:
             # Neither a speed nor rest known (a receiver without velocity, started on the
             # move): the INS starts at zero velocity with the uncertainty of a moving vehicle.
             sigma_vel = cfg.sigma_vel0 if at_rest or np.isfinite(speed) else UNKNOWN_SPEED_SIGMA
-            sigma_tilt = cfg.sigma_tilt0 if at_rest else \
+            # At rest or with the IMU still, nothing accelerated over the levelling.
+            still = at_rest or epoch - s.t_still <= REST_HOLD
+            sigma_tilt = cfg.sigma_tilt0 if still else \
                 self._levelling_tilt_sigma(normal_gravity(m.lat, m.h))
             P0 = initial_covariance(self._space, cfg.noise, cfg.sigma_pos0, sigma_vel,
                                     sigma_tilt)
             if not m.height_known:  # a 2-D fix: the height is a guess
                 up = self._space["pos"].start + 2
                 P0[up, up] = m.cov_enu[2, 2]
-            if at_rest or epoch - s.t_still <= REST_HOLD:
+            if still:
                 take_static_gyro_bias(s.levelling, self._space, cfg.noise, P0, s.estimates)
             s.pinned_antenna = (m.lat, m.lon, m.h)
             nav = levelled_state(s.levelling, m.lat, m.lon, m.h, self._lever,
@@ -806,15 +808,19 @@ class Navigator:
         mean horizontal part the receiver's velocities over the levelling tell (a simulated car
         accelerating at 1.4 m/s^2 started pitched 8.5 deg off, its tilt sigma 2.3 deg with the
         accelerometers', its updates gated and forced in: docs/results/product_path.md,
-        "2026-12-06 (session 32)"); the configured sigma without two velocities."""
-        s, sigma = self._state, self.config.sigma_tilt0
+        "2026-12-06 (session 32)"). Without two velocities it is unknown, ``moving_accel_sigma``
+        (a simulated car started on fixes alone levelled on 0.65 m/s^2 at the 0.2 its tilt
+        sigma allowed, took it for accelerometer bias, and ran with its roll 2 deg off and its
+        attitude NEES 10-34: "2026-12-06 (session 35)")."""
+        s, cfg = self._state, self.config
+        unknown = float(np.hypot(cfg.sigma_tilt0, cfg.moving_accel_sigma / g))
         if s.levelling_velocities is None:
-            return sigma
+            return unknown
         (t0, v0), (t1, v1) = s.levelling_velocities
         if t1 <= t0:
-            return sigma
+            return unknown
         accel = np.hypot(v1[0] - v0[0], v1[1] - v0[1]) / (t1 - t0)
-        return float(np.hypot(sigma, accel / g))
+        return float(np.hypot(cfg.sigma_tilt0, accel / g))
 
     def _check_course_direction(self, m, st, epoch):
         """Whether the body x axis a start on the move aligned on the course points along the

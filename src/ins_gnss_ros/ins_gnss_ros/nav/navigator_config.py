@@ -48,6 +48,10 @@ class NavigatorConfig:
         (rad/s), averaged over it.
     sigma_pos0, sigma_vel0, sigma_tilt0 : float
         Initial standard deviations at the first fix (m, m/s, rad).
+    moving_accel_sigma : float
+        A start on the move that no two receiver velocities measure: standard deviation of
+        the vehicle's mean horizontal acceleration over the levelling, m/s^2
+        (:meth:`Navigator._levelling_tilt_sigma`).
     sigma_yaw_align : float
         Floor of the heading standard deviation after motion alignment, rad.
     static_speed : float
@@ -113,6 +117,7 @@ class NavigatorConfig:
     sigma_pos0: float = 1.0
     sigma_vel0: float = 0.1
     sigma_tilt0: float = 0.02
+    moving_accel_sigma: float = 1.0
     sigma_yaw_align: float = np.deg2rad(1.0)
     static_speed: float = 0.1
     align_speed: float = 0.5
