@@ -8,13 +8,14 @@ residual z is differentiated by central differences. A sign error in any H block
 import numpy as np
 import pytest
 
+from ins_gnss_ros.magnetic.compass import magnetic_azimuth
 from ins_gnss_ros.nav import measurements as M
 from ins_gnss_ros.nav.earth import earth_rate_enu, ecef_to_enu_matrix, geodetic_to_ecef
 from ins_gnss_ros.nav.ekf import ExtraState, StateSpace
 from ins_gnss_ros.nav.error_model import make_layout
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
 from ins_gnss_ros.nav.rotations import quat_conj, quat_from_euler, quat_from_rotvec, quat_mul, \
-    quat_to_dcm, skew
+    quat_to_dcm, quat_to_euler, skew
 from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405, filter_noise
 from ins_gnss_ros.nav.strapdown import NavState, apply_correction
 
@@ -174,6 +175,33 @@ def test_magnetic_heading_with_bias_state():
         # residual = true bias - estimate, so the estimate is true - residual
         return M.biased_heading(SPACE, st, az + bias_true, 1e-4, bias_true - res["mag"][0]).z
     check(model, z_of, 1e-7)
+
+
+def test_magnetic_heading_levelled_with_the_ins_attitude():
+    # A compass that levels the body field with the INS's roll and pitch (mag_compass's
+    # attitude_source ins_state) errs by the INS's tilt error times tan(inclination): the
+    # reading is recomputed from the true body field at every perturbed INS attitude.
+    decl, incl = np.deg2rad(10.0), np.deg2rad(72.0)
+    field = np.array([np.cos(incl) * np.sin(decl), np.cos(incl) * np.cos(decl), -np.sin(incl)])
+    mag_b = quat_to_dcm(TRUE.q_nb).T @ field
+
+    def reading(st):
+        roll, pitch, _ = quat_to_euler(st.q_nb)
+        return magnetic_azimuth(mag_b, roll, pitch) + decl
+
+    model = M.biased_heading(SPACE, TRUE, reading(TRUE), 1e-4, field_enu=field)
+    assert model.z[0] == pytest.approx(0.0, abs=1e-12)
+
+    def z_of(dx):
+        st, res = perturbed(dx)
+        return M.biased_heading(SPACE, st, reading(st), 1e-4, -res["mag"][0],
+                                field_enu=field).z
+    check(model, z_of, 1e-7)
+    tilt = model.H[0, SPACE["att"]][:2]
+    assert np.hypot(*tilt) == pytest.approx(np.tan(incl), rel=1e-9)
+    # taken as a yaw alone (a compass levelling itself) the tilt columns are the x axis'
+    yaw_only = M.biased_heading(SPACE, TRUE, reading(TRUE), 1e-4).H[0, SPACE["att"]]
+    assert np.hypot(*yaw_only[:2]) < 0.3
 
 
 def test_nonholonomic_and_zupt_zaru():

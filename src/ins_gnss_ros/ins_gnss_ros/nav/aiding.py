@@ -22,7 +22,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..magnetic.wmm import decimal_year, field_elements
+from ..magnetic.wmm import FieldAlongTrack, decimal_year, field_elements
 from .alignment import course_is_known, yaw_of_x
 from .course import MIN_SCATTER_SAMPLES, CourseFromFixes, WhiteNoise
 from .ekf import ExtraState
@@ -210,6 +210,9 @@ class AidingPolicy:
     phase_differences : bool
         The fixed phase double differences aid the attitude: ``gnss/heading`` only aligns the
         heading (the two come from the same phase and would count it twice).
+    magnetic_levelled_by_ins : bool
+        ``mag/heading`` was levelled with this filter's roll and pitch: its tilt error is the
+        filter's (measurements.biased_heading).
     """
 
     position_sigma_floor: float = 0.02
@@ -221,6 +224,7 @@ class AidingPolicy:
     max_delay: float = 3.0
     wheel: WheelPolicy = WheelPolicy()
     phase_differences: bool = False
+    magnetic_levelled_by_ins: bool = True
 
     @classmethod
     def from_params(cls, p: dict) -> "AidingPolicy":
@@ -228,7 +232,8 @@ class AidingPolicy:
         return cls(p["gnss.position_sigma_floor_m"], p["gnss.velocity_sigma_floor_mps"],
                    p["gnss.velocity_delay_s"], p["coupling"], p["auto.min_satellites"],
                    p["max_imu_gap_s"], p["history_s"], wheel=WheelPolicy.from_params(p),
-                   phase_differences=p["use_phase_dd"])
+                   phase_differences=p["use_phase_dd"],
+                   magnetic_levelled_by_ins=p["magnetic_levelled_by_ins"])
 
 
 #: Longest the first fixes of a receiver without velocity wait for the rest detector, s (an
@@ -369,6 +374,7 @@ class Aiding:
         noise = navigator.config.noise
         self._rest = RestDetector(noise.accel_psd, noise.gyro_psd)
         self._wmm_declination = None  # at the datum, once a magnetic heading needs it
+        self._wmm = FieldAlongTrack()  # the field a compass levelled with the INS measured
         self._first_held_t = math.nan  # the first fix held for the rest detector, s
         self._start_rest = False  # started in this still run before the fixes confirmed it
         # the last gnss/vel's horizontal speed and its sigma per horizontal axis (reported, or
@@ -872,9 +878,27 @@ class Aiding:
             return self._seen(source, t, False)
         if HEADING_SOURCES[source] is not None:
             variance = self._correlated_variance(source, t, float(variance))
+        field = self._field_direction(t) if source == "mag/heading" and \
+            self.policy.magnetic_levelled_by_ins else None
         self.navigator.add_measurement(HeadingFix(t, float(azimuth), float(variance),
-                                                  bias=HEADING_SOURCES[source]))
+                                                  bias=HEADING_SOURCES[source], field_enu=field))
         return self._seen(source, t, True)
+
+    def _field_direction(self, t: float) -> tuple | None:
+        """The WMM field's direction (ENU) at the solution's position (the datum before it
+        starts) at t (s), for a compass levelled with the INS's roll and pitch; None without
+        a position or outside the model. The compass's reported variance keeps the share of
+        the tilt sigma this filter reported: counted twice with the tilt columns, it only
+        weighs the compass less while the tilt is uncertain."""
+        nav = self.navigator.solution
+        at = (nav.lat, nav.lon, nav.h) if nav is not None else self.datum
+        if at is None:
+            return None
+        try:
+            field = self._wmm(*at, decimal_year(t)).enu
+        except ValueError:  # outside the model's life span
+            return None
+        return tuple(field.tolist())
 
     def _against_gyros(self, source: str, t: float, azimuth: float) -> None:
         """Take a heading reading at t (s) against the azimuth the gyros integrate from the

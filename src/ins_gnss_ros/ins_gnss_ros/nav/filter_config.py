@@ -83,6 +83,10 @@ PARAMS = (
           0.0, 30.0),
     Param("magnetic_bias_sigma_deg", 2.0,
           "initial sigma of the magnetic-heading bias state, deg (0: no bias state)", 0.0, 30.0),
+    Param("magnetic_levelled_by_ins", True, "mag/heading was levelled with this filter's roll "
+          "and pitch (mag_compass attitude_source: ins_state): in motion its error holds the "
+          "filter's tilt error times the tangent of the field's inclination, fused as such; "
+          "false for a compass that levels itself"),
     Param("use_speed_log", False,
           "use log/speed (water speed along body x) with water-current and log-scale states"),
     Param("speed_log.current_sigma_mps", 0.3, "initial sigma of the water current, m/s",

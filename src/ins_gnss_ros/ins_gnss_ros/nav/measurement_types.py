@@ -60,12 +60,15 @@ class HeadingFix:
     """Azimuth of the body x axis (rad, clockwise from true north) at time t, variance (rad^2).
     `bias` names the extra block of the source's own heading bias: "mag" for a magnetic compass,
     "ahrs" for an IMU's orientation (declination already applied); None for a true heading
-    (phase differences, a dual-antenna receiver)."""
+    (phase differences, a dual-antenna receiver). `field_enu`: the Earth field's direction
+    (ENU) for a compass that levelled it with the filter's own roll and pitch
+    (measurements.biased_heading), else None."""
 
     t: float
     azimuth: float
     variance: float
     bias: str | None = None
+    field_enu: tuple | None = None
 
 
 @dataclass(frozen=True)

@@ -256,7 +256,7 @@ def heading(space, state, azimuth, variance, baseline_yaw_b=0.0, name="heading")
     return Innovation(name, np.array([wrap_pi(pred - azimuth)]), H, np.array([[variance]]))
 
 
-def biased_heading(space, state, azimuth, variance, bias=0.0, block="mag"):
+def biased_heading(space, state, azimuth, variance, bias=0.0, block="mag", field_enu=None):
     """A heading with a bias of its own: a magnetic compass (seed 004 section 2.8:
     z_MK = K_pr - K_mk = phi_h - dK_mk - noise) or an IMU's orientation, already corrected for
     declination.
@@ -264,6 +264,16 @@ def biased_heading(space, state, azimuth, variance, bias=0.0, block="mag"):
     With the extra state `block` ("mag", "ahrs") the source's bias b (measured minus true) is
     estimated; `bias` is its running estimate, the state is the residual b - bias, so
     H_block = -1.
+
+    A compass levelled with this filter's own roll and pitch (``field_enu`` given) errs by the
+    filter's tilt error: it measures the forward axis against the field's horizontal part as
+    the INS attitude C' = (I - [phi x]) C carries the body field into the level frame, so its
+    reading is az(C' x_b) - az(F'), F' = (I - [phi x]) F, and z = pred - reading = az(F') -
+    az(F) (plus the bias and the noise): H_att is the gradient of the field's azimuth, whose
+    tilt columns are the tangent of the inclination (3.3 at St Petersburg: 1 deg of tilt about
+    magnetic north is 3.3 deg of heading) and whose yaw column is the axis' own. Fused as a
+    yaw alone, the tilt a simulated car's turn left (2-3 deg at a sigma of 2) turned its yaw
+    9 deg off (docs/results/product_path.md, "2026-12-06 (session 35)").
 
     Parameters
     ----------
@@ -273,8 +283,13 @@ def biased_heading(space, state, azimuth, variance, bias=0.0, block="mag"):
         rad^2.
     bias : float
         Current compass-bias estimate, rad.
+    field_enu : array_like, shape (3,), optional
+        The Earth field's direction (ENU, any length) where the reading was levelled with the
+        filter's roll and pitch; None for a source that levels itself.
     """
     pred, grad = azimuth_of_axis(state.q_nb)
+    if field_enu is not None:
+        _, grad = azimuth_of_axis(state.q_nb, quat_to_dcm(state.q_nb).T @ field_enu)
     H = _zeros(space, 1)
     H[0, space["att"]] = grad
     if block in space:

@@ -955,8 +955,19 @@ class Navigator:
         elif m.bias is not None:
             s.heading_steered_by |= {m.bias}
             bias = s.estimates[m.bias][0] if m.bias in s.estimates else 0.0
+            # The compass's tilt error as the filter's own only while the vehicle is known to
+            # move (its speed 3 sigma above align_speed): standing it is a constant the
+            # compass bias carries, and the velocity updates, which at rest tell only the
+            # tilt's sum with the held accelerometer biases, move the tilt back and forth; the
+            # tilt columns dragged the yaw 3.4 times as far (10 deg in 2 s) and a standing car
+            # left with its tilt 2.6 deg off at a sigma of 0.6 (docs/results/product_path.md,
+            # "2026-12-06 (session 35)"), as did the first seconds of a start whose speed was
+            # still unknown.
+            vel = self._space["vel"].start
+            sigma_v = np.sqrt(0.5 * np.trace(s.ekf.P[vel:vel + 2, vel:vel + 2]))
+            moving = np.hypot(*st.v_enu[:2]) - 3.0 * sigma_v > self.config.align_speed
             self._update(meas.biased_heading(self._space, st, m.azimuth, m.variance, bias,
-                                             m.bias), epoch)
+                                             m.bias, m.field_enu if moving else None), epoch)
         else:
             self._update(meas.heading(self._space, st, m.azimuth, m.variance), epoch)
 
