@@ -809,9 +809,9 @@ class Navigator:
         accelerating at 1.4 m/s^2 started pitched 8.5 deg off, its tilt sigma 2.3 deg with the
         accelerometers', its updates gated and forced in: docs/results/product_path.md,
         "2026-12-06 (session 32)"). Without two velocities it is unknown, ``moving_accel_sigma``
-        (a simulated car started on fixes alone levelled on 0.65 m/s^2 at the 0.2 its tilt
-        sigma allowed, took it for accelerometer bias, and ran with its roll 2 deg off and its
-        attitude NEES 10-34: "2026-12-06 (session 35)")."""
+        (simulated cars started on fixes alone levelled on 0.65-1.3 m/s^2 where a 1 deg tilt
+        sigma allows 0.17, took it for accelerometer bias, and ran with their roll 1-2 deg off
+        at an attitude NEES of 10-28: "2026-12-06 (session 35)")."""
         s, cfg = self._state, self.config
         unknown = float(np.hypot(cfg.sigma_tilt0, cfg.moving_accel_sigma / g))
         if s.levelling_velocities is None:
@@ -955,21 +955,24 @@ class Navigator:
         elif m.bias is not None:
             s.heading_steered_by |= {m.bias}
             bias = s.estimates[m.bias][0] if m.bias in s.estimates else 0.0
-            # The compass's tilt error as the filter's own only while the vehicle is known to
-            # move (its speed 3 sigma above align_speed): standing it is a constant the
-            # compass bias carries, and the velocity updates, which at rest tell only the
-            # tilt's sum with the held accelerometer biases, move the tilt back and forth; the
-            # tilt columns dragged the yaw 3.4 times as far (10 deg in 2 s) and a standing car
-            # left with its tilt 2.6 deg off at a sigma of 0.6 (docs/results/product_path.md,
-            # "2026-12-06 (session 35)"), as did the first seconds of a start whose speed was
-            # still unknown.
-            vel = self._space["vel"].start
-            sigma_v = np.sqrt(0.5 * np.trace(s.ekf.P[vel:vel + 2, vel:vel + 2]))
-            moving = np.hypot(*st.v_enu[:2]) - 3.0 * sigma_v > self.config.align_speed
+            field = m.field_enu if m.field_enu is not None and self._known_to_move(st) else None
             self._update(meas.biased_heading(self._space, st, m.azimuth, m.variance, bias,
-                                             m.bias, m.field_enu if moving else None), epoch)
+                                             m.bias, field), epoch)
         else:
             self._update(meas.heading(self._space, st, m.azimuth, m.variance), epoch)
+
+    def _known_to_move(self, st):
+        """Whether the vehicle is known to move at st: its speed 3 sigma above align_speed. Only
+        then is a compass levelled with the INS's roll and pitch fused with the filter's tilt
+        in its error (measurements.biased_heading): standing, that error is a constant the
+        compass bias carries, and the velocity updates, which at rest tell only the tilt's sum
+        with the held accelerometer biases, move the tilt back and forth; the tilt columns
+        dragged the yaw 3.4 times as far (10 deg in 2 s) and a standing car left with its tilt
+        2.6 deg off at a sigma of 0.6 (docs/results/product_path.md, "2026-12-06 (session
+        35)"), as did the first seconds of a start whose speed was still unknown."""
+        vel = self._space["vel"].start
+        sigma = np.sqrt(0.5 * np.trace(self._state.ekf.P[vel:vel + 2, vel:vel + 2]))
+        return np.hypot(*st.v_enu[:2]) - 3.0 * sigma > self.config.align_speed
 
     def _heading_refuted(self, m, st, epoch):
         self._refute(m.bias, m.why)
