@@ -492,6 +492,28 @@ def test_fixes_without_velocities_refute_their_covariance_in_motion_before_a_cou
         assert min(m.cov_enu[0, 0] for m in courses) > 1.0
 
 
+#: The car of the next two tests: gravity, its acceleration along its x axis (East) and its
+#: speed when the data begin, m/s^2, m/s^2, m/s.
+G, ACCEL, SPEED0 = 9.81, 1.5, 5.0
+
+
+def _accelerating_car(nav, seconds, velocities):
+    """Feed nav that car's 100 Hz IMU and 5 Hz fixes (with velocities or without) for
+    `seconds`, yielding after each GNSS epoch."""
+    lat0, lon0, dt = 59.9, 30.3, 0.01
+    for k in range(1, round(seconds / dt) + 1):
+        t = k * dt
+        nav.add_imu(t, np.zeros(3), np.array([ACCEL, 0.0, G]) * dt)
+        if k % 20 == 0:
+            east = SPEED0 * t + 0.5 * ACCEL * t * t
+            if velocities:
+                nav.add_measurement(GnssVelocity(t, np.array([SPEED0 + ACCEL * t, 0.0, 0.0]),
+                                                 np.eye(3) * 0.05 ** 2))
+            nav.add_measurement(GnssFix(t, np.radians(lat0), np.radians(lon0 + east / (
+                M_PER_DEG * np.cos(np.radians(lat0)))), 10.0, np.eye(3) * 0.25))
+            yield
+
+
 def test_a_start_on_the_move_while_accelerating_is_as_tilted_as_the_acceleration_makes_it():
     """A car accelerating at 1.5 m/s^2 along its x axis when the data begin (fix + velocity
     at 5 Hz): levelled on the specific force, which holds the acceleration, the start is
@@ -499,27 +521,17 @@ def test_a_start_on_the_move_while_accelerating_is_as_tilted_as_the_acceleration
     over the levelling, Navigator._levelling_tilt_sigma), where it said 2.3 deg for a car's
     8.5 deg (docs/results/product_path.md, "2026-12-06 (session 32)")."""
     nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_uncalibrated"})))
-    lat0, lon0, g, a, v0 = 59.9, 30.3, 9.81, 1.5, 5.0
-    dt = 0.01
     sigmas = []
-    for k in range(1, 501):  # 5 s
-        t = k * dt
-        nav.add_imu(t, np.zeros(3), np.array([a, 0.0, g]) * dt)
-        if k % 20 == 0:
-            east = v0 * t + 0.5 * a * t * t
-            nav.add_measurement(GnssVelocity(t, np.array([v0 + a * t, 0.0, 0.0]),
-                                             np.eye(3) * 0.05 ** 2))
-            nav.add_measurement(GnssFix(t, np.radians(lat0), np.radians(lon0 + east / (
-                M_PER_DEG * np.cos(np.radians(lat0)))), 10.0, np.eye(3) * 0.25))
-            if nav.started:
-                att = nav.space["att"].start
-                sigmas.append(np.sqrt(np.diag(nav.covariance())[att:att + 2]))
+    for _ in _accelerating_car(nav, 5.0, velocities=True):
+        if nav.started:
+            att = nav.space["att"].start
+            sigmas.append(np.sqrt(np.diag(nav.covariance())[att:att + 2]))
     # at the start, levelled on the acceleration: as uncertain as it makes the tilt
-    assert np.all(sigmas[0] >= 0.9 * a / g), np.degrees(sigmas[0])
+    assert np.all(sigmas[0] >= 0.9 * ACCEL / G), np.degrees(sigmas[0])
     # and the filter takes the tilt out with the receiver's velocities: level, within it
     roll, pitch, _ = quat_to_euler(nav.solution.q_nb)
     assert abs(roll) < 3.0 * sigmas[-1][0] and abs(pitch) < 3.0 * sigmas[-1][1]
-    assert abs(pitch) < 0.3 * a / g
+    assert abs(pitch) < 0.3 * ACCEL / G
 
 
 def test_a_start_on_the_move_without_velocities_takes_the_acceleration_as_unknown():
@@ -530,23 +542,15 @@ def test_a_start_on_the_move_without_velocities_takes_the_acceleration_as_unknow
     drive: docs/results/product_path.md, "2026-12-06 (session 35)")."""
     params = resolve(PARAMS, {"imu_grade": "mems_uncalibrated"})
     nav = Navigator(navigator_config(params))
-    lat0, lon0, g, a, v0 = 59.9, 30.3, 9.81, 1.5, 5.0
-    dt = 0.01
-    for k in range(1, 201):  # 2 s
-        t = k * dt
-        nav.add_imu(t, np.zeros(3), np.array([a, 0.0, g]) * dt)
-        if k % 20 == 0:
-            east = v0 * t + 0.5 * a * t * t
-            nav.add_measurement(GnssFix(t, np.radians(lat0), np.radians(lon0 + east / (
-                M_PER_DEG * np.cos(np.radians(lat0)))), 10.0, np.eye(3) * 0.25))
-            if nav.started:
-                break
+    for _ in _accelerating_car(nav, 2.0, velocities=False):
+        if nav.started:
+            break
     assert nav.started
     att = nav.space["att"].start
     sigma = np.sqrt(np.diag(nav.covariance())[att:att + 2])
-    assert np.all(sigma >= params["init.moving_accel_sigma_mps2"] / g), np.degrees(sigma)
+    assert np.all(sigma >= params["init.moving_accel_sigma_mps2"] / G), np.degrees(sigma)
     _, pitch, _ = quat_to_euler(nav.solution.q_nb)
-    assert abs(pitch) == pytest.approx(a / g, rel=0.05)
+    assert abs(pitch) == pytest.approx(ACCEL / G, rel=0.05)
     assert abs(pitch) < 2.0 * sigma[1]
 
 
