@@ -19,10 +19,13 @@ for independent news (nav/alignment.py, fixes_with_course).
 A vehicle too slow for the chord (a wheeled robot at 1 m/s with 1 m fixes would need 20 m
 within two seconds) gets its velocity from a run of fixes instead (:func:`run_velocity`): a
 least-squares fit over up to RUN_S seconds in which the gyros carry the direction of motion
-(the INS's yaw at each fix, levelled but of any heading) and the speed may change at a constant
-rate, the velocity taken at the run's last fix. Its covariance holds what the fit leaves out:
-an error of the gyros' rate, a change of acceleration, and the fixes' slow error, which
-over tens of seconds no longer cancels.
+(the INS's yaw at each fix, levelled but of any heading; their rate error about the vertical an
+unknown of the fit, within its prior) and the speed may change at a constant rate, the velocity
+taken at the run's last fix. Its covariance holds what the fit leaves out: a change of
+acceleration, and the fixes' slow error, which over tens of seconds no longer cancels. The same
+fit serves a car started on the move whose fixes are too noisy for the chord (2 m at 5 Hz: the
+chord's ten sigma needs 14 m/s): its gyros' turn-on bias, never measured at rest, is what the
+fit's rate error measures.
 """
 from __future__ import annotations
 
@@ -110,13 +113,18 @@ def _turned(ic, js, v):
 
 def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma):
     """The velocity at the last of a run of fixes, from a fit in which the gyros carry the
-    direction of motion and the speed changes at a constant rate.
+    direction of motion, their rate error about the vertical is an unknown and the speed changes
+    at a constant rate.
 
-    With theta(t) the INS's yaw at t less its yaw at the last fix (the velocity turns with the
-    body: a constant side slip), v the velocity at the last fix and k the speed's rate of change
-    over the speed, the fixes lie at p(t) = p_end - integral from t to t_end of
-    R(theta) (1 + k (t' - t_end)) v dt' (Gauss-Newton from the fit without k, which is linear).
-    The vertical is a quadratic in time.
+    With theta(t) the INS's yaw at t less its yaw at the last fix, less b (t - t_end) for the
+    gyros' rate error b (the velocity turns with the body: a constant side slip), v the velocity
+    at the last fix and k the speed's rate of change over the speed, the fixes lie at
+    p(t) = p_end - integral from t to t_end of R(theta) (1 + k (t' - t_end)) v dt'
+    (Gauss-Newton from the fit without k and b, which is linear). b has the prior
+    N(0, yaw_rate_sigma^2): a turn-on bias of degrees per second, never measured at rest by a
+    start on the move, turns a run's course by tens of degrees, and the track's curvature
+    against the gyros' turn measures it (a straight track the gyros see turning). The vertical
+    is a quadratic in time.
 
     Parameters
     ----------
@@ -129,7 +137,8 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma):
     white, vertical_var : (N,) ndarray
         Their white variance per horizontal axis and their vertical variance, m^2.
     yaw_rate_sigma : float
-        1 sigma of the error of the gyros' rate about the vertical, rad/s.
+        1 sigma of the error of the gyros' rate about the vertical, rad/s (0: none, b not
+        fitted).
 
     Returns
     -------
@@ -139,51 +148,64 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma):
         freedom; None for a run without motion.
     """
     n = len(tau)
-    theta = np.unwrap(yaw)
-    theta = theta - theta[-1]
-    c, s = np.cos(theta), np.sin(theta)
-    ic, js = _from_each_to_last(c, tau), _from_each_to_last(s, tau)
-    jc, jt = _from_each_to_last(tau * c, tau), _from_each_to_last(tau * s, tau)
+    turn = np.unwrap(yaw)
+    turn = turn - turn[-1]
+    fits_rate = yaw_rate_sigma > 0.0
+    m = 6 if fits_rate else 5  # p_end (2), v (2), k, b
+    # the rows: each fix's east, then its north; b's prior last
     weight = np.repeat(1.0 / white, 2)
     y = d[:, :2].reshape(-1)
+    if fits_rate:
+        weight, y = np.append(weight, yaw_rate_sigma ** -2), np.append(y, 0.0)
 
-    def design(v, k):
-        """The model's fixes (2N,) and its derivatives (2N, 5) at x = (p_end east, north; v
-        east, north; k = a / speed), each fix's east row, then its north row."""
+    def integrals(b):
+        """The integrals from each fix to the last of cos and sin of the turn for the rate
+        error b (ic, js), times t' (jc, jt) and times t'^2 (kc, kt)."""
+        theta = turn - b * tau
+        c, s = np.cos(theta), np.sin(theta)
+        return [_from_each_to_last(f, tau) for f in (c, s, tau * c, tau * s,
+                                                     tau * tau * c, tau * tau * s)]
+
+    def design(x):
+        """The model's rows and their derivatives (rows, m) at x."""
+        v, k = x[2:4], x[4]
+        ic, js, jc, jt, kc, kt = integrals(x[5] if fits_rate else 0.0)
         cos_part, sin_part = ic + k * jc, js + k * jt
-        a = np.zeros((n, 2, 5))
-        a[:, 0, 0] = a[:, 1, 1] = 1.0
-        a[:, :, 2] = -_turned(cos_part, sin_part, (1.0, 0.0))
-        a[:, :, 3] = -_turned(cos_part, sin_part, (0.0, 1.0))
-        a[:, :, 4] = -_turned(jc, jt, v)
-        return (a[:, :, 2:4] @ v).reshape(-1), a.reshape(2 * n, 5)
+        a = np.zeros((len(y), m))
+        rows = a[:2 * n].reshape(n, 2, m)
+        rows[:, 0, 0] = rows[:, 1, 1] = 1.0
+        rows[:, :, 2] = -_turned(cos_part, sin_part, (1.0, 0.0))
+        rows[:, :, 3] = -_turned(cos_part, sin_part, (0.0, 1.0))
+        rows[:, :, 4] = -_turned(jc, jt, v)
+        model = np.zeros(len(y))
+        model[:2 * n] = (x[:2] + rows[:, :, 2:4] @ v).reshape(-1)
+        if fits_rate:  # d theta / d b = -t': the rows turn by the integral of t' (1 + k t')
+            rows[:, :, 5] = _turned(jc + k * kc, jt + k * kt, (-v[1], v[0]))
+            a[-1, 5], model[-1] = 1.0, x[5]
+        return model, a
 
     def solve(a, r):
         normal = np.linalg.inv(a.T @ (a * weight[:, None]))
         gain = normal @ (a * weight[:, None]).T
         return gain @ r, normal, gain
 
-    # without the acceleration the model is linear; Gauss-Newton from there (a few steps: the
-    # speed's rate of change is small against the speed over a run the fixes can follow)
-    _, a = design(np.zeros(2), 0.0)
-    x = np.append(solve(a[:, :4], y)[0], 0.0)
-    end = np.tile([0, 1], n)  # each row's p_end component
-    for _ in range(4):
+    # without the acceleration and the rate error the model is linear; Gauss-Newton from
+    # there (a few steps: the speed's rate of change is small against the speed over a run the
+    # fixes can follow, and the rate error's turn over it a fraction of a radian)
+    x = np.zeros(m)
+    _, a = design(x)
+    x[:4] = solve(a[:, :4], y)[0]
+    for _ in range(6):
         if x[2] == 0.0 and x[3] == 0.0:
             return None
-        moved, a = design(x[2:4], x[4])
-        x = x + solve(a, y - x[end] - moved)[0]
+        model, a = design(x)
+        x = x + solve(a, y - model)[0]
     u = x[2:4] / np.hypot(x[2], x[3])
-    moved, a = design(x[2:4], x[4])
-    residual = y - x[end] - moved
+    model, a = design(x)
+    residual = y - model
     _, normal, gain = solve(a, residual)
     chi2 = float(residual @ (weight * residual))
     cov = normal[2:4, 2:4] + SLOW_ERROR_RATE ** 2 * np.eye(2)
-    # What the fit leaves out, through its gain on the positions: an error of the gyros' rate
-    # (the turn errs by rate * (t - t_end): the fixes lie off by its integral on the turned
-    # velocity) and the worst single step of the acceleration along the track.
-    bias = gain[2:4] @ _turned(jc, jt, np.array([-x[3], x[2]])).reshape(-1)
-    cov += yaw_rate_sigma ** 2 * np.outer(bias, bias)
     # vertical: p_end + v tau + a tau^2 / 2
     a_up = np.stack([np.ones(n), tau, 0.5 * tau * tau], axis=1)
     w_up = 1.0 / vertical_var
@@ -192,16 +214,20 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma):
     residual_up = d[:, 2] - a_up @ (gain_up @ d[:, 2])
     chi2 += float(residual_up @ (w_up * residual_up))
     dof = 3 * n - 8
-    # A step of Δa in the speed's rate at t_k moves the last velocity by -Δa t_k u and each
+    # What the fit leaves out: the worst single step of the acceleration along the track. A
+    # step of Δa in the speed's rate at t_k moves the last velocity by -Δa t_k u and each
     # fix, relative to the last, by the integral from it (or from t_k) to t_end of
     # -Δa (t - t_k) R(theta) u. Its size is ACCELERATION_CHANGE, or the largest the residual
     # test misses (Baarda's minimal detectable bias: the step whose residuals reach the test's
     # detectable noncentrality), whichever is smaller: over a long run the speed at its end is
     # uncertain by what such steps could hide (its course is not: they move the fixes along
     # the track).
+    ic, js, jc, jt, _, _ = integrals(x[5] if fits_rate else 0.0)
     later = np.maximum(np.arange(n)[None, :], np.arange(n)[:, None])  # (step at k, fix i)
-    moves = -_turned((jc[later] - tau[:, None] * ic[later]).reshape(-1),
-                     (jt[later] - tau[:, None] * js[later]).reshape(-1), u).reshape(n, 2 * n)
+    moves = np.zeros((n, len(y)))  # (b's prior row not moved)
+    moves[:, :2 * n] = -_turned((jc[later] - tau[:, None] * ic[later]).reshape(-1),
+                                (jt[later] - tau[:, None] * js[later]).reshape(-1),
+                                u).reshape(n, 2 * n)
     step = 0.5 * np.clip(tau[None, :] - tau[:, None], 0.0, None) ** 2  # the vertical's
     worst = _worst_step(moves, a, gain, weight, dof, gain[2:4], u, tau)
     worst_up = _worst_step(step, a_up, gain_up, w_up, dof, gain_up[1:2], [1.0], tau)
@@ -211,7 +237,7 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma):
     full[:2, :2] = cov
     full[2, 2] = normal_up[1, 1] + worst_up[0] ** 2
     gains = np.zeros((n, 3, 3))
-    gains[:, :2, 0], gains[:, :2, 1] = gain[2:4, 0::2].T, gain[2:4, 1::2].T
+    gains[:, :2, 0], gains[:, :2, 1] = gain[2:4, 0:2 * n:2].T, gain[2:4, 1:2 * n:2].T
     gains[:, 2, 2] = gain_up[1]
     return v, full, gains, chi2, dof
 
