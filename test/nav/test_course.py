@@ -222,6 +222,26 @@ def test_run_velocity_measures_the_gyros_rate_error():
     assert 0.5 < np.mean(ratios) < 1.3
 
 
+def test_run_velocity_course_holds_what_the_tilt_does_to_the_turns():
+    """An INS tilted by epsilon turns its yaw by up to 1 - cos epsilon per radian of the
+    vehicle's turn more or less than the heading: with the tilt's sigma the course's variance
+    across the track grows by (0.5 (1 - cos 2 sigma) min(turn, 1) speed)^2 over a run that
+    turned, and not at all over a straight one."""
+    from ins_gnss_ros.nav.course import run_velocity
+
+    tau = np.arange(-20.0, 1e-9, 0.4)
+    n, sigma = len(tau), 0.3
+    for rate, turn in ((0.05, 1.0), (0.0, 0.0)):
+        d, yaw = turning_run(tau, rate=rate)
+        level, tilted = (run_velocity(tau, d, yaw, np.ones(n), np.full(n, 4.0), 0.0, tilt)
+                         for tilt in (0.0, sigma))
+        np.testing.assert_allclose(tilted[0], level[0])
+        across = np.array([-level[0][1], level[0][0]]) / np.hypot(*level[0][:2])
+        grown = across @ (tilted[1] - level[1])[:2, :2] @ across
+        expected = (0.5 * (1.0 - math.cos(2.0 * sigma)) * turn * np.hypot(*level[0][:2])) ** 2
+        assert grown == pytest.approx(expected, rel=1e-6, abs=1e-12)
+
+
 def test_a_slow_vehicle_gets_its_course_from_a_run():
     """A robot at 1 m/s with 1 m fixes at 2.5 Hz: the two-second chord never clears ten
     sigma, the run does within about fifteen seconds, its course within 3 sigma of the truth;

@@ -111,7 +111,7 @@ def _turned(ic, js, v):
     return np.stack([ic * v[0] - js * v[1], js * v[0] + ic * v[1]], axis=1)
 
 
-def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma):
+def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma, tilt_sigma=0.0):
     """The velocity at the last of a run of fixes, from a fit in which the gyros carry the
     direction of motion, their rate error about the vertical is an unknown and the speed changes
     at a constant rate.
@@ -126,6 +126,18 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma):
     against the gyros' turn measures it (a straight track the gyros see turning). The vertical
     is a quadratic in time.
 
+    The yaw is the heading only of a levelled body: the azimuth of a body x axis tilted by
+    epsilon errs by up to (1 - cos epsilon) / 2 (small epsilon), one way at 45 deg between the
+    tilt's axis and the heading and the other way a quarter turn later: over a turn of the
+    vehicle the INS's yaw changes by up to (1 - cos epsilon) per radian of it more or less
+    than the heading, and by up to 1 - cos epsilon in all. An INS left unaided
+    on the move (a start on the move before its heading is known) tilts by what its gyros'
+    biases leave, tens of degrees on a consumer unit within a minute, where its turns are no
+    longer the vehicle's; the course's covariance takes (1 - cos 2 tilt_sigma) min(turn, 1) as
+    two sigma of a course error (a simulated robot with a consumer unit started on the move,
+    59 deg of tilt sigma after 41 s, aligned on a course 7.9 deg off for a sigma of 3.9 deg,
+    its heading then running off at 7 deg/s with a sigma of 5-8 deg).
+
     Parameters
     ----------
     tau : (N,) ndarray
@@ -139,6 +151,8 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma):
     yaw_rate_sigma : float
         1 sigma of the error of the gyros' rate about the vertical, rad/s (0: none, b not
         fitted).
+    tilt_sigma : float
+        1 sigma of the INS's tilt, rad.
 
     Returns
     -------
@@ -232,6 +246,9 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma):
     worst = _worst_step(moves, a, gain, weight, dof, gain[2:4], u, tau)
     worst_up = _worst_step(step, a_up, gain_up, w_up, dof, gain_up[1:2], [1.0], tau)
     cov += np.outer(worst, worst)
+    turn_error = 0.5 * (1.0 - np.cos(2.0 * tilt_sigma)) * min(float(np.abs(turn).max()), 1.0)
+    across = np.array([-u[1], u[0]])
+    cov += (turn_error * np.hypot(x[2], x[3])) ** 2 * np.outer(across, across)
     v = np.array([x[2], x[3], gain_up[1] @ d[:, 2]])
     full = np.zeros((3, 3))
     full[:2, :2] = cov
@@ -316,13 +333,15 @@ class CourseFromFixes:
         self._run.clear()
 
     def add(self, t: float, lat: float, lon: float, h: float, cov: np.ndarray,
-            yaw: float | None = None, yaw_rate_sigma: float = 0.0, yaw_checked: bool = False):
+            yaw: float | None = None, yaw_rate_sigma: float = 0.0, yaw_checked: bool = False,
+            tilt_sigma: float = 0.0):
         """A fix at t (s; rad, rad, m) with its ENU covariance (m^2), already observed
         (:meth:`observe`), and the INS's yaw of the body x axis then (rad, counter-clockwise;
         None before the INS is levelled: no run is kept) with the sigma of its gyros' rate
-        error about the vertical (rad/s); ``yaw_checked``: a heading source under check steers
-        that yaw (a run's velocity then only checks it: GnssVelocity.checks_only). Returns the
-        velocity it completes (of the chord, else of the run), or None."""
+        error about the vertical (rad/s) and of its tilt (rad); ``yaw_checked``: a heading
+        source under check steers that yaw (a run's velocity then only checks it:
+        GnssVelocity.checks_only). Returns the velocity it completes (of the chord, else of the
+        run), or None."""
         r = geodetic_to_ecef(lat, lon, h)
         R = ecef_to_enu_matrix(lat, lon)
         fix = GnssFix(t, lat, lon, h, cov)
@@ -333,7 +352,7 @@ class CourseFromFixes:
             self._run.append((r, yaw, fix))
         velocity = self._chord(r, R, fix)
         if velocity is None and len(self._run) >= MIN_RUN_FIXES:
-            velocity = self._run_velocity(R, yaw_rate_sigma, yaw_checked)
+            velocity = self._run_velocity(R, yaw_rate_sigma, tilt_sigma, yaw_checked)
         if velocity is not None:  # the next velocity of fixes not in this one
             self._window, self._run = self._window[-1:], self._run[-1:]
         return velocity
@@ -362,7 +381,8 @@ class CourseFromFixes:
         fixes = tuple(zip((f for _, f in self._window), cross))
         return GnssVelocity(0.5 * (first.t + t), d / dt, cov_v, fixes)
 
-    def _run_velocity(self, R: np.ndarray, yaw_rate_sigma: float, checks_only: bool):
+    def _run_velocity(self, R: np.ndarray, yaw_rate_sigma: float, tilt_sigma: float,
+                      checks_only: bool):
         """The velocity of the run at its last fix (:func:`run_velocity`, ENU axes R there),
         once its course is known to MAX_COURSE_SIGMA; a run the fit does not hold loses its
         older half."""
@@ -373,7 +393,7 @@ class CourseFromFixes:
         white = [self.fix_to_fix(f.cov_enu) for _, _, f in run]
         fit = run_velocity(tau, d, np.array([yaw for _, yaw, _ in run]),
                            np.array([w[0, 0] for w in white]), np.array([w[2, 2] for w in white]),
-                           yaw_rate_sigma)
+                           yaw_rate_sigma, tilt_sigma)
         if fit is None:
             return None
         v, cov, gains, chi2, dof = fit

@@ -356,6 +356,13 @@ class Navigator:
         return float(np.sqrt(sum(P[self._space[name].start + 2, self._space[name].start + 2]
                                  for name in ("bg", "gmg") if name in self._space)))
 
+    def tilt_sigma(self):
+        """1 sigma of the INS's tilt, the larger of its two horizontal attitude errors', rad,
+        once :attr:`started` (a yaw is a heading only to that: nav/course.py)."""
+        self._catch_up()
+        att, P = self._space["att"].start, self._state.ekf.P
+        return float(np.sqrt(max(P[att, att], P[att + 1, att + 1])))
+
     space = property(lambda self: self._space, doc="The filter's StateSpace.")
     lever_arm_b = property(lambda self: self._lever, doc="GNSS antenna relative to the IMU, FLU, m.")
 
