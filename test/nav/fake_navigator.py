@@ -31,3 +31,6 @@ class RecordingNavigator:
 
     def yaw_rate_sigma(self):
         return 0.0
+
+    def tilt_sigma(self):
+        return 0.0

@@ -204,6 +204,32 @@ def test_magnetic_heading_levelled_with_the_ins_attitude():
     assert np.hypot(*yaw_only[:2]) < 0.3
 
 
+def test_horizontal_acceleration_is_the_tilts_and_accelerometers_share_of_gravity():
+    """The INS's computed horizontal acceleration less the vehicle's: its Jacobian in the tilt
+    and accelerometer-bias columns by central differences of the strapdown's own
+    C (f + b) - g; the yaw column left out (a yaw error turns the vehicle's unknown
+    acceleration), the position and velocity ones too."""
+    from ins_gnss_ros.nav.earth import normal_gravity
+
+    g_n = np.array([0.0, 0.0, normal_gravity(TRUE.lat, TRUE.h)])
+    a_true = np.array([0.8, -0.5, 0.1])
+    f_b = M.quat_to_dcm(TRUE.q_nb).T @ (a_true + g_n)
+    model = M.horizontal_acceleration(SPACE, TRUE, a_true, OMEGA, 1.0)
+    np.testing.assert_allclose(model.z, a_true[:2])
+    np.testing.assert_allclose(model.R, np.eye(2))
+
+    def z_of(dx):
+        st, _ = perturbed(dx)
+        return (M.quat_to_dcm(st.q_nb) @ (f_b + dx[SPACE["ba"]]) - g_n)[:2]
+    H = numerical_H(z_of, STEPS)
+    att, ba = SPACE["att"], SPACE["ba"]
+    tilt = slice(att.start, att.start + 2)
+    np.testing.assert_allclose(model.H[:, tilt], H[:, tilt], atol=1e-6)
+    np.testing.assert_allclose(model.H[:, ba], H[:, ba], atol=1e-6)
+    assert not model.H[:, att.start + 2].any()
+    assert not model.H[:, SPACE["pos"]].any() and not model.H[:, SPACE["vel"]].any()
+
+
 def test_nonholonomic_and_zupt_zaru():
     # A state that satisfies the constraint at the point `arm` of vehicle axes turned by
     # `bore` (pitch, yaw) from the IMU axes.

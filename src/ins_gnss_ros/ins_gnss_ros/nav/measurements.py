@@ -19,7 +19,8 @@ import numpy as np
 
 from . import _kernels
 from .conventions import azimuth_from_yaw, wrap_pi
-from .earth import WGS84, earth_rate_enu, ecef_to_enu_matrix, geodetic_to_ecef
+from .earth import WGS84, earth_rate_enu, ecef_to_enu_matrix, geodetic_to_ecef, normal_gravity
+from .error_model import system_matrix
 from .lever_arm import lever_arm_position, lever_arm_velocity, lever_arm_velocity_jacobians
 from .rotations import cross, quat_to_dcm, skew
 from .vehicle_constraint import turned
@@ -342,6 +343,31 @@ def zero_velocity(space, state, sigma):
     H = _zeros(space, 3)
     H[:, space["vel"]] = np.eye(3)
     return Innovation("zupt", np.asarray(state.v_enu, float).copy(), H, sigma ** 2 * np.eye(3))
+
+
+def horizontal_acceleration(space, state, a_enu, omega_ib_b, sigma):
+    """The vehicle's horizontal acceleration is unknown to sigma (m/s^2 per axis): the INS's
+    computed one is its error (the tilt's share of gravity, the accelerometers' errors: the
+    system matrix's horizontal velocity rows) plus the vehicle's own. Its yaw column is left
+    out: a yaw error turns the vehicle's acceleration, which stays as unknown (the heading may
+    not be known at all).
+
+    Parameters
+    ----------
+    a_enu : array_like, shape (3,)
+        The INS's mean acceleration over its last segment (ENU, m/s^2).
+    omega_ib_b : array_like, shape (3,)
+        Compensated angular rate, rad/s.
+    """
+    g_n = np.array([0.0, 0.0, normal_gravity(state.lat, state.h)])
+    f_b = quat_to_dcm(state.q_nb).T @ (np.asarray(a_enu, float) + g_n)
+    F = system_matrix(space.layout, state, f_b, omega_ib_b)  # (the core states' block)
+    vel, H = space["vel"].start, _zeros(space, 2)
+    H[:, :len(F)] = F[vel:vel + 2]
+    H[:, space["pos"]] = H[:, space["vel"]] = 0.0  # (Coriolis and transport terms: negligible)
+    H[:, space["att"].start + 2] = 0.0
+    return Innovation("horizontal_acceleration", np.asarray(a_enu, float)[:2].copy(), H,
+                      sigma ** 2 * np.eye(2))
 
 
 def zero_angular_rate(space, state, omega_ib_b, sigma):

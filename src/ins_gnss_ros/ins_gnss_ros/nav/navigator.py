@@ -62,6 +62,9 @@ from .vehicle_constraint import LEARN_S, SLIP_HOLD_SIGMA, SLIP_MIN_SPEED, SLIP_R
 REST_HOLD = 0.5
 #: An INS velocity sigma beyond this fraction of the GNSS speed keeps no direction to align on.
 UNINFORMED_VELOCITY = 0.3
+#: Shortest interval, s, between two levellings of an INS aligning on the move
+#: (Navigator._level_on_the_move).
+LEVEL_INTERVAL = 1.0
 #: Standard deviations by which a heading source's alignment may miss the first course before
 #: the source is refuted (Navigator._check_heading_on_course): once per source and run, so a
 #: true heading is refuted with a probability of 6e-5.
@@ -360,6 +363,9 @@ class Navigator:
         """1 sigma of the INS's tilt, the larger of its two horizontal attitude errors', rad,
         once :attr:`started` (a yaw is a heading only to that: nav/course.py)."""
         self._catch_up()
+        return self._tilt_sigma()
+
+    def _tilt_sigma(self):
         att, P = self._space["att"].start, self._state.ekf.P
         return float(np.sqrt(max(P[att, att], P[att + 1, att + 1])))
 
@@ -665,20 +671,40 @@ class Navigator:
         s = self._state
         return s.gnss_speed <= self.config.static_speed or epoch - s.t_rest <= REST_HOLD
 
-    def _held_for_alignment(self, m, epoch):
-        """While aligning, GNSS is used only at rest: reject m ("aligning") in motion."""
+    def _held_for_alignment(self, m, st, epoch):
+        """While aligning, GNSS is used only at rest: reject m ("aligning") in motion, where the
+        INS is kept level on gravity (:meth:`_level_on_the_move`)."""
         if self._state.mode == ALIGNING and not self._state.heading_known and \
                 not self._at_rest(epoch):
+            self._level_on_the_move(st, epoch)
             self._refuse(m, epoch, "aligning")
             return True
         return False
+
+    def _level_on_the_move(self, st, epoch):
+        """An INS aligning on the move runs unaided until its heading is known, and its tilt
+        grows with its gyros' biases (default.yaml's 3 deg/s: a tilt sigma of 24 deg after 9 s
+        and 60 deg after 40 s on a simulated robot started on the move, where its yaw is no
+        heading and its alignment no small correction): at most every
+        LEVEL_INTERVAL s its horizontal acceleration is taken for the vehicle's, unknown to
+        ``moving_accel_sigma`` (meas.horizontal_acceleration). The vehicle's acceleration
+        lasts for seconds, so more often would count it as news; and only while the tilt is
+        less certain than that acceleration leaves it (a standing start's levelled tilt is
+        better: there the update would only trade the tilt against the biases)."""
+        s, sigma_a = self._state, self.config.moving_accel_sigma
+        if epoch - s.t_levelled < LEVEL_INTERVAL or \
+                self._tilt_sigma() <= sigma_a / normal_gravity(st.lat, st.h):
+            return
+        s.t_levelled = epoch
+        self._update(meas.horizontal_acceleration(self._space, st, s.a_enu, s.omega, sigma_a),
+                     epoch, aiding=False)
 
     def _gnss_fix(self, m, st, epoch):
         s = self._state
         if m.t <= s.t_fixes_aligned:
             self._refuse(m, epoch, "in the alignment")
             return
-        if self._held_for_alignment(m, epoch):
+        if self._held_for_alignment(m, st, epoch):
             return
         self._fix_common_var = m.common_var
         v_ant = point_velocity(st.v_enu, st.q_nb, s.omega, self._lever, st.lat)
@@ -749,7 +775,7 @@ class Navigator:
             if restart:
                 return
             st = extrapolate(s.nav, st.t - s.nav.t, s.a_enu)
-        if self._held_for_alignment(m, epoch):
+        if self._held_for_alignment(m, st, epoch):
             return
         innov = meas.gnss_velocity(self._space, st, m.v_enu, m.cov_enu, s.omega, self._lever,
                                    dzdt=s.a_enu, latency=s.estimates.get("vd", (0.0,))[0],
@@ -1019,7 +1045,7 @@ class Navigator:
                      epoch)
 
     def _wheel_odometry(self, m, st, epoch):
-        if self._held_for_alignment(m, epoch):  # body axes without a heading: not linear
+        if self._held_for_alignment(m, st, epoch):  # body axes without a heading: not linear
             return
         scale = self._state.estimates.get("wheel", np.zeros(1))[0]
         self._update(meas.wheel_velocity(self._space, st, m.velocity_b, m.variance,
@@ -1039,7 +1065,7 @@ class Navigator:
         """Queued before the start, applied after it: the filter already started."""
 
     def _satellite_ranges(self, m, st, epoch):
-        if self._held_for_alignment(m, epoch):
+        if self._held_for_alignment(m, st, epoch):
             return
         s = self._state
         clock = s.estimates.get("clock", np.zeros(3))

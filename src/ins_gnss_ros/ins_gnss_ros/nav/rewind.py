@@ -105,6 +105,9 @@ class RunState:
     slip_held, t_slip : bool, float
         The side slip of a heading aligned on the course is held (Navigator._slip_update), and
         the epoch of its last update (NaN until the first epoch after the alignment).
+    t_levelled : float
+        The epoch of the last levelling of an INS aligning on the move
+        (Navigator._level_on_the_move).
     """
 
     next_sample: int = 0
@@ -141,6 +144,7 @@ class RunState:
     course_check: tuple | None = None
     slip_held: bool = False
     t_slip: float = -np.inf
+    t_levelled: float = -np.inf
 
     @classmethod
     def initial(cls, space):
