@@ -25,7 +25,7 @@ Usage::
     .venv/bin/python bench/bench_robustness.py            # the full matrix (~15 min)
     .venv/bin/python bench/bench_robustness.py --short    # three cells
     .venv/bin/python bench/bench_robustness.py --cells 9 --seeds 3 4 5 6 7   # over seeds
-    (test/trial/test_robustness.py runs eleven of the cells, 60 s each, in CI)
+    (test/trial/test_robustness.py runs some of the cells, 60 s each, in CI)
 """
 from __future__ import annotations
 
@@ -99,7 +99,17 @@ CELLS += [Cell("fix only 1 Hz", ("--gnss-rate", "1", "--no-gnss-vel")),
                                   "--gnss-sigma-h-reported", "0.1")),
           Cell("rolling start, single-point fixes only of 2 m whose driver reports 0.1 m",
                ("--static", "0", "--no-gnss-vel", "--gnss-sigma-h", "2.0", "--gnss-sigma-v",
-                "4.0", "--gnss-sigma-h-reported", "0.1"))]
+                "4.0", "--gnss-sigma-h-reported", "0.1")),
+          # an INS that aligns on the move for seconds with a consumer unit's gyro biases
+          Cell("rolling start, consumer MEMS unit, single-point fixes only of 2 m whose driver "
+               "reports 0.1 m",
+               ("--static", "0", "--imu-grade", "consumer_mems", "--no-gnss-vel",
+                "--gnss-sigma-h", "2.0", "--gnss-sigma-v", "4.0", "--gnss-sigma-h-reported",
+                "0.1")),
+          Cell("slow robot started on the move, consumer MEMS unit, 2.5 Hz fixes of 1 m "
+               "without velocity or covariance, no heading source",
+               ("--static", "0", "--gnss-rate", "2.5", "--no-gnss-vel", "--no-gnss-cov",
+                "--gnss-sigma-h", "1.0", "--gnss-sigma-v", "2.0"), scenario="robot")]
 SHORT = [CELLS[0], CELLS[3], CELLS[10]]
 
 
