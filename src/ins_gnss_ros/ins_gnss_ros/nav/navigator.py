@@ -360,8 +360,9 @@ class Navigator:
                                  for name in ("bg", "gmg") if name in self._space)))
 
     def tilt_sigma(self):
-        """1 sigma of the INS's tilt, the larger of its two horizontal attitude errors', rad,
-        once :attr:`started` (a yaw is a heading only to that: nav/course.py)."""
+        """1 sigma of the INS's tilt (the larger of its two horizontal attitude errors' sigmas),
+        rad, once :attr:`started`: a yaw is a heading only to within what it does
+        (nav/course.py)."""
         self._catch_up()
         return self._tilt_sigma()
 
@@ -685,12 +686,12 @@ class Navigator:
         """An INS aligning on the move runs unaided until its heading is known, and its tilt
         grows with its gyros' biases (default.yaml's 3 deg/s: a tilt sigma of 24 deg after 9 s
         and 60 deg after 40 s on a simulated robot started on the move, where its yaw is no
-        heading and its alignment no small correction): at most every
-        LEVEL_INTERVAL s its horizontal acceleration is taken for the vehicle's, unknown to
-        ``moving_accel_sigma`` (meas.horizontal_acceleration). The vehicle's acceleration
-        lasts for seconds, so more often would count it as news; and only while the tilt is
-        less certain than that acceleration leaves it (a standing start's levelled tilt is
-        better: there the update would only trade the tilt against the biases)."""
+        heading and its alignment no small correction): at most every LEVEL_INTERVAL s its
+        horizontal acceleration is taken for the vehicle's, unknown to ``moving_accel_sigma``
+        (meas.horizontal_acceleration). The vehicle's acceleration lasts for seconds, so more
+        often would count it as news; and only while the tilt is less certain than that
+        acceleration leaves it (a standing start's levelled tilt is better: there the update
+        would only trade the tilt against the biases)."""
         s, sigma_a = self._state, self.config.moving_accel_sigma
         if epoch - s.t_levelled < LEVEL_INTERVAL or \
                 self._tilt_sigma() <= sigma_a / normal_gravity(st.lat, st.h):
