@@ -877,8 +877,7 @@ class Navigator:
         t0, v0, own0 = history[0]
         dv, dv_ins = v - v0, own - own0
         P, S = s.ekf.P, self._space
-        att = S["att"].start
-        drift = normal_gravity(st.lat, st.h) * np.sqrt(max(P[att, att], P[att + 1, att + 1]))
+        drift = normal_gravity(st.lat, st.h) * self._tilt_sigma()
         if "ba" in S:
             ba = S["ba"].start
             drift += np.sqrt(max(P[ba, ba], P[ba + 1, ba + 1]))
