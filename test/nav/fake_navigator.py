@@ -34,3 +34,6 @@ class RecordingNavigator:
 
     def tilt_sigma(self):
         return 0.0
+
+    def yaw_scale_sigma(self):
+        return 0.0

@@ -157,7 +157,7 @@ def test_run_velocity_follows_a_turn_the_gyros_carry_and_a_changing_speed():
     d, yaw = turning_run(tau)
     n = len(tau)
     # (the INS's yaw with any offset: only its turns enter)
-    v, cov, gains, chi2, dof = run_velocity(tau, d, yaw + 1.3, np.ones(n), np.full(n, 4.0),
+    v, cov, gains, chi2, dof, _ = run_velocity(tau, d, yaw + 1.3, np.ones(n), np.full(n, 4.0),
                                             0.0)
     np.testing.assert_allclose(v, [1.0, 0.0, 0.0], atol=2e-3)
     assert chi2 < 1e-3 and dof == 3 * n - 8
@@ -209,37 +209,44 @@ def test_run_velocity_measures_the_gyros_rate_error():
     tau = np.arange(-8.0, 1e-9, 0.2)
     d, yaw = turning_run(tau, speed_end=12.0, rate=0.03, accel=0.25)
     n, bias, prior = len(tau), math.radians(2.0), math.radians(3.0)
-    ratios, sigmas = [], []
+    ratios, sigmas, rate_ratios = [], [], []
     for _ in range(400):
         noisy = d + rng.standard_normal(d.shape) * [2.0, 2.0, 4.0]
-        v, cov, _, chi2, dof = run_velocity(tau, noisy, yaw + bias * tau, np.full(n, 4.0),
-                                            np.full(n, 16.0), prior)
+        v, cov, _, chi2, dof, (rate, rate_var) = run_velocity(
+            tau, noisy, yaw + bias * tau, np.full(n, 4.0), np.full(n, 16.0), prior)
         across = np.array([-v[1], v[0]]) / np.hypot(v[0], v[1])
         sigma = math.sqrt(across @ cov[:2, :2] @ across) / np.hypot(v[0], v[1])
         ratios.append((math.atan2(v[1], v[0]) / sigma) ** 2)
         sigmas.append(sigma)
+        rate_ratios.append((rate - bias) ** 2 / rate_var)
     assert np.median(sigmas) < 0.7 * MAX_COURSE_SIGMA
     assert 0.5 < np.mean(ratios) < 1.3
+    # the rate error itself, for the filter's gyro bias (measured: 0.89)
+    assert 0.7 < np.mean(rate_ratios) < 1.3
 
 
 def test_run_velocity_course_holds_what_the_tilt_does_to_the_turns():
     """An INS tilted by epsilon turns its yaw by up to 1 - cos epsilon per radian of the
     vehicle's turn more or less than the heading: with the tilt's sigma the course's variance
     across the track grows by (0.5 (1 - cos 2 sigma) min(turn, 1) speed)^2 over a run that
-    turned, and not at all over a straight one."""
+    turned, and not at all over a straight one. The rate error's variance grows by that turn
+    error and the gyros' scale error times the turn, over the run's span, squared."""
     from ins_gnss_ros.nav.course import run_velocity
 
     tau = np.arange(-20.0, 1e-9, 0.4)
-    n, sigma = len(tau), 0.3
+    n, sigma, scale = len(tau), 0.3, 0.015
     for rate, turn in ((0.05, 1.0), (0.0, 0.0)):
         d, yaw = turning_run(tau, rate=rate)
-        level, tilted = (run_velocity(tau, d, yaw, np.ones(n), np.full(n, 4.0), 0.0, tilt)
-                         for tilt in (0.0, sigma))
-        np.testing.assert_allclose(tilted[0], level[0])
-        across = np.array([-level[0][1], level[0][0]]) / np.hypot(*level[0][:2])
-        grown = across @ (tilted[1] - level[1])[:2, :2] @ across
-        expected = (0.5 * (1.0 - math.cos(2.0 * sigma)) * turn * np.hypot(*level[0][:2])) ** 2
-        assert grown == pytest.approx(expected, rel=1e-6, abs=1e-12)
+        level, tilted = (run_velocity(tau, d, yaw, np.ones(n), np.full(n, 4.0), 0.01, tilt,
+                                      scale * bool(tilt)) for tilt in (0.0, sigma))
+        np.testing.assert_allclose(tilted.v, level.v)
+        across = np.array([-level.v[1], level.v[0]]) / np.hypot(*level.v[:2])
+        grown = across @ (tilted.cov - level.cov)[:2, :2] @ across
+        turn_error = 0.5 * (1.0 - math.cos(2.0 * sigma)) * turn
+        assert grown == pytest.approx((turn_error * np.hypot(*level.v[:2])) ** 2, rel=1e-6,
+                                      abs=1e-12)
+        assert tilted.rate[1] - level.rate[1] == pytest.approx(
+            ((turn_error + scale * rate * 20.0) / 20.0) ** 2, rel=1e-6, abs=1e-15)
 
 
 def test_a_slow_vehicle_gets_its_course_from_a_run():

@@ -284,6 +284,25 @@ def test_nonholonomic_and_zupt_zaru():
     check(model, z_zaru, 1e-4)
 
 
+@pytest.mark.parametrize("roll, yaw", [(0.0, 2.5), (np.pi / 2, -1.0)])
+def test_vertical_rate_error_is_what_the_gyro_residual_turns_the_x_axis_azimuth_by(roll, yaw):
+    """H dx: how fast a residual gyro bias turns the azimuth of the body x axis (what a run of
+    fixes measures against, course.run_velocity), for a level body and for one rolled 90 deg,
+    whose y axis is then up."""
+    state = NavState(TRUE.lat, TRUE.lon, TRUE.h, TRUE.v_enu, quat_from_euler(roll, 0.0, yaw))
+    model = M.vertical_rate_error(SPACE, state, 0.01, 1e-6)
+    residual, dt = np.array([0.003, -0.02, 0.05]), 1e-6
+    dx = np.zeros(SPACE.size)
+    dx[SPACE["bg"]] = residual
+
+    def azimuth(C):
+        return np.arctan2(C[1, 0], C[0, 0])
+    C = M.quat_to_dcm(state.q_nb)
+    turned = C @ M.quat_to_dcm(quat_from_rotvec(residual * dt))
+    assert model.H @ dx == pytest.approx([(azimuth(turned) - azimuth(C)) / dt], rel=1e-5)
+    assert model.z == pytest.approx([0.01]) and model.R.ravel() == pytest.approx([1e-6])
+
+
 def test_speed_log_with_current_and_scale():
     current, scale = np.array([0.3, -0.2]), 0.02
     r = M.quat_to_dcm(TRUE.q_nb)[:, 0]

@@ -801,13 +801,13 @@ class Aiding:
         if heading != self._course_heading:
             self._course.restart_run()
             self._course_heading = heading
-        yaw, rate_sigma, tilt_sigma = None, 0.0, 0.0  # (None: the run is forgotten)
+        yaw, rate_sigma, tilt_sigma, scale_sigma = None, 0.0, 0.0, 0.0  # (None: no run kept)
         if nav.started:
             yaw, rate_sigma = yaw_of_x(nav.attitude_at(t)), nav.yaw_rate_sigma()
-            tilt_sigma = nav.tilt_sigma()
+            tilt_sigma, scale_sigma = nav.tilt_sigma(), nav.yaw_scale_sigma()
         velocity = self._course.add(t, lat, lon, h, cov, yaw, rate_sigma,
                                     yaw_checked=nav.heading_by is not None,
-                                    tilt_sigma=tilt_sigma)
+                                    tilt_sigma=tilt_sigma, scale_sigma=scale_sigma)
         if velocity is not None:
             self.navigator.add_measurement(velocity)
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 import bisect
 import functools
 from collections import deque
+from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import brentq
@@ -86,15 +87,16 @@ def detectable_noncentrality(dof: int) -> float:
     return float(brentq(lambda lam: ncx2.sf(gate, dof, lam) - DETECTION_POWER, 1e-6, 1e4))
 
 
-def _worst_step(moves, a, gain, weight, dof, velocity_gain, u, tau):
-    """The largest velocity error (m/s) of steps of the acceleration at each fix that the
-    residual test would miss, at most ACCELERATION_CHANGE: moves (N, M) the fixes' rows moved
-    by a unit step at each fix's time, a (M, p) the fit's design, gain (p, M) its gain, weight
-    (M,) its rows' weights, velocity_gain the gain's velocity rows, u the step's direction."""
+def _worst_step(moves, a, gain, weight, dof, rows, direct):
+    """The largest error of the unknowns ``rows`` of the fit (the gain's rows, k of them) that
+    a step of the acceleration at one of the fixes leaves and the residual test would miss, at
+    most ACCELERATION_CHANGE: moves (N, M) the fixes' rows moved by a unit step at each fix's
+    time, a (M, p) the fit's design, gain (p, M) its gain, weight (M,) its rows' weights,
+    direct (N, k) what a unit step at each fix does to those unknowns themselves."""
     unfitted = moves - (moves @ gain.T) @ a.T
     size = np.minimum(ACCELERATION_CHANGE, np.sqrt(
         detectable_noncentrality(dof) / np.maximum((unfitted ** 2) @ weight, 1e-300)))
-    errors = size[:, None] * (moves @ velocity_gain.T + np.outer(tau, u))
+    errors = size[:, None] * (moves @ rows.T + direct)
     return errors[np.argmax(np.linalg.norm(errors, axis=1))]
 
 
@@ -111,7 +113,20 @@ def _turned(ic, js, v):
     return np.stack([ic * v[0] - js * v[1], js * v[0] + ic * v[1]], axis=1)
 
 
-def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma, tilt_sigma=0.0):
+class RunFit(NamedTuple):
+    """A run's fit (:func:`run_velocity`)."""
+
+    v: np.ndarray       # (3,) the velocity at the last fix, m/s, ENU
+    cov: np.ndarray     # (3, 3) its covariance, (m/s)^2
+    gains: np.ndarray   # (N, 3, 3) the derivatives of v with respect to each fix's position
+    chi2: float         # the fit's weighted squared residuals
+    dof: int            # their degrees of freedom
+    rate: tuple | None  # the gyros' rate error about the vertical and its variance (rad/s,
+    #                     (rad/s)^2), or None when not fitted
+
+
+def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma, tilt_sigma=0.0,
+                 scale_sigma=0.0):
     """The velocity at the last of a run of fixes, from a fit in which the gyros carry the
     direction of motion, their rate error about the vertical is an unknown and the speed changes
     at a constant rate.
@@ -138,6 +153,16 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma, tilt_sigma=0.
     59 deg of tilt sigma after 41 s, aligned on a course 7.9 deg off for a sigma of 3.9 deg,
     its heading then running off at 7 deg/s with a sigma of 5-8 deg).
 
+    The fitted rate error is the gyros' bias about the vertical that the filter's estimate
+    misses: a start on the move learns it nowhere else, and left there the heading of a
+    consumer unit's robot aligned on its course ran off at the 5 deg/s its run had measured
+    to 0.2 deg/s (docs/results/product_path.md, "2026-12-06 (session 37)"). Its variance holds
+    what the fit leaves out as the velocity's does: the worst step of the acceleration the
+    residual test would miss (without it a weaving robot's rate errors were twice their sigma,
+    test_aiding.py), and what the tilt and the gyros' scale error do to the run's turn, which
+    passes for a rate over the run. (Its correlation with the course is left out: the course
+    is taken at the last fix, where the rate error has turned nothing yet.)
+
     Parameters
     ----------
     tau : (N,) ndarray
@@ -153,13 +178,13 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma, tilt_sigma=0.
         fitted).
     tilt_sigma : float
         1 sigma of the INS's tilt, rad.
+    scale_sigma : float
+        1 sigma of the gyros' scale-factor error about the vertical (-).
 
     Returns
     -------
-    (v (3,), cov (3, 3), gains (N, 3, 3), chi2, dof) or None
-        The velocity (m/s, ENU) and its covariance, the derivative of v with respect to each
-        fix's position, and the fit's weighted squared residuals with their degrees of
-        freedom; None for a run without motion.
+    RunFit or None
+        None for a run without motion.
     """
     n = len(tau)
     turn = np.unwrap(yaw)
@@ -243,12 +268,18 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma, tilt_sigma=0.
                                 (jt[later] - tau[:, None] * js[later]).reshape(-1),
                                 u).reshape(n, 2 * n)
     step = 0.5 * np.clip(tau[None, :] - tau[:, None], 0.0, None) ** 2  # the vertical's
-    worst = _worst_step(moves, a, gain, weight, dof, gain[2:4], u, tau)
-    worst_up = _worst_step(step, a_up, gain_up, w_up, dof, gain_up[1:2], [1.0], tau)
+    worst = _worst_step(moves, a, gain, weight, dof, gain[2:4], np.outer(tau, u))
+    worst_up = _worst_step(step, a_up, gain_up, w_up, dof, gain_up[1:2], tau[:, None])
     cov += np.outer(worst, worst)
-    turn_error = 0.5 * (1.0 - np.cos(2.0 * tilt_sigma)) * min(float(np.abs(turn).max()), 1.0)
+    largest_turn = float(np.abs(turn).max())
+    turn_error = 0.5 * (1.0 - np.cos(2.0 * tilt_sigma)) * min(largest_turn, 1.0)
     across = np.array([-u[1], u[0]])
     cov += (turn_error * np.hypot(x[2], x[3])) ** 2 * np.outer(across, across)
+    rate = None
+    if fits_rate:
+        worst_rate = _worst_step(moves, a, gain, weight, dof, gain[5:6], np.zeros((n, 1)))[0]
+        rate = (float(x[5]), float(normal[5, 5] + worst_rate ** 2 + (
+            (turn_error + scale_sigma * largest_turn) / -tau[0]) ** 2))
     v = np.array([x[2], x[3], gain_up[1] @ d[:, 2]])
     full = np.zeros((3, 3))
     full[:2, :2] = cov
@@ -256,7 +287,7 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma, tilt_sigma=0.
     gains = np.zeros((n, 3, 3))
     gains[:, :2, 0], gains[:, :2, 1] = gain[2:4, 0:2 * n:2].T, gain[2:4, 1:2 * n:2].T
     gains[:, 2, 2] = gain_up[1]
-    return v, full, gains, chi2, dof
+    return RunFit(v, full, gains, chi2, dof, rate)
 
 
 class WhiteNoise:
@@ -334,14 +365,14 @@ class CourseFromFixes:
 
     def add(self, t: float, lat: float, lon: float, h: float, cov: np.ndarray,
             yaw: float | None = None, yaw_rate_sigma: float = 0.0, yaw_checked: bool = False,
-            tilt_sigma: float = 0.0):
+            tilt_sigma: float = 0.0, scale_sigma: float = 0.0):
         """A fix at t (s; rad, rad, m) with its ENU covariance (m^2), already observed
         (:meth:`observe`), and the INS's yaw of the body x axis then (rad, counter-clockwise;
         None before the INS is levelled: no run is kept) with the sigma of its gyros' rate
-        error about the vertical (rad/s) and of its tilt (rad); ``yaw_checked``: a heading
-        source under check steers that yaw (a run's velocity then only checks it:
-        GnssVelocity.checks_only). Returns the velocity it completes (of the chord, else of the
-        run), or None."""
+        error about the vertical (rad/s), of their scale-factor error there (-) and of its
+        tilt (rad); ``yaw_checked``: a heading source under check steers that yaw (a run's
+        velocity then only checks it: GnssVelocity.checks_only). Returns the velocity it
+        completes (of the chord, else of the run), or None."""
         r = geodetic_to_ecef(lat, lon, h)
         R = ecef_to_enu_matrix(lat, lon)
         fix = GnssFix(t, lat, lon, h, cov)
@@ -352,7 +383,8 @@ class CourseFromFixes:
             self._run.append((r, yaw, fix))
         velocity = self._chord(r, R, fix)
         if velocity is None and len(self._run) >= MIN_RUN_FIXES:
-            velocity = self._run_velocity(R, yaw_rate_sigma, tilt_sigma, yaw_checked)
+            velocity = self._run_velocity(R, yaw_rate_sigma, tilt_sigma, scale_sigma,
+                                          yaw_checked)
         if velocity is not None:  # the next velocity of fixes not in this one
             self._window, self._run = self._window[-1:], self._run[-1:]
         return velocity
@@ -382,7 +414,7 @@ class CourseFromFixes:
         return GnssVelocity(0.5 * (first.t + t), d / dt, cov_v, fixes)
 
     def _run_velocity(self, R: np.ndarray, yaw_rate_sigma: float, tilt_sigma: float,
-                      checks_only: bool):
+                      scale_sigma: float, checks_only: bool):
         """The velocity of the run at its last fix (:func:`run_velocity`, ENU axes R there),
         once its course is known to MAX_COURSE_SIGMA; a run the fit does not hold loses its
         older half."""
@@ -393,10 +425,10 @@ class CourseFromFixes:
         white = [self.fix_to_fix(f.cov_enu) for _, _, f in run]
         fit = run_velocity(tau, d, np.array([yaw for _, yaw, _ in run]),
                            np.array([w[0, 0] for w in white]), np.array([w[2, 2] for w in white]),
-                           yaw_rate_sigma, tilt_sigma)
+                           yaw_rate_sigma, tilt_sigma, scale_sigma)
         if fit is None:
             return None
-        v, cov, gains, chi2, dof = fit
+        v, cov, gains, chi2, dof, rate = fit
         if chi2 > chi2_gate(dof, RESIDUAL_QUANTILE):
             del run[:len(run) // 2]
             return None
@@ -406,7 +438,7 @@ class CourseFromFixes:
         # the fixes within the chord's window, the navigator's to take after the alignment
         fixes = tuple((f, gain @ w) for (_, _, f), gain, w in zip(run, gains, white)
                       if last.t - f.t <= WINDOW_S)
-        return GnssVelocity(last.t, v, cov, fixes, checks_only=checks_only)
+        return GnssVelocity(last.t, v, cov, fixes, checks_only=checks_only, rate_error=rate)
 
     def observe(self, t: float, lat: float, lon: float, h: float) -> tuple | None:
         """Every fix (t s; rad, rad, m), for the fix-to-fix noise of :meth:`fix_to_fix`.

@@ -45,7 +45,9 @@ class GnssVelocity:
     and the course is not known beyond the receiver's noise: nav/aiding.py).
     ``checks_only``: a course of a run of fixes made with the INS's yaw while a heading source
     not yet confirmed steered it (nav/course.py): it confirms or refutes that heading and
-    aligns none (refuted, the yaw it was made with followed the source)."""
+    aligns none (refuted, the yaw it was made with followed the source).
+    ``rate_error``: for a run's velocity, the gyros' rate error about the vertical the run
+    measured and its variance (rad/s, (rad/s)^2), which the alignment on it takes; else None."""
 
     t: float
     v_enu: np.ndarray
@@ -53,6 +55,7 @@ class GnssVelocity:
     fixes: tuple = ()
     aligns: bool = True
     checks_only: bool = False
+    rate_error: tuple | None = None
 
 
 @dataclass(frozen=True)

@@ -393,6 +393,23 @@ def zero_angular_rate(space, state, omega_ib_b, sigma):
     return Innovation("zaru", z, H, sigma ** 2 * np.eye(3))
 
 
+def vertical_rate_error(space, state, rate, variance):
+    """The compensated gyros' rate error about the vertical, measured: a run of fixes' track
+    against the INS's yaw (nav/course.py, run_velocity). The residual gyro bias d_omega (body)
+    turns the yaw by e_U^T C d_omega per second.
+
+    Parameters
+    ----------
+    rate : float
+        rad/s, counter-clockwise about the up axis.
+    variance : float
+        (rad/s)^2.
+    """
+    H = _zeros(space, 1)
+    _gyro_columns(space, H, quat_to_dcm(state.q_nb)[2:3])
+    return Innovation("course_rate", np.array([float(rate)]), H, np.array([[float(variance)]]))
+
+
 def nonholonomic(space, state, sigma_lateral, sigma_vertical, omega_ib_b=np.zeros(3),
                  lever_b=np.zeros(3), boresight=np.zeros(2), axes=np.eye(3)):
     """Non-holonomic constraint of a wheeled vehicle: no lateral or vertical velocity at the

@@ -359,6 +359,16 @@ class Navigator:
         return float(np.sqrt(sum(P[self._space[name].start + 2, self._space[name].start + 2]
                                  for name in ("bg", "gmg") if name in self._space)))
 
+    def yaw_scale_sigma(self):
+        """1 sigma of the gyros' scale-factor error about the body z axis (its state's, else
+        the one :func:`~ins_gnss_ros.nav.propagation.turn_noise` takes), -: what a yaw carried
+        by the gyros errs by per radian turned (nav/course.py)."""
+        self._catch_up()
+        if "sg" in self._space:
+            i = self._space["sg"].start + 2
+            return float(np.sqrt(self._state.ekf.P[i, i]))
+        return float(self.config.noise.blocks["sg"].sigma0)
+
     def tilt_sigma(self):
         """1 sigma of the INS's tilt (the larger of its two horizontal attitude errors' sigmas),
         rad, once :attr:`started`: a yaw is a heading only to within what it does
@@ -766,6 +776,9 @@ class Navigator:
                     self._learned_nhc.moving < LEARN_S and "nhc" in self._space:
                 # the body x axis taken for the direction of motion: its side slip is held
                 s.slip_held, s.t_slip = True, np.nan
+            if m.rate_error is not None:
+                # the gyros' bias about the vertical a start on the move never measured at rest
+                self._update(meas.vertical_rate_error(self._space, s.nav, *m.rate_error), epoch)
             if (restart or s.started_on_x) and not m.fixes:
                 # the body x axis taken for the direction of motion (a course of fixes comes no
                 # more once the heading is known: nothing checks it there)
