@@ -157,8 +157,8 @@ def test_run_velocity_follows_a_turn_the_gyros_carry_and_a_changing_speed():
     d, yaw = turning_run(tau)
     n = len(tau)
     # (the INS's yaw with any offset: only its turns enter)
-    v, cov, gains, chi2, dof, _ = run_velocity(tau, d, yaw + 1.3, np.ones(n), np.full(n, 4.0),
-                                            0.0)
+    v, cov, gains, chi2, dof, _ = run_velocity(tau, d, yaw + 1.3, np.ones(n),
+                                               np.full(n, 4.0), 0.0)
     np.testing.assert_allclose(v, [1.0, 0.0, 0.0], atol=2e-3)
     assert chi2 < 1e-3 and dof == 3 * n - 8
     # the gains are the fit's: a fix moved moves the velocity by them
