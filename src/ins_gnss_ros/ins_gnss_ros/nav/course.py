@@ -87,15 +87,20 @@ def detectable_noncentrality(dof: int) -> float:
     return float(brentq(lambda lam: ncx2.sf(gate, dof, lam) - DETECTION_POWER, 1e-6, 1e4))
 
 
-def _worst_step(moves, a, gain, weight, dof, rows, direct):
-    """The largest error of the unknowns ``rows`` of the fit (the gain's rows, k of them) that
-    a step of the acceleration at one of the fixes leaves and the residual test would miss, at
-    most ACCELERATION_CHANGE: moves (N, M) the fixes' rows moved by a unit step at each fix's
-    time, a (M, p) the fit's design, gain (p, M) its gain, weight (M,) its rows' weights,
-    direct (N, k) what a unit step at each fix does to those unknowns themselves."""
+def _undetected_steps(moves, a, gain, weight, dof):
+    """The size of the largest step of the acceleration at each fix that the residual test
+    would miss, at most ACCELERATION_CHANGE (N,): moves (N, M) the fixes' rows moved by a unit
+    step at each fix's time, a (M, p) the fit's design, gain (p, M) its gain, weight (M,) its
+    rows' weights."""
     unfitted = moves - (moves @ gain.T) @ a.T
-    size = np.minimum(ACCELERATION_CHANGE, np.sqrt(
+    return np.minimum(ACCELERATION_CHANGE, np.sqrt(
         detectable_noncentrality(dof) / np.maximum((unfitted ** 2) @ weight, 1e-300)))
+
+
+def _worst_step(size, moves, rows, direct):
+    """The largest error of the unknowns ``rows`` of the fit (the gain's rows, k of them) that
+    the steps of :func:`_undetected_steps` (``size``) leave: direct (N, k) what a unit step at
+    each fix does to those unknowns themselves."""
     errors = size[:, None] * (moves @ rows.T + direct)
     return errors[np.argmax(np.linalg.norm(errors, axis=1))]
 
@@ -268,8 +273,10 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma, tilt_sigma=0.
                                 (jt[later] - tau[:, None] * js[later]).reshape(-1),
                                 u).reshape(n, 2 * n)
     step = 0.5 * np.clip(tau[None, :] - tau[:, None], 0.0, None) ** 2  # the vertical's
-    worst = _worst_step(moves, a, gain, weight, dof, gain[2:4], np.outer(tau, u))
-    worst_up = _worst_step(step, a_up, gain_up, w_up, dof, gain_up[1:2], tau[:, None])
+    size = _undetected_steps(moves, a, gain, weight, dof)
+    worst = _worst_step(size, moves, gain[2:4], np.outer(tau, u))
+    worst_up = _worst_step(_undetected_steps(step, a_up, gain_up, w_up, dof), step,
+                           gain_up[1:2], tau[:, None])
     cov += np.outer(worst, worst)
     largest_turn = float(np.abs(turn).max())
     turn_error = 0.5 * (1.0 - np.cos(2.0 * tilt_sigma)) * min(largest_turn, 1.0)
@@ -277,7 +284,7 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma, tilt_sigma=0.
     cov += (turn_error * np.hypot(x[2], x[3])) ** 2 * np.outer(across, across)
     rate = None
     if fits_rate:
-        worst_rate = _worst_step(moves, a, gain, weight, dof, gain[5:6], np.zeros((n, 1)))[0]
+        worst_rate = _worst_step(size, moves, gain[5:6], np.zeros((n, 1)))[0]
         rate = (float(x[5]), float(normal[5, 5] + worst_rate ** 2 + (
             (turn_error + scale_sigma * largest_turn) / -tau[0]) ** 2))
     v = np.array([x[2], x[3], gain_up[1] @ d[:, 2]])
