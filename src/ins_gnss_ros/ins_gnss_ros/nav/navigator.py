@@ -694,10 +694,10 @@ class Navigator:
 
     def _level_on_the_move(self, st, epoch):
         """An INS aligning on the move runs unaided until its heading is known, and its tilt
-        grows with its gyros' biases (default.yaml's 3 deg/s: a tilt sigma of 24 deg after 9 s
-        and 60 deg after 40 s on a simulated robot started on the move, where its yaw is no
-        heading and its alignment no small correction): at most every LEVEL_INTERVAL s its
-        horizontal acceleration is taken for the vehicle's, unknown to ``moving_accel_sigma``
+        grows with its gyros' biases (default.yaml's 3 deg/s of session 36: a tilt sigma of 24
+        deg after 9 s and 60 deg after 40 s on a simulated robot started on the move, where its
+        yaw is no heading and its alignment no small correction): at most every LEVEL_INTERVAL s
+        its horizontal acceleration is taken for the vehicle's, unknown to ``moving_accel_sigma``
         (meas.horizontal_acceleration). The vehicle's acceleration lasts for seconds, so more
         often would count it as news; and only while the tilt is less certain than that
         acceleration leaves it (a standing start's levelled tilt is better: there the update

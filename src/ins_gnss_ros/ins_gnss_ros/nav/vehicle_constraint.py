@@ -32,7 +32,7 @@ the motion, within ``alignment.SIDE_SLIP_SIGMA``. :func:`hold_side_slip` keeps t
 for those first seconds as a lateral constraint on the body axes with the slip as the
 boresight yaw, a random walk of ``SLIP_RATE``: the gyros' z bias then shows in the yaw's drift
 from the course in straight driving. Without it the default profile's gyro-bias uncertainty
-(3 deg/s) let the yaw sigma of a simulated rolling start grow to 28 deg in 15 s, where the
+(then 3 deg/s) let the yaw sigma of a simulated rolling start grow to 28 deg in 15 s, where the
 linearised filter ran the yaw 95 deg off (docs/results/product_path.md, "2026-12-06 (session
 34)").
 """
