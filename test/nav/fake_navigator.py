@@ -11,6 +11,7 @@ class RecordingNavigator:
     started = True
     solution = None  # (levelled: the gyros' azimuth projects on body z)
     heading_by = None  # (a heading the motion has confirmed, or none)
+    heading_unconfirmed = False
 
     def __init__(self, heading_known: bool = True):
         self.measurements, self.heading_known = [], heading_known

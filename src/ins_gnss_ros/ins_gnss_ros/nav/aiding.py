@@ -785,8 +785,9 @@ class Aiding:
     def _course_velocity(self, t: float, lat: float, lon: float, h: float,
                          cov: np.ndarray) -> None:
         """Without any gnss/vel and before the heading is known, successive fixes give the
-        velocity that aligns the heading (nav/course.py), or checks one a heading source
-        aligned. The run of fixes (for a vehicle too slow for the chord) starts again where
+        velocity that aligns the heading (nav/course.py), or checks one not yet confirmed
+        (Navigator.heading_unconfirmed: a heading source aligned it, or the gyros' bias may
+        hold a turn). The run of fixes (for a vehicle too slow for the chord) starts again where
         the INS's yaw was turned (aligned, or forgotten); made while a heading source under
         check steers that yaw, it only checks it (the run of a car starting off refuted a
         NED-convention AHRS and re-aligned the heading on its own course, 8 deg off: 26 valid
@@ -794,7 +795,7 @@ class Aiding:
         (restarted there, a robot at 0.5 m/s with 1 m fixes aligned 47 s into its motion
         instead of 13 s)."""
         nav = self.navigator
-        if self._has_velocity() or (nav.heading_known and nav.heading_by is None):
+        if self._has_velocity() or (nav.heading_known and not nav.heading_unconfirmed):
             self._course.clear()
             return
         heading = (nav.heading_known, nav.heading_by)
@@ -806,7 +807,7 @@ class Aiding:
             yaw, rate_sigma = yaw_of_x(nav.attitude_at(t)), nav.yaw_rate_sigma()
             tilt_sigma, scale_sigma = nav.tilt_sigma(), nav.yaw_scale_sigma()
         velocity = self._course.add(t, lat, lon, h, cov, yaw, rate_sigma,
-                                    yaw_checked=nav.heading_by is not None,
+                                    yaw_checked=nav.heading_unconfirmed,
                                     tilt_sigma=tilt_sigma, scale_sigma=scale_sigma)
         if velocity is not None:
             self.navigator.add_measurement(velocity)

@@ -296,13 +296,14 @@ def take_static_gyro_bias(levelling, space, noise, P, estimates):
     """At a static start, the gyro bias from the stationary mean (:meth:`Levelling.gyro_bias`)
     into the running ``estimates`` and the covariance ``P`` (in place). A MEMS unit's turn-on
     bias (degrees per second on the data sheets) left to the filter makes the tilt drift faster
-    than the aiding corrects it, and the updates are gated."""
+    than the aiding corrects it, and the updates are gated. Returns whether it was taken."""
     bias = levelling.gyro_bias(noise.gyro_psd, noise.blocks["bg"].sigma0) \
         if "bg" in space else None
     if bias is not None:
         block = space["bg"]
         estimates["bg"] = bias[0]
         P[block, block] = np.eye(3) * bias[1]
+    return bias is not None
 
 
 def levelled_state(levelling, lat, lon, h, lever_b, speed, t):

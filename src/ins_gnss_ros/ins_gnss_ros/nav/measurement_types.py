@@ -43,9 +43,10 @@ class GnssVelocity:
     ((m^2)/s): the alignment on it uses them with that correlation, and the filter not again.
     ``aligns``: its course may align the heading (the front end says no while the IMU is still
     and the course is not known beyond the receiver's noise: nav/aiding.py).
-    ``checks_only``: a course of a run of fixes made with the INS's yaw while a heading source
-    not yet confirmed steered it (nav/course.py): it confirms or refutes that heading and
-    aligns none (refuted, the yaw it was made with followed the source).
+    ``checks_only``: a course of a run of fixes made with the INS's yaw while the heading was
+    unconfirmed (Navigator.heading_unconfirmed: a heading source steered it, or the gyros' bias
+    about the vertical may hold a turn): it confirms or refutes that heading and aligns none
+    (refuted, the yaw it was made with followed the source or the turn).
     ``rate_error``: for a run's velocity, the gyros' rate error about the vertical the run
     measured and its variance (rad/s, (rad/s)^2), which the alignment on it takes; else None."""
 

@@ -318,6 +318,16 @@ class Navigator:
                           "only roll and pitch are known).")
     heading_by = _view("_state", "heading_by", "The bias block of the heading source the "
                        "heading was aligned on until the motion confirms it, else None.")
+
+    @property
+    def heading_unconfirmed(self):
+        """The heading is known but rests on what the motion has still to confirm: a heading
+        source's alignment (heading_by), or gyros whose bias about the vertical may hold a
+        steady turn (the still IMU's mean on the move); courses of fixes check it."""
+        self._catch_up()
+        s = self._state
+        return s.heading_known and (s.heading_by is not None or s.turn_in_bias)
+
     estimates = _view("_state", "estimates", "Running sensor, clock and extra-block estimates "
                       "by block name (not to be changed).")
     updates = _view("_recorder", "updates", "UpdateResult of every measurement kept, in "
@@ -564,7 +574,11 @@ class Navigator:
                 up = self._space["pos"].start + 2
                 P0[up, up] = m.cov_enu[2, 2]
             if still:
-                take_static_gyro_bias(s.levelling, self._space, cfg.noise, P0, s.estimates)
+                taken = take_static_gyro_bias(s.levelling, self._space, cfg.noise, P0,
+                                              s.estimates)
+                # Not known to stand, the vehicle may be turning steadily: its rate is in the
+                # mean about the vertical, as bias.
+                s.turn_in_bias = taken and not at_rest
             s.pinned_antenna = (m.lat, m.lon, m.h)
             nav = levelled_state(s.levelling, m.lat, m.lon, m.h, self._lever,
                                  0.0 if at_rest else s.gnss_speed, float(buf.time(k - 1)))
@@ -748,6 +762,9 @@ class Navigator:
             self._check_heading_on_course(m, epoch)
             if s.heading_known and m.fixes:  # a course of fixes checks; they are fixes
                 return
+        elif s.turn_in_bias and s.heading_known and m.checks_only and \
+                s.gnss_speed >= cfg.align_speed:
+            self._check_turn_on_course(m, epoch)
         if m.checks_only:
             return
         if s.course_check is not None and s.heading_known and \
@@ -848,6 +865,37 @@ class Navigator:
             return
         self._refute_heading(f"missed the course by {np.degrees(miss):+.0f} deg (sigma "
                              f"{np.degrees(np.sqrt(variance)):.0f} deg)")
+
+    def _check_turn_on_course(self, m, epoch):
+        """The heading of gyros whose bias about the vertical was taken from a still IMU's
+        mean on the move (State.turn_in_bias) against a later course of fixes m. A vehicle
+        turning steadily through the levelling gave its rate to that mean, and its INS then
+        holds a yaw the course turns away from at that rate (a robot circling at 5.7 deg/s
+        was NAVIGATING with its heading running round, 180 deg off at a sigma of 3.4 deg:
+        docs/results/product_path.md, "2026-12-07 (session 39)"). A course missed by
+        HEADING_CONFIRM_SIGMAS standard deviations refutes the bias: back to its data-sheet
+        prior, the heading forgotten, and the next course aligns it with the run's rate
+        error measured (nav/course.py). The check goes on as long as the fixes alone steer,
+        the miss of a slow turn growing with time, or until a rest measures the bias."""
+        s = self._state
+        delta, sigma = yaw_error_from_course(np.asarray(m.v_enu, float), m.cov_enu, s.nav.q_nb)
+        if sigma > CONFIRM_COURSE_SIGMA:
+            return
+        yaw = self._space["att"].stop - 1
+        variance = sigma * sigma + s.ekf.P[yaw, yaw]
+        miss = wrap_pi(delta)
+        if abs(miss) <= HEADING_CONFIRM_SIGMAS * np.sqrt(variance):
+            return
+        s.turn_in_bias = False
+        bias, P, z = s.estimates["bg"].copy(), s.ekf.P.copy(), self._space["bg"].start + 2
+        bias[2], P[z, :], P[:, z] = 0.0, 0.0, 0.0
+        P[z, z] = self.config.noise.blocks["bg"].sigma0 ** 2
+        s.estimates["bg"], s.ekf.P = bias, P
+        self._forget_heading()
+        self._recorder.add_update(rejected(
+            "course_on_x", epoch, np.array([miss]), np.array([[variance]]),
+            "the course turned away from the heading: the gyros' bias about the vertical, "
+            "taken on the move, held a turn; bias back to its prior, heading aligned anew"))
 
     def _levelling_tilt_sigma(self, g):
         """The levelling's own tilt sigma at a start on the move, rad: levelled on a specific
@@ -975,6 +1023,7 @@ class Navigator:
         s, cfg = self._state, self.config
         if cfg.zaru_sigma is None:
             return
+        s.turn_in_bias = False  # the bias measured at rest
         omega, T = s.omega, s.omega_time
         if s.rest_time > 0.0:
             errors = SensorErrors.of_estimates(s.estimates)

@@ -96,6 +96,10 @@ class RunState:
         The filter started on the move, its velocity along the body x axis
         (alignment.levelled_state): the heading aligned against it takes that axis for the
         direction of motion.
+    turn_in_bias : bool
+        The gyros' bias about the vertical was taken from the mean of an IMU still while the
+        vehicle was not known to stand: a steady turn's rate may be in it, until a rest
+        measures the bias or a course of fixes refutes it (Navigator._check_turn_on_course).
     course_check : tuple or None
         After a start on the move aligned the body x axis on a receiver velocity's course, until
         the motion tells which way that axis points (Navigator._check_course_direction): the
@@ -141,6 +145,7 @@ class RunState:
     t_fixes_aligned: float = -np.inf
     levelling_velocities: tuple | None = None
     started_on_x: bool = False
+    turn_in_bias: bool = False
     course_check: tuple | None = None
     slip_held: bool = False
     t_slip: float = -np.inf
