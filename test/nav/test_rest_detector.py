@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from ins_gnss_ros.nav.rest_detector import RestDetector
+from ins_gnss_ros.nav.rest_detector import MAX_FIX_WAIT_S, RestDetector
 
 DT = 0.005
 ACCEL_PSD, GYRO_PSD = (2e-3) ** 2, math.radians(0.01) ** 2  # per sqrt(Hz)
@@ -14,28 +14,36 @@ LAT, LON = math.radians(59.9), math.radians(30.3)
 M_PER_RAD = 6.37e6
 
 
-def run(seconds, speed=0.0, accel=0.0, fix_sigma=0.5, fix_rate=5.0, seed=1, start=0.0):
+def run(seconds, speed=0.0, accel=0.0, fix_sigma=0.5, fix_rate=5.0, seed=1, start=0.0,
+        climb=0.0, lag=0.0):
     """A detector fed an IMU at rest or in steady straight motion (the same readings: gravity,
     the gyro bias, white noise, plus `accel` along x after `start` s) and fixes moving east at
-    `speed` m/s. Returns the times (s) at which rest was confirmed and the zero-velocity cues."""
-    rng = np.random.default_rng(seed)
+    `speed` m/s and up at `climb` m/s, each given `lag` s before the increments of its time.
+    Returns the times (s) at which rest was confirmed and the zero-velocity cues."""
+    rng, fix_rng = np.random.default_rng(seed), np.random.default_rng(seed + 1000)
     det = RestDetector(ACCEL_PSD, GYRO_PSD)
     bias = np.radians([0.5, -0.3, 0.2])  # a MEMS gyro's turn-on bias: constant, so still
     confirmed, cues = [], []
-    every = round(1.0 / (fix_rate * DT))
-    for k in range(1, round(seconds / DT) + 1):
+    n, every = round(seconds / DT), round(1.0 / (fix_rate * DT))
+    fixes = iter(range(every, n + 1, every))
+    k_fix = next(fixes, None)
+    for k in range(1, n + 1):
         t = k * DT
         a = accel if t > start else 0.0
         f = np.array([a, 0.0, 9.81]) + math.sqrt(ACCEL_PSD / DT) * rng.standard_normal(3)
         w = bias + math.sqrt(GYRO_PSD / DT) * rng.standard_normal(3)
         if det.increment(t, w * DT, f * DT, DT):
             cues.append(t)
-        if k % every == 0:
-            x = speed * t + 0.5 * accel * max(t - start, 0.0) ** 2
-            lon = LON + (x + fix_sigma * rng.standard_normal()) / (M_PER_RAD * math.cos(LAT))
-            lat = LAT + fix_sigma * rng.standard_normal() / M_PER_RAD
-            if det.fix(t, lat, lon, 10.0, np.diag([fix_sigma ** 2] * 2 + [4 * fix_sigma ** 2])):
-                confirmed.append(t)
+        while k_fix is not None and k_fix * DT - lag <= t + 1e-9:
+            t_fix = k_fix * DT
+            x = speed * t_fix + 0.5 * accel * max(t_fix - start, 0.0) ** 2
+            lon = LON + (x + fix_sigma * fix_rng.standard_normal()) / (M_PER_RAD * math.cos(LAT))
+            lat = LAT + fix_sigma * fix_rng.standard_normal() / M_PER_RAD
+            h = 10.0 + climb * t_fix + 2.0 * fix_sigma * fix_rng.standard_normal()
+            if det.fix(t_fix, lat, lon, h,
+                       np.diag([fix_sigma ** 2] * 2 + [4 * fix_sigma ** 2])):
+                confirmed.append(t_fix)
+            k_fix = next(fixes, None)
     return confirmed, cues
 
 
@@ -46,11 +54,37 @@ def test_a_still_imu_and_unmoving_fixes_confirm_rest_within_seconds():
     assert len(cues) >= 4 * (20.0 - confirmed[0]) - 2
 
 
+def test_fixes_ahead_of_the_imu_count_once_its_blocks_reach_them():
+    """The node graph's increments reach the filter after the fixes of their time (the
+    preprocessor measures the IMU's rate first): judged on arrival, the first fixes of a
+    standing start counted for no run, and the graph confirmed rest 3 s after `--offline`.
+    Fixes whose IMU never comes wait no longer than MAX_FIX_WAIT_S."""
+    _, cues = run(20.0, fix_rate=1.0)
+    _, cues_late = run(20.0, fix_rate=1.0, lag=1.5)
+    assert cues and cues_late == cues
+    det = RestDetector(ACCEL_PSD, GYRO_PSD)
+    for k in range(100):
+        det.fix(float(k), LAT, LON, 10.0, np.eye(3))
+    assert len(det._fixes_waiting) == MAX_FIX_WAIT_S + 1
+
+
 def test_steady_motion_the_imu_cannot_see_is_not_rest():
     confirmed, cues = run(60.0, speed=10.0)
     assert not confirmed and not cues
     # a creeping vehicle either: the fixes rule out 0.3 m/s only below it
     assert not run(60.0, speed=1.0)[0]
+
+
+def test_slow_steady_motion_that_precise_fixes_show_is_not_rest():
+    """Below the speed the fixes must rule out, but plainly not zero in fixes of centimetres
+    at 10 Hz: a robot creeping at 0.3 m/s, a vessel heaving at 0.5 m/s (the real vessel in
+    waves was taken at rest a second into its recording, its heave 0.53 m/s: docs/results/
+    product_path.md, "2026-12-07 (session 39)"); nor the still runs after, until the IMU
+    moves. Standing, such fixes confirm at once, and a long standstill keeps its rest."""
+    assert not run(20.0, speed=0.3, fix_sigma=0.025, fix_rate=10.0)[0]
+    assert not run(20.0, climb=0.5, fix_sigma=0.025, fix_rate=10.0)[0]
+    confirmed = run(120.0, fix_sigma=0.025, fix_rate=10.0)[0]
+    assert confirmed[0] <= 1.5 and len(confirmed) == round(10 * (120.0 - confirmed[0])) + 1
 
 
 def test_a_noisy_receiver_confirms_later():

@@ -15,7 +15,10 @@ both agree:
   57(11), 2010), and the block means stay those of the first still block (a smooth start has
   no scatter within a block, but its specific force changes), for at least ``MIN_STILL_S``;
 * GNSS: the velocity fitted by least squares to the fixes since the IMU became still is below
-  ``REST_SPEED`` with three sigmas to spare (a noisy receiver simply takes longer to confirm).
+  ``REST_SPEED`` with three sigmas to spare (a noisy receiver simply takes longer to confirm),
+  and in all three axes consistent with zero: an IMU can also hold still for a second or two
+  in slow steady motion, and a vessel in waves does, its heave of 0.5 m/s plain in fixes of
+  centimetres (docs/results/product_path.md, "2026-12-07 (session 39)").
 
 While both hold, every still block is a cue for a zero-velocity update (nav/aiding.py uses
 them while the filter aligns); any block with motion in it ends the rest at once.
@@ -26,7 +29,9 @@ import math
 
 import numpy as np
 
+from .course import SLOW_ERROR_RATE
 from .earth import ecef_to_enu_matrix, geodetic_to_ecef
+from .gating import chi2_gate
 
 #: Length of the IMU blocks whose scatter is tested, s.
 BLOCK_S = 0.25
@@ -42,8 +47,15 @@ VIBRATION_RATE = math.radians(0.2)
 SCATTER_MARGIN = 2.0
 #: Horizontal speed the fixes must rule out (at three sigmas) to declare rest, m/s.
 REST_SPEED = 0.5
+#: A run's fitted velocity beyond this quantile of its chi-square (three degrees of freedom,
+#: the fit's covariance and the fixes' slow error, SLOW_ERROR_RATE, twice that vertically)
+#: is motion, whatever its size.
+MOTION_QUANTILE = 0.999
 #: Degrees of freedom of a receiver velocity's scatter in still runs before it is its noise.
 MIN_VELOCITY_DOF = 10
+#: Longest a fix waits for the IMU blocks of its time, s (beyond it the IMU is missing, not
+#: late: the fix counts for no run).
+MAX_FIX_WAIT_S = 5.0
 
 
 def _sum3(values) -> float:
@@ -76,6 +88,9 @@ class RestDetector:
         #                              sum of squares east, north]
         self._velocities_pending = []  # those of the open block, counted if it closes still
         self._velocity_scatter = [0.0, 0]  # squared deviations and dof of the ended runs
+        self._moving_unseen = False  # the fixes showed motion the IMU cannot: until it moves
+        self._judged_until = -math.inf  # end of the last IMU block judged, s
+        self._fixes_waiting = []  # fixes ahead of it, as fix's arguments
 
     @property
     def undecided(self) -> bool:
@@ -116,7 +131,10 @@ class RestDetector:
             return False
         self._block = None
         self._any_block = True
+        self._judged_until = t
         pending, self._velocities_pending = self._velocities_pending, []
+        reached = [f for f in self._fixes_waiting if f[0] <= t]
+        del self._fixes_waiting[:len(reached)]
         if self._still(b):
             self.still_until = t
             if math.isnan(self.still_since):
@@ -125,9 +143,11 @@ class RestDetector:
                 self.blocks_still_since = b[0]
             for v_east, v_north in pending:
                 self._add_velocity(v_east, v_north)
+            for fix in reached:
+                self._add_fix(*fix)
             return self.at_rest
         self._end_run()
-        self.blocks_still_since = math.nan
+        self.blocks_still_since, self._moving_unseen = math.nan, False
         return False
 
     def _still(self, b) -> bool:
@@ -193,38 +213,58 @@ class RestDetector:
 
     def fix(self, t: float, lat: float, lon: float, h: float, cov_enu: np.ndarray) -> bool:
         """Add a fix at t (s; rad, rad, m, ENU covariance m^2 of its fix-to-fix noise, which
-        the fit of a velocity sees) and return whether the vehicle is
-        confirmed at rest: the IMU still for ``MIN_STILL_S`` and the fixes of the still run
-        moving at less than ``REST_SPEED`` with three sigmas to spare."""
-        if math.isnan(self.still_since) or t < self.still_since:
+        the fit of a velocity sees) and return whether the vehicle is confirmed at rest: the
+        IMU still for ``MIN_STILL_S`` and the fixes of the still run moving at less than
+        ``REST_SPEED`` with three sigmas to spare, at a velocity consistent with zero.
+
+        A fix ahead of the IMU's judged blocks waits for them (up to MAX_FIX_WAIT_S) and counts
+        if the block it falls in is still: the node graph's increments reach the filter after
+        the fixes of their time (the preprocessor measures the IMU's rate first), and judged
+        on arrival the first fixes of a standing start counted for no run, so that the graph
+        confirmed rest 3 s after `trial replay --offline` (docs/results/product_path.md,
+        "2026-12-06 (session 38)")."""
+        if t > self._judged_until:
+            waiting = self._fixes_waiting
+            waiting.append((t, lat, lon, h, cov_enu))
+            del waiting[:sum(1 for f in waiting if f[0] < t - MAX_FIX_WAIT_S)]
+            return self.at_rest
+        return self._add_fix(t, lat, lon, h, cov_enu)
+
+    def _add_fix(self, t: float, lat: float, lon: float, h: float, cov_enu: np.ndarray) -> bool:
+        """:meth:`fix` once the IMU's blocks reach t."""
+        if math.isnan(self.still_since) or t < self.still_since or self._moving_unseen:
             self._fixes = None
             return False
         r = geodetic_to_ecef(lat, lon, h)
         if self._fixes is None:
             self._fixes = {"r0": r, "R": ecef_to_enu_matrix(lat, lon), "t0": t, "n": 0,
-                           "st": 0.0, "stt": 0.0, "sx": [0.0, 0.0], "stx": [0.0, 0.0],
-                           "var": 0.0}
+                           "st": 0.0, "stt": 0.0, "sx": [0.0] * 3, "stx": [0.0] * 3}
         s = self._fixes
-        # The sums of the east and north components in Python floats (the same IEEE operations
-        # as numpy's on 2-vectors, without its per-call cost at every fix).
-        x = s["R"].dot(r - s["r0"])[:2].tolist()  # (dot: @ at half the cost, course.py)
+        # The sums of the east, north and up components in Python floats (the same IEEE
+        # operations as numpy's on 3-vectors, without its per-call cost at every fix).
+        x = s["R"].dot(r - s["r0"]).tolist()  # (dot: @ at half the cost, course.py)
         tau = t - s["t0"]
         s["n"] += 1
         s["st"] += tau
         s["stt"] += tau * tau
         sx, stx = s["sx"], s["stx"]
-        for k in range(2):
+        for k in range(3):
             sx[k] += x[k]
             stx[k] += tau * x[k]
-        s["var"] = 0.5 * float(cov_enu[0, 0] + cov_enu[1, 1])  # the caller's latest estimate
+        horizontal = 0.5 * float(cov_enu[0, 0] + cov_enu[1, 1])  # the caller's latest estimate
+        var = (horizontal, horizontal, float(cov_enu[2, 2]))
         n = s["n"]
         spread = s["stt"] - s["st"] ** 2 / n  # sum of (t - mean t)^2
         if n < 3 or t - self.still_since < MIN_STILL_S or spread <= 0.0:
             return self.at_rest
-        v = [(stx[k] - s["st"] * sx[k] / n) / spread for k in range(2)]
-        sigma_v = math.sqrt(s["var"] / spread)
-        if math.hypot(*v) + 3.0 * sigma_v < REST_SPEED:
-            self.at_rest = True
-        elif math.hypot(*v) - 3.0 * sigma_v > REST_SPEED:
+        v = [(stx[k] - s["st"] * sx[k] / n) / spread for k in range(3)]
+        sigma_v = math.sqrt(horizontal / spread)
+        slow = (SLOW_ERROR_RATE, SLOW_ERROR_RATE, 2.0 * SLOW_ERROR_RATE)
+        moving = sum(v[k] * v[k] / (var[k] / spread + slow[k] ** 2) for k in range(3)) \
+            > chi2_gate(3, MOTION_QUANTILE)
+        if moving or math.hypot(v[0], v[1]) - 3.0 * sigma_v > REST_SPEED:
             self._end_run()   # steady motion the IMU cannot see: not at rest until it moves
+            self._moving_unseen = True
+        elif math.hypot(v[0], v[1]) + 3.0 * sigma_v < REST_SPEED:
+            self.at_rest = True
         return self.at_rest
