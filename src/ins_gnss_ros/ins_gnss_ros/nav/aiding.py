@@ -639,8 +639,9 @@ class Aiding:
                               float(cov[2, 2]) - vertical)
                 white[2, 2] = vertical
                 cov = white
-        at_rest = self._rest_wanted() and \
-            self._rest.fix(t, lat, lon, h, self._course.fix_to_fix(cov))
+        at_rest = self._rest_wanted() and self._rest.fix(
+            t, lat, lon, h, self._course.fix_to_fix(cov),
+            (horizontal_var, float(cov[2, 2]) + common_var[1]))
         if self._without_velocity_before_start():
             if at_rest:
                 self.navigator.add_measurement(ZeroVelocity(t))  # levels as a static start

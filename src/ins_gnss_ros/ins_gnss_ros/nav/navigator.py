@@ -54,8 +54,8 @@ from .rest_noise import RestNoise
 from .rotations import quat_from_rotvec, quat_rotate, quat_to_dcm
 from .rewind import Rewind, RunState
 from .strapdown import apply_error_state
-from .vehicle_constraint import LEARN_S, SLIP_HOLD_SIGMA, SLIP_MIN_SPEED, SLIP_RATE, \
-    SLIP_RATE_ARM, LearnedConstraint, forget_boresight, hold_side_slip
+from .vehicle_constraint import LEARN_S, SLIP_HOLD_SIGMA, SLIP_RATE, SLIP_RATE_ARM, \
+    LearnedConstraint, forget_boresight, hold_side_slip
 
 #: A zero-velocity update tells the vehicle at rest for this long after its epoch, s (the
 #: front end sends one per still IMU block, nav/rest_detector.py).
@@ -1221,7 +1221,7 @@ class Navigator:
             s.t_slip = s.nav.t
             return
         if s.nav.t - s.t_slip < cfg.nhc_interval - 1e-9 or \
-                np.hypot(*s.nav.v_enu[:2]) < SLIP_MIN_SPEED:
+                np.hypot(*s.nav.v_enu[:2]) < cfg.align_speed:
             return
         slip = slice(S["nhc"].start + 1, S["nhc"].stop)
         walk = SLIP_RATE ** 2 * (s.nav.t - s.t_slip)

@@ -48,8 +48,9 @@ SCATTER_MARGIN = 2.0
 #: Horizontal speed the fixes must rule out (at three sigmas) to declare rest, m/s.
 REST_SPEED = 0.5
 #: A run's fitted velocity beyond this quantile of its chi-square (three degrees of freedom,
-#: the fit's covariance and the fixes' slow error, SLOW_ERROR_RATE, twice that vertically)
-#: is motion, whatever its size.
+#: the fit's covariance of the fixes' white noise, and the rate of their slow error: their
+#: absolute sigma over the run's length, at least SLOW_ERROR_RATE, twice that vertically) is
+#: motion, whatever its size.
 MOTION_QUANTILE = 0.999
 #: Degrees of freedom of a receiver velocity's scatter in still runs before it is its noise.
 MIN_VELOCITY_DOF = 10
@@ -211,11 +212,14 @@ class RestDetector:
         n = v[0]
         return v[3] - v[1] * v[1] / n + v[4] - v[2] * v[2] / n, 2 * (n - 1)
 
-    def fix(self, t: float, lat: float, lon: float, h: float, cov_enu: np.ndarray) -> bool:
+    def fix(self, t: float, lat: float, lon: float, h: float, cov_enu: np.ndarray,
+            absolute_var: tuple[float, float]) -> bool:
         """Add a fix at t (s; rad, rad, m, ENU covariance m^2 of its fix-to-fix noise, which
-        the fit of a velocity sees) and return whether the vehicle is confirmed at rest: the
-        IMU still for ``MIN_STILL_S`` and the fixes of the still run moving at less than
-        ``REST_SPEED`` with three sigmas to spare, at a velocity consistent with zero.
+        the fit of a velocity sees, and its absolute variance per horizontal axis and
+        vertically, m^2, whose slow part drifts over a run) and return whether the vehicle is
+        confirmed at rest: the IMU still for ``MIN_STILL_S`` and the fixes of the still run
+        moving at less than ``REST_SPEED`` with three sigmas to spare, at a velocity
+        consistent with zero.
 
         A fix ahead of the IMU's judged blocks waits for them (up to MAX_FIX_WAIT_S) and counts
         if the block it falls in is still: the node graph's increments reach the filter after
@@ -225,12 +229,13 @@ class RestDetector:
         "2026-12-06 (session 38)")."""
         if t > self._judged_until:
             waiting = self._fixes_waiting
-            waiting.append((t, lat, lon, h, cov_enu))
+            waiting.append((t, lat, lon, h, cov_enu, absolute_var))
             del waiting[:sum(1 for f in waiting if f[0] < t - MAX_FIX_WAIT_S)]
             return self.at_rest
-        return self._add_fix(t, lat, lon, h, cov_enu)
+        return self._add_fix(t, lat, lon, h, cov_enu, absolute_var)
 
-    def _add_fix(self, t: float, lat: float, lon: float, h: float, cov_enu: np.ndarray) -> bool:
+    def _add_fix(self, t: float, lat: float, lon: float, h: float, cov_enu: np.ndarray,
+                 absolute_var: tuple[float, float]) -> bool:
         """:meth:`fix` once the IMU's blocks reach t."""
         if math.isnan(self.still_since) or t < self.still_since or self._moving_unseen:
             self._fixes = None
@@ -259,7 +264,12 @@ class RestDetector:
             return self.at_rest
         v = [(stx[k] - s["st"] * sx[k] / n) / spread for k in range(3)]
         sigma_v = math.sqrt(horizontal / spread)
-        slow = (SLOW_ERROR_RATE, SLOW_ERROR_RATE, 2.0 * SLOW_ERROR_RATE)
+        # (a receiver's error of metres that the white noise leaves out wanders by about its
+        # sigma over a run of seconds: a standing robot's fixes of 1 m without covariance
+        # passed for motion 5 s into the standstill)
+        span = t - s["t0"]
+        slow = [max(SLOW_ERROR_RATE, math.sqrt(absolute_var[0]) / span)] * 2 + \
+            [max(2.0 * SLOW_ERROR_RATE, math.sqrt(absolute_var[1]) / span)]
         moving = sum(v[k] * v[k] / (var[k] / spread + slow[k] ** 2) for k in range(3)) \
             > chi2_gate(3, MOTION_QUANTILE)
         if moving or math.hypot(v[0], v[1]) - 3.0 * sigma_v > REST_SPEED:

@@ -72,12 +72,14 @@ BORESIGHT_SIGMA_DEG = 3.0
 #: The held side slip (:func:`hold_side_slip`): its random walk, rad/sqrt(s) (a car's slip
 #: changes by a degree or two over a turn); the lateral constraint's noise, m/s, widened by
 #: the yaw rate times ``SLIP_RATE_ARM`` m (an IMU up to that far from the rear axle slips
-#: sideways in turns); the least speed it is applied at, m/s (slower, a walker's or a
-#: manoeuvring robot's body turns freely against its course).
+#: sideways in turns). It is applied at the speeds a course aligns at (the navigator's
+#: ``align_speed``): a slow robot's yaw has nothing else to hold it (above 3 m/s only, a
+#: consumer unit's robot with receiver velocities ran its heading 180 deg off,
+#: docs/results/product_path.md "2026-12-07 (session 39)"); a walker's body, turned against
+#: its course, rejects it, which ends the hold.
 SLIP_RATE = np.radians(1.0)
 SLIP_HOLD_SIGMA = 0.5
 SLIP_RATE_ARM = 2.0
-SLIP_MIN_SPEED = 3.0
 #: The largest share of the yaw variance the held slip takes: a yaw aligned with a sigma near
 #: the slip's keeps a part of its error its own, so that P stays positive definite.
 SLIP_SHARE = 0.9
