@@ -868,7 +868,7 @@ class Navigator:
 
     def _check_turn_on_course(self, m, epoch):
         """The heading of gyros whose bias about the vertical was taken from a still IMU's
-        mean on the move (State.turn_in_bias) against a later course of fixes m. A vehicle
+        mean on the move (RunState.turn_in_bias) against a later course of fixes m. A vehicle
         turning steadily through the levelling gave its rate to that mean, and its INS then
         holds a yaw the course turns away from at that rate (a robot circling at 5.7 deg/s
         was NAVIGATING with its heading running round, 180 deg off at a sigma of 3.4 deg:
