@@ -7,7 +7,7 @@ of a GNSS outage as the configured one does.
 import numpy as np
 
 from ins_gnss_ros.nav import vehicle_constraint as vc
-from ins_gnss_ros.nav.ekf import ExtraState
+from ins_gnss_ros.nav.ekf import ExtraState, at_prior
 from ins_gnss_ros.nav.error_model import nav_error
 from ins_gnss_ros.nav.rotations import quat_from_euler, quat_to_dcm
 
@@ -128,7 +128,7 @@ def test_the_held_side_slip_tells_nothing_of_the_yaw_at_first_and_keeps_p_positi
         expected = 100.0 * (var_yaw + slip_var - 2.0 * c + vc.SLIP_OWN_SIGMA ** 2)
         assert np.isclose(h @ held @ h, expected, rtol=1e-12)
     block = slice(6, 8)
-    forgotten = vc.forget_boresight(held, block, np.radians(vc.BORESIGHT_SIGMA_DEG))
+    forgotten = at_prior(held, block, np.radians(vc.BORESIGHT_SIGMA_DEG))
     assert np.array_equal(forgotten[block, :6], np.zeros((2, 6)))
     assert np.allclose(forgotten[block, block],
                        np.radians(vc.BORESIGHT_SIGMA_DEG) ** 2 * np.eye(2))

@@ -146,6 +146,17 @@ class StateSpace:
         return name in self._slices
 
 
+def at_prior(P, rows, sigma0):
+    """The covariance P (a copy) with the states ``rows`` (a slice) back at their prior, sigma0
+    (one or per state), and uncorrelated with the rest: what they were estimated to is
+    forgotten."""
+    P = P.copy()
+    P[rows, :] = 0.0
+    P[:, rows] = 0.0
+    P[rows, rows] = np.diag(np.broadcast_to(sigma0, (rows.stop - rows.start,)) ** 2)
+    return P
+
+
 def _kernel_array(a, ndim):
     """`a` as a C-contiguous float64 array of at least `ndim` dimensions, as the compiled
     update takes it: `a` itself when it is one already (the measurement models' arrays; the

@@ -37,7 +37,7 @@ from .alignment import SIDE_SLIP_SIGMA, Levelling, couple_start_to_lever_arm, \
     yaw_error_from_course, yaw_error_from_heading, yaw_error_from_motion
 from .conventions import wrap_pi
 from .earth import WGS84, normal_gravity
-from .ekf import ErrorStateEKF, StateSpace
+from .ekf import ErrorStateEKF, StateSpace, at_prior
 from .error_model import make_layout
 from .gating import rejected
 from .imu_buffer import ImuBuffer
@@ -55,7 +55,7 @@ from .rotations import quat_from_rotvec, quat_rotate, quat_to_dcm
 from .rewind import Rewind, RunState
 from .strapdown import apply_error_state
 from .vehicle_constraint import LEARN_S, SLIP_HOLD_SIGMA, SLIP_RATE, SLIP_RATE_ARM, \
-    LearnedConstraint, forget_boresight, hold_side_slip
+    LearnedConstraint, hold_side_slip
 
 #: A zero-velocity update tells the vehicle at rest for this long after its epoch, s (the
 #: front end sends one per still IMU block, nav/rest_detector.py).
@@ -840,18 +840,13 @@ class Navigator:
         its covariance small against REP-145: on a simulated car the filter held a heading
         107 deg off (NEES 7,400; docs/results/product_path.md, "2026-12-06 (session 28)")."""
         s = self._state
-        v = np.asarray(m.v_enu, float)
-        vel, yaw = self._space["vel"], self._space["att"].stop - 1
-        P_vv = s.ekf.P[vel, vel]
-        if np.sqrt(P_vv[0, 0]) < UNINFORMED_VELOCITY * s.gnss_speed and not m.checks_only:
-            delta, sigma, gain = yaw_error_from_motion(v, m.cov_enu, s.nav.v_enu, s.nav.q_nb)
-        else:
-            (delta, sigma), gain = yaw_error_from_course(v, m.cov_enu, s.nav.q_nb), None
-        if sigma > CONFIRM_COURSE_SIGMA:
+        vel = self._space["vel"]
+        from_motion = not m.checks_only and \
+            np.sqrt(s.ekf.P[vel.start, vel.start]) < UNINFORMED_VELOCITY * s.gnss_speed
+        checked = self._course_miss(m, from_motion)
+        if checked is None:
             return  # a faster course will tell more
-        variance = sigma * sigma + s.ekf.P[yaw, yaw] + (0.0 if gain is None else
-                                                       gain @ P_vv @ gain)
-        miss = wrap_pi(delta)
+        miss, variance = checked
         if abs(miss) <= HEADING_CONFIRM_SIGMAS * np.sqrt(variance):
             # What the heading left uncertain in the position while it waited stays so, now
             # in P for the fixes to pull in (published only, it vanished with the confirmation
@@ -866,6 +861,25 @@ class Navigator:
         self._refute_heading(f"missed the course by {np.degrees(miss):+.0f} deg (sigma "
                              f"{np.degrees(np.sqrt(variance)):.0f} deg)")
 
+    def _course_miss(self, m, from_motion):
+        """How far the heading misses the course of the GNSS velocity m, and the variance of
+        that miss (rad, wrapped; rad^2): against the INS velocity's direction (``from_motion``:
+        alignment.yaw_error_from_motion) or the body x axis, with the yaw's own variance; None
+        where the course's sigma is beyond CONFIRM_COURSE_SIGMA."""
+        s = self._state
+        v = np.asarray(m.v_enu, float)
+        vel, yaw = self._space["vel"], self._space["att"].stop - 1
+        P_vv = s.ekf.P[vel, vel]
+        if from_motion:
+            delta, sigma, gain = yaw_error_from_motion(v, m.cov_enu, s.nav.v_enu, s.nav.q_nb)
+        else:
+            (delta, sigma), gain = yaw_error_from_course(v, m.cov_enu, s.nav.q_nb), None
+        if sigma > CONFIRM_COURSE_SIGMA:
+            return None
+        variance = sigma * sigma + s.ekf.P[yaw, yaw] + (0.0 if gain is None else
+                                                       gain @ P_vv @ gain)
+        return wrap_pi(delta), variance
+
     def _check_turn_on_course(self, m, epoch):
         """The heading of gyros whose bias about the vertical was taken from a still IMU's
         mean on the move (RunState.turn_in_bias) against a later course of fixes m. A vehicle
@@ -878,19 +892,17 @@ class Navigator:
         error measured (nav/course.py). The check goes on as long as the fixes alone steer,
         the miss of a slow turn growing with time, or until a rest measures the bias."""
         s = self._state
-        delta, sigma = yaw_error_from_course(np.asarray(m.v_enu, float), m.cov_enu, s.nav.q_nb)
-        if sigma > CONFIRM_COURSE_SIGMA:
+        checked = self._course_miss(m, from_motion=False)
+        if checked is None:
             return
-        yaw = self._space["att"].stop - 1
-        variance = sigma * sigma + s.ekf.P[yaw, yaw]
-        miss = wrap_pi(delta)
+        miss, variance = checked
         if abs(miss) <= HEADING_CONFIRM_SIGMAS * np.sqrt(variance):
             return
         s.turn_in_bias = False
-        bias, P, z = s.estimates["bg"].copy(), s.ekf.P.copy(), self._space["bg"].start + 2
-        bias[2], P[z, :], P[:, z] = 0.0, 0.0, 0.0
-        P[z, z] = self.config.noise.blocks["bg"].sigma0 ** 2
-        s.estimates["bg"], s.ekf.P = bias, P
+        z = self._space["bg"].start + 2
+        s.ekf.P = at_prior(s.ekf.P, slice(z, z + 1), self.config.noise.blocks["bg"].sigma0)
+        s.estimates["bg"] = s.estimates["bg"].copy()
+        s.estimates["bg"][2] = 0.0
         self._forget_heading()
         self._recorder.add_update(rejected(
             "course_on_x", epoch, np.array([miss]), np.array([[variance]]),
@@ -1237,8 +1249,8 @@ class Navigator:
     def _end_slip_hold(self):
         """Back to the boresight state's prior: the learned axes (or none) take over."""
         self._state.slip_held = False
-        self._reset_boresight(forget_boresight(self._state.ekf.P, self._space["nhc"],
-                                               self._space.extras["nhc"].sigma0))
+        self._reset_boresight(at_prior(self._state.ekf.P, self._space["nhc"],
+                                       self._space.extras["nhc"].sigma0))
 
     def _reset_boresight(self, P):
         """The boresight estimate back to zero with the covariance P, recorded as a correction

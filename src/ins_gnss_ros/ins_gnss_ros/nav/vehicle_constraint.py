@@ -225,13 +225,3 @@ def hold_side_slip(P, yaw, slip, slip_var):
     P[slip, slip] = slip_var + SLIP_OWN_SIGMA ** 2
     return P
 
-
-def forget_boresight(P, block, sigma0):
-    """The covariance P with the boresight block (a slice) back at its prior, sigma0 (rad, the
-    block's ExtraState.sigma0: ``BORESIGHT_SIGMA_DEG``) and uncorrelated: the learned axes that
-    follow are new."""
-    P = P.copy()
-    P[block, :] = 0.0
-    P[:, block] = 0.0
-    P[block, block] = np.diag(np.broadcast_to(sigma0, (block.stop - block.start,)) ** 2)
-    return P
