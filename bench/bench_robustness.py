@@ -13,7 +13,10 @@ out) and judges the outputs against the simulation's truth:
 * the rate of ``nav/fix`` after alignment, valid or not (the ekf's ``output_rate_hz``, 10 Hz);
 * the yaw error of ``ins/state`` at the first NAVIGATING ``nav/status`` over that status's yaw
   sigma (att[2]): whether the alignment's heading is as good as it claims (about 1 RMS over
-  seeds, ``--seeds``).
+  seeds, ``--seeds``);
+* the heading's RMS error and the mean attitude NEES (expect 3) after alignment, as
+  ``trial evaluate --skip`` gives them from ``ins/state`` and ``nav/odom``: a heading run round
+  or a tilt held with too small a sigma, which the position may hide.
 
 A cell with ``previous_drive`` first replays an earlier drive of the same car (the same
 ``--mag-iron`` vehicle, the next seed) with the default profile saving the magnetometer's
@@ -125,6 +128,7 @@ def judge(bag: Path, out: Path) -> dict:
     from ins_gnss_ros.nav.lever_arm import lever_arm_position
     from ins_gnss_ros.nav.rotations import quat_to_euler
     from ins_gnss_ros.trial.simulate import SimOptions
+    from ins_gnss_ros.trial.report import evaluate_run
 
     def stamps(msgs):
         return np.array([io.msg_stamp_ns(m.msg) for m in msgs]) * 1e-9
@@ -196,9 +200,15 @@ def judge(bag: Path, out: Path) -> dict:
         sigma = first.state_std[list(first.state_names).index("att[2]")]
         yaw_sigmas = float(wrap_pi(quat_to_euler(np.array([o.w, o.x, o.y, o.z]))[2]
                                    - true_yaw)) / sigma
+    heading_rms = attitude_nees = np.nan
+    if after.any():
+        _, metrics = evaluate_run(out, bag, plots=False, skip_s=t_align - t_state[0])
+        heading_rms = metrics["heading_rms_deg"]
+        attitude_nees = metrics["nees_attitude_mean"]
     return {"align_s": t_align - t_start, "rms_m": rms, "raw_m": raw_rms,
             "ratio": rms / raw_rms, "valid_early": early, "valid_beyond_5_sigma": beyond,
-            "valid_fixes": len(valid), "fix_rate_hz": fix_rate, "yaw_error_sigmas": yaw_sigmas}
+            "valid_fixes": len(valid), "fix_rate_hz": fix_rate, "yaw_error_sigmas": yaw_sigmas,
+            "heading_rms_deg": heading_rms, "attitude_nees": attitude_nees}
 
 
 def _simulate_and_replay(cell: Cell, bag: Path, out: Path, duration: float, seed: int,
@@ -260,8 +270,9 @@ def main(argv=None) -> int:
         return 0
     print("| cell | seed | aligned after (s) | horizontal RMS after (m) | raw fixes (m) | ratio | "
           "valid before alignment | valid beyond 5 sigma | nav/fix after alignment (Hz) | "
-          "yaw error / sigma at alignment |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "yaw error / sigma at alignment | heading RMS after (deg) | attitude NEES after "
+          "(expect 3) |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for cell in cells:
@@ -270,7 +281,8 @@ def main(argv=None) -> int:
                 print(f"| {cell.name} | {seed} | {r['align_s']:.1f} | {r['rms_m']:.2f} | "
                       f"{r['raw_m']:.2f} | {r['ratio']:.2f} | {r['valid_early']} | "
                       f"{r['valid_beyond_5_sigma']} of {r['valid_fixes']} | "
-                      f"{r['fix_rate_hz']:.1f} | {r['yaw_error_sigmas']:+.2f} |", flush=True)
+                      f"{r['fix_rate_hz']:.1f} | {r['yaw_error_sigmas']:+.2f} | "
+                      f"{r['heading_rms_deg']:.2f} | {r['attitude_nees']:.1f} |", flush=True)
     return 0
 
 
