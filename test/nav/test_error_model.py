@@ -69,11 +69,11 @@ def linear_phi(layout, states, f_b, w_b, dt):
 
 
 LAYOUT = em.StateLayout(("pos", "vel", "att", "bg", "ba", "gmg", "gma", "sg", "sa", "ng",
-                         "na", "gs"), {"gmg": 20.0, "gma": 30.0})
+                         "na", "nz", "gs"), {"gmg": 20.0, "gma": 30.0})
 #: Perturbation size per block: small enough to stay linear (2 km is 3e-4 of the Earth's
 #: radius), large enough that the small curvature and transport-rate terms show.
 SIZE = {"pos": 2000.0, "vel": 0.1, "att": 1e-3, "bg": 2e-5, "ba": 2e-3, "gmg": 2e-5,
-        "gma": 2e-3, "sg": 1e-3, "sa": 1e-3, "ng": 1e-3, "na": 1e-3, "gs": 2e-6}
+        "gma": 2e-3, "sg": 1e-3, "sa": 1e-3, "ng": 1e-3, "na": 1e-3, "nz": 1e-3, "gs": 2e-6}
 #: Absolute floors (far below every real error, above double-precision noise).
 FLOOR = {"pos": 1e-6, "vel": 1e-8, "att": 1e-10}
 
@@ -98,6 +98,7 @@ def nonlinear_vs_linear():
             st0 = inject(state0, x0[S["pos"]], x0[S["vel"]], x0[S["att"]])
             Mg = se.error_matrix(x0[S["sg"]], x0[S["ng"]])
             Ma = se.error_matrix(x0[S["sa"]], x0[S["na"]])
+            Ma[2, :2] += x0[S["nz"]]  # the z accelerometer reading x and y
             Gs = x0[S["gs"]].reshape(3, 3)
             bg = x0[S["bg"]] + np.outer(np.exp(-t_mid / LAYOUT.tau["gmg"]), x0[S["gmg"]])
             ba = x0[S["ba"]] + np.outer(np.exp(-t_mid / LAYOUT.tau["gma"]), x0[S["gma"]])
@@ -151,6 +152,8 @@ def test_layout_presets_and_slices():
     L24 = em.make_layout("24")
     assert L24.size == 24 and L24["clock"] == slice(21, 24)
     assert em.make_layout("33").size == 33
+    L17 = em.make_layout("17")
+    assert L17.size == 17 and L17["nz"] == slice(15, 17)
     L = em.make_layout(["pos", "vel", "att", "gs"])
     assert L["gs"] == slice(9, 18) and "bg" not in L
     with pytest.raises(ValueError):

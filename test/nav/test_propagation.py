@@ -1,9 +1,9 @@
 """The navigator's time update of a segment (nav/propagation.py): its compiled loop
-(_kernels.mech_segment) against the two modules it stands for, SensorErrors.compensate and
-strapdown.run, the compiled sum of its steps against numpy's, the whole compiled step
-(_kernels.time_update) against that loop and the filter's own prediction
-(ErrorStateEKF.predict), and the attitude variance of a turn (turn_noise) against the errors
-of drawn gyro triads."""
+(_kernels.mech_segment) against the two modules it stands for, SensorErrors.compensate (then
+the "nz" cross-axis terms taken out) and strapdown.run, the compiled sum of its steps against
+numpy's, the whole compiled step (_kernels.time_update) against that loop and the filter's own
+prediction (ErrorStateEKF.predict), and the attitude variance of a turn (turn_noise) against
+the errors of drawn gyro triads."""
 import numpy as np
 
 from ins_gnss_ros.nav import _kernels
@@ -32,17 +32,19 @@ def test_the_compiled_segment_equals_compensation_then_mechanisation():
                           accel_bias=np.array([0.05, -0.02, 0.1]),
                           gyro_scale=np.array([1e-3, -5e-4, 2e-3]),
                           accel_scale=np.array([-1e-3, 2e-3, 5e-4]))
+    cross_z = np.array([0.02, -0.015])  # the z accelerometer reading x and y ("nz")
     dt = float(dts.sum()) / n
 
     c_th, c_dv = errors.compensate(th, dv, dts)
+    c_dv[:, 2] -= c_dv[:, :2] @ cross_z
     ref = run(start, c_th + cth, c_dv + cdv, dt)
 
     v, q, sums = start.v_enu.copy(), start.q_nb.copy(), np.empty((2, 3))
     track = np.full((n - 1, 10), np.nan)  # the solution after each sample but the last
     lat, lon, h = _kernels.mech_segment(start.lat, start.lon, start.h, v, q, th, dv, cth, cdv,
                                         dts, errors.gyro_bias, errors.gyro_scale,
-                                        errors.accel_bias, errors.accel_scale, dt,
-                                        WGS84.kernel_params, sums, track)
+                                        errors.accel_bias, errors.accel_scale, cross_z,
+                                        dt, WGS84.kernel_params, sums, track)
     np.testing.assert_allclose([lat, lon], [ref["lat"][-1], ref["lon"][-1]], rtol=0, atol=1e-14)
     assert len(ref["lat"]) == n + 1  # the start, then after each sample
     np.testing.assert_allclose(track[:, :2], np.column_stack([ref["lat"], ref["lon"]])[1:n],
@@ -71,7 +73,8 @@ def test_the_compiled_time_update_is_the_segment_loop_then_the_filter_prediction
     # Gauss-Markov, clock and extra blocks: the model's constant terms are in F too.
     noise = filter_noise(GRADES["mems_adis16405"])
     space = StateSpace(make_layout(("pos", "vel", "att", "bg", "ba", "gmg", "gma", "sg", "sa",
-                                    "clock"), noise), {"td": ExtraState(1, 0.01, 1e-6, 50.0)})
+                                    "nz", "clock"), noise),
+                       {"td": ExtraState(1, 0.01, 1e-6, 50.0)})
     q0 = np.array([0.9, 0.1, -0.2, 0.37]) / np.linalg.norm([0.9, 0.1, -0.2, 0.37])
     start = NavState(0.9, 0.5, 120.0, np.array([12.0, -3.0, 0.4]), q0, 0.0)
     P0 = np.diag(rng.uniform(1e-6, 1.0, space.size))
@@ -81,7 +84,8 @@ def test_the_compiled_time_update_is_the_segment_loop_then_the_filter_prediction
     dv = rng.normal(0.0, 5e-2, (n, 3)) + np.array([0.0, 0.0, 0.098])
     cth, cdv = rng.normal(0.0, 1e-7, (n, 3)), rng.normal(0.0, 1e-6, (n, 3))
     estimates = {"bg": np.array([1e-3, -2e-3, 5e-4]), "ba": np.array([0.05, -0.02, 0.1]),
-                 "sg": np.array([1e-3, -5e-4, 2e-3]), "sa": np.array([-1e-3, 2e-3, 5e-4])}
+                 "sg": np.array([1e-3, -5e-4, 2e-3]), "sa": np.array([-1e-3, 2e-3, 5e-4]),
+                 "nz": np.array([0.02, -0.015])}
 
     s = RunState(nav=start, ekf=ErrorStateEKF(space, noise, P0), estimates=dict(estimates))
     track = np.empty((n - 1, 10))
@@ -94,8 +98,9 @@ def test_the_compiled_time_update_is_the_segment_loop_then_the_filter_prediction
     track_ref = np.empty((n - 1, 10))
     lat, lon, h = _kernels.mech_segment(start.lat, start.lon, start.h, v, q, th, dv, cth, cdv,
                                         dts, errors.gyro_bias, errors.gyro_scale,
-                                        errors.accel_bias, errors.accel_scale, T / n,
-                                        WGS84.kernel_params, sums, track_ref)
+                                        errors.accel_bias, errors.accel_scale,
+                                        estimates["nz"], T / n, WGS84.kernel_params, sums,
+                                        track_ref)
     ekf = ErrorStateEKF(space, noise, P0)
     phi_ref = ekf.predict(start, sums[1] / T, sums[0] / T, T)
     # then the turn's attitude variance of the gyros' cross-axis errors (no "ng" block here)

@@ -184,11 +184,13 @@ def _compensated(measured, dt, bias, scale):
 
 @njit(cache=True)
 def mech_segment(lat, lon, h, v, q, th, dv, cth, cdv, dts, gyro_bias, gyro_scale, accel_bias,
-                 accel_scale, dt, ell_par, sums, track):
+                 accel_scale, accel_cross_z, dt, ell_par, sums, track):
     """The navigator's time update of one segment of raw samples on the solution (lat, lon,
     h, v, q): each increment compensated as increments.SensorErrors.compensate does
-    ((measured - bias dts) / (1 + scale)), its coning/sculling terms cth, cdv added, and
-    mechanised by :func:`mech_step` at the common step dt with a free vertical channel.
+    ((measured - bias dts) / (1 + scale)), then the z accelerometer's reading of the x and y
+    increments taken out (accel_cross_z, the "nz" states: the strapdown node does not apply
+    them, the filter's corrections carry them to it), its coning/sculling terms cth, cdv added,
+    and mechanised by :func:`mech_step` at the common step dt with a free vertical channel.
 
     v and q are updated in place (mech_step reads them before it writes); sums gets the sums
     of the compensated gyro and accelerometer increments (2, 3), in numpy's order (row after
@@ -207,7 +209,12 @@ def mech_segment(lat, lon, h, v, q, th, dv, cth, cdv, dts, gyro_bias, gyro_scale
                 sums[0, j] += a
                 sums[1, j] += b
             rot[j] = a + cth[i, j]
-            dvn[j] = b + cdv[i, j]
+            dvn[j] = b
+        cross = accel_cross_z[0] * dvn[0] + accel_cross_z[1] * dvn[1]
+        dvn[2] -= cross
+        sums[1, 2] -= cross
+        for j in range(3):
+            dvn[j] += cdv[i, j]
         lat, lon, h = mech_step(lat, lon, h, v, q, rot, dvn, dt, ell_par, math.nan, 0.0, 0.0,
                                 v, q)
         if i < track.shape[0]:
@@ -327,8 +334,9 @@ def coning_sculling_run(dtheta, dv, prev_th, prev_v, two_sample, phi, dv_nav):
 
 _normal_gravity_dh = njit(cache=True)(earth._normal_gravity_dh)
 
-#: Sensor-error column kinds of :func:`system_matrix` (error_model.StateLayout.sensor_plan).
-BIAS, SCALE, NONORTHOGONALITY, G_SENSITIVITY = 0, 1, 2, 3
+#: Sensor-error column kinds of :func:`system_matrix` (error_model.StateLayout.sensor_plan):
+#: VERTICAL_CROSS_AXIS is NONORTHOGONALITY's last two terms (ZX, ZY) alone.
+BIAS, SCALE, NONORTHOGONALITY, G_SENSITIVITY, VERTICAL_CROSS_AXIS = 0, 1, 2, 3, 4
 
 
 @njit(cache=True)
@@ -443,11 +451,13 @@ def system_matrix(F, lat, h, v, q, f_b, w_ib_b, ell_par, sensors, misalign_index
             elif kind == SCALE:
                 for j in range(3):
                     F[row + i, col + j] = sign * (C[i, j] * x_b[j])
-            elif kind == NONORTHOGONALITY:
+            elif kind == NONORTHOGONALITY or kind == VERTICAL_CROSS_AXIS:
                 # C Gamma(x_b), Babich eq. 5.4: column k is C[:, r] x_b[s] for the (r, s) term.
-                for j in range(6):
-                    F[row + i, col + j] = sign * (C[i, misalign_index[j, 0]]
-                                                  * x_b[misalign_index[j, 1]])
+                first = 0 if kind == NONORTHOGONALITY else 4
+                for j in range(6 - first):
+                    m = first + j
+                    F[row + i, col + j] = sign * (C[i, misalign_index[m, 0]]
+                                                  * x_b[misalign_index[m, 1]])
             else:  # G_SENSITIVITY: C kron(I, f_b^T), rate error = G f_b with G row-major.
                 for r in range(3):
                     for j in range(3):
@@ -555,8 +565,8 @@ def _block_sum(a, lo, n):
 
 @njit(cache=True)
 def time_update(lat, lon, h, v, q, t0, t, th, dv, cth, cdv, gyro_bias, gyro_scale, accel_bias,
-                accel_scale, ell_par, out_v, out_q, a_enu, omega, F, refresh, sensors,
-                misalign_index, P, Q, order, track):
+                accel_scale, accel_cross_z, ell_par, out_v, out_q, a_enu, omega, F, refresh,
+                sensors, misalign_index, P, Q, order, track):
     """The navigator's time update of one segment (propagation.propagate): the samples' steps
     from their end times t (N,) after the solution's time t0 (at least 1 us each) and their
     sum T; the solution (lat, lon, h, v, q) mechanised over the samples by
@@ -577,7 +587,8 @@ def time_update(lat, lon, h, v, q, t0, t, th, dv, cth, cdv, gyro_bias, gyro_scal
     out_v[:] = v
     out_q[:] = q
     lat1, lon1, h1 = mech_segment(lat, lon, h, out_v, out_q, th, dv, cth, cdv, dts, gyro_bias,
-                                  gyro_scale, accel_bias, accel_scale, T / th.shape[0], ell_par,
+                                  gyro_scale, accel_bias, accel_scale, accel_cross_z,
+                                  T / th.shape[0], ell_par,
                                   sums, track)
     f_b = np.empty(3)
     for j in range(3):

@@ -164,7 +164,8 @@ class Navigator:
         cfg = self.config
         self._space = StateSpace(make_layout(cfg.layout, cfg.noise), dict(cfg.extras))
         if "gs" in self._space or "ng" in self._space or "na" in self._space:
-            raise ValueError("the navigator compensates bias and scale-factor blocks only")
+            raise ValueError("the navigator compensates bias, scale-factor and vertical "
+                             "cross-axis (nz) blocks only")
         self._nav_blocks = tuple(self._space[name].start for name in ("pos", "vel", "att"))
         self._no_var = np.zeros(self._space.size)  # (_published_var: read, never written)
         self._no_var.flags.writeable = False

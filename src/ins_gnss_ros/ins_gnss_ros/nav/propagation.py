@@ -15,6 +15,10 @@ from .strapdown import NavState
 #: takes 3-10 s, and by the next one the aiding has measured what the last did.
 TURN_TIME = 10.0
 
+#: The z accelerometer's cross-axis terms of a layout without "nz" (_kernels.mech_segment;
+#: writeable, as the estimates are: a read-only array would compile the kernel once more).
+NO_CROSS_Z = np.zeros(2)
+
 
 def extrapolate(state, dt, a_enu):
     """State moved by dt (s; normally a fraction of one IMU sample, or the change of the
@@ -72,7 +76,8 @@ def propagate(s, rows, noise, cov_interval, gaps, space, track):
     lat, lon, h, T, phi, P = _kernels.time_update(
         float(start.lat), float(start.lon), float(start.h), start.v_enu, start.q_nb,
         float(start.t), t, th, dv, cth, cdv, errors.gyro_bias, errors.gyro_scale,
-        errors.accel_bias, errors.accel_scale, WGS84.kernel_params, v, q, s.a_enu, s.omega, F,
+        errors.accel_bias, errors.accel_scale, s.estimates.get("nz", NO_CROSS_Z),
+        WGS84.kernel_params, v, q, s.a_enu, s.omega, F,
         rebuild, ekf.space.layout.sensor_plan, MISALIGN_COLUMNS,
         np.ascontiguousarray(ekf.P, float), Q, int(ekf.order), track)
     ekf.predicted(F, phi, P)

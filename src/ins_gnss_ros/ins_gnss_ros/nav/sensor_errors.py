@@ -339,7 +339,7 @@ class FilterNoise:
         Accelerometer white-noise spectral density [m²/s³] (= VRW²).
     blocks : dict[str, BlockNoise]
         Sensor-error blocks by layout name ("bg", "ba", "gmg", "gma", "sg", "sa", "ng",
-        "na", "gs").
+        "na", "nz", "gs").
     """
 
     gyro_psd: float
@@ -366,6 +366,7 @@ def filter_noise(grade, bias_model="gm"):
     blocks = {
         "sg": BlockNoise(g.scale_sigma), "sa": BlockNoise(a.scale_sigma),
         "ng": BlockNoise(g.misalign_sigma), "na": BlockNoise(a.misalign_sigma),
+        "nz": BlockNoise(a.misalign_sigma),
         "gs": BlockNoise(grade.g_sensitivity_sigma),
     }
     for name, t in (("g", g), ("a", a)):
