@@ -588,8 +588,7 @@ def time_update(lat, lon, h, v, q, t0, t, th, dv, cth, cdv, gyro_bias, gyro_scal
     out_q[:] = q
     lat1, lon1, h1 = mech_segment(lat, lon, h, out_v, out_q, th, dv, cth, cdv, dts, gyro_bias,
                                   gyro_scale, accel_bias, accel_scale, accel_cross_z,
-                                  T / th.shape[0], ell_par,
-                                  sums, track)
+                                  T / th.shape[0], ell_par, sums, track)
     f_b = np.empty(3)
     for j in range(3):
         a_enu[j] = (out_v[j] - v[j]) / T

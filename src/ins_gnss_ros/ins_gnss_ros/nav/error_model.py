@@ -54,9 +54,9 @@ BLOCK_SIZES = {"pos": 3, "vel": 3, "att": 3, "bg": 3, "ba": 3, "gmg": 3, "gma": 
 #: adds the cross-axis terms that read a horizontal acceleration as vertical ("nz"), which
 #: an accelerometer triad nobody calibrated shows as a tilt in every manoeuvre (a consumer
 #: part's 2 % is 1.1 deg): the default profile's. The accelerometers' other four terms are
-#: left out: on gravity XZ and YZ are a bias ("ba" carries them), and with XY and YX
-#: estimated as well the real car drive lost 12 % (docs/results/product_path.md, "2026-12-07
-#: (session 40)").
+#: left out: on gravity XZ and YZ are a bias ("ba" carries them), and with all six estimated
+#: the real car drive lost 12 % per outage where these two cost it 2 %
+#: (docs/results/product_path.md, "2026-12-07 (session 40)").
 LAYOUTS = {
     "9": ("pos", "vel", "att"),
     "15": ("pos", "vel", "att", "bg", "ba"),

@@ -77,9 +77,8 @@ def propagate(s, rows, noise, cov_interval, gaps, space, track):
         float(start.lat), float(start.lon), float(start.h), start.v_enu, start.q_nb,
         float(start.t), t, th, dv, cth, cdv, errors.gyro_bias, errors.gyro_scale,
         errors.accel_bias, errors.accel_scale, s.estimates.get("nz", NO_CROSS_Z),
-        WGS84.kernel_params, v, q, s.a_enu, s.omega, F,
-        rebuild, ekf.space.layout.sensor_plan, MISALIGN_COLUMNS,
-        np.ascontiguousarray(ekf.P, float), Q, int(ekf.order), track)
+        WGS84.kernel_params, v, q, s.a_enu, s.omega, F, rebuild, ekf.space.layout.sensor_plan,
+        MISALIGN_COLUMNS, np.ascontiguousarray(ekf.P, float), Q, int(ekf.order), track)
     ekf.predicted(F, phi, P)
     s.nav = NavState.taking(lat, lon, h, v, q, float(t[-1]))
     s.omega_time = T
