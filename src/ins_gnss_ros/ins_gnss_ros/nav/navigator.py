@@ -1095,13 +1095,9 @@ class Navigator:
         if not s.heading_known:
             return
         s.heading_by = None
-        P = s.ekf.P.copy()
-        for k in (self._space["att"].stop - 1, self._space["vel"]):
-            P[k, :] = 0.0
-            P[:, k] = 0.0
-        vel = self._space["vel"]
-        P[vel, vel] = np.eye(3) * UNKNOWN_SPEED_SIGMA ** 2
-        s.ekf.P = P
+        yaw = self._space["att"].stop - 1
+        s.ekf.P = at_prior(at_prior(s.ekf.P, self._space["vel"], UNKNOWN_SPEED_SIGMA),
+                           slice(yaw, yaw + 1), 0.0)
         s.heading_known, s.mode = False, ALIGNING
         s.t_model = -np.inf  # the system matrix holds the attitude: rebuilt at the next step
         self._revision += 1  # the followers hear that the heading is unknown
