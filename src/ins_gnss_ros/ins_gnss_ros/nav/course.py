@@ -63,6 +63,14 @@ CHI2_1_MEDIAN = 0.4549
 #: fixes at 2.5 Hz needs about 25 s), of at least MIN_RUN_FIXES (the fit's five unknowns and a
 #: few residuals to test it with).
 RUN_S, MIN_RUN_FIXES = 30.0, 6
+#: Fewest standard deviations of a run's speed (its fit's noise and the slow error) in that
+#: speed. The course's sigma, the velocity across the track over the speed, holds only where
+#: the speed is known; on a short run the first to pass MAX_COURSE_SIGMA is otherwise one the
+#: noise flattered, its speed come out high or the fixes' white variance, from a few second
+#: differences yet, low (robots at 1 m/s with a known gyro rate: a run of 6 s released at
+#: 1.28 m/s, 22 deg off for a sigma of 4; the squared errors over their variance 2.84 on
+#: average at release, 1.19 with it; test_course.py).
+MIN_SPEED_SIGMAS = 5.0
 #: Largest 1 sigma of the course of a run's velocity [rad]: the chord's (a displacement of
 #: MIN_SIGMAS standard deviations of its length, each axis's half of it across the track).
 MAX_COURSE_SIGMA = 1.0 / (MIN_SIGMAS * np.sqrt(2.0))
@@ -128,6 +136,8 @@ class RunFit(NamedTuple):
     dof: int            # their degrees of freedom
     rate: tuple | None  # the gyros' rate error about the vertical and its variance (rad/s,
     #                     (rad/s)^2), or None when not fitted
+    speed_sigma: float  # 1 sigma of the speed from the fit's noise and the slow error, m/s
+    #                     (cov holds more: what the fit leaves out)
 
 
 def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma, tilt_sigma=0.0,
@@ -250,6 +260,7 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma, tilt_sigma=0.
     _, normal, gain = solve(a, residual)
     chi2 = float(residual @ (weight * residual))
     cov = normal[2:4, 2:4] + SLOW_ERROR_RATE ** 2 * np.eye(2)
+    speed_sigma = float(np.sqrt(u @ cov @ u))
     # vertical: p_end + v tau + a tau^2 / 2
     a_up = np.stack([np.ones(n), tau, 0.5 * tau * tau], axis=1)
     w_up = 1.0 / vertical_var
@@ -294,7 +305,7 @@ def run_velocity(tau, d, yaw, white, vertical_var, yaw_rate_sigma, tilt_sigma=0.
     gains = np.zeros((n, 3, 3))
     gains[:, :2, 0], gains[:, :2, 1] = gain[2:4, 0:2 * n:2].T, gain[2:4, 1:2 * n:2].T
     gains[:, 2, 2] = gain_up[1]
-    return RunFit(v, full, gains, chi2, dof, rate)
+    return RunFit(v, full, gains, chi2, dof, rate, speed_sigma)
 
 
 class WhiteNoise:
@@ -423,8 +434,8 @@ class CourseFromFixes:
     def _run_velocity(self, R: np.ndarray, yaw_rate_sigma: float, tilt_sigma: float,
                       scale_sigma: float, checks_only: bool):
         """The velocity of the run at its last fix (:func:`run_velocity`, ENU axes R there),
-        once its course is known to MAX_COURSE_SIGMA; a run the fit does not hold loses its
-        older half."""
+        once its speed is known to MIN_SPEED_SIGMAS and its course to MAX_COURSE_SIGMA; a run
+        the fit does not hold loses its older half."""
         run = self._run
         r_end, last = run[-1][0], run[-1][2]
         tau = np.array([f.t - last.t for _, _, f in run])
@@ -435,12 +446,13 @@ class CourseFromFixes:
                            yaw_rate_sigma, tilt_sigma, scale_sigma)
         if fit is None:
             return None
-        v, cov, gains, chi2, dof, rate = fit
+        v, cov, gains, chi2, dof, rate, speed_sigma = fit
         if chi2 > chi2_gate(dof, RESIDUAL_QUANTILE):
             del run[:len(run) // 2]
             return None
-        across = np.array([-v[1], v[0]])
-        if across @ cov[:2, :2] @ across > (MAX_COURSE_SIGMA * (v[0] ** 2 + v[1] ** 2)) ** 2:
+        across, speed2 = np.array([-v[1], v[0]]), v[0] ** 2 + v[1] ** 2
+        if speed2 < (MIN_SPEED_SIGMAS * speed_sigma) ** 2 or \
+                across @ cov[:2, :2] @ across > (MAX_COURSE_SIGMA * speed2) ** 2:
             return None
         # the fixes within the chord's window, the navigator's to take after the alignment
         fixes = tuple((f, gain @ w) for (_, _, f), gain, w in zip(run, gains, white)
