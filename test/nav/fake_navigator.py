@@ -7,7 +7,7 @@ class RecordingNavigator:
     """Keeps what it is given; ``heading_known`` as the test sets it."""
 
     config = SimpleNamespace(noise=SimpleNamespace(accel_psd=1e-6, gyro_psd=1e-8), extras={},
-                             static_speed=0.1)
+                             static_speed=0.1, align_speed=0.5)
     started = True
     solution = None  # (levelled: the gyros' azimuth projects on body z)
     heading_by = None  # (a heading the motion has confirmed, or none)

@@ -808,11 +808,12 @@ def test_a_start_on_the_move_takes_the_gyros_bias_about_the_vertical_from_its_ru
     """A weaving robot started on the move with fixes alone, its z gyro 4 deg/s off (the
     default profile's prior: 5 deg/s): the run of fixes that aligns its heading measured that
     error (course.run_velocity); the filter takes it at the alignment
-    (measurements.vertical_rate_error: 3.7 +- 0.4 deg/s), and 25 s later the heading is
-    within 3 sigma of the truth (12 deg for 11). Left out, the alignment left the bias as
-    unknown as the profile says (0.0 +- 4.9 deg/s), and the heading ran 180 deg off; a
-    consumer unit's robot so published its heading 100 deg RMS off (attitude NEES 32:
-    docs/results/product_path.md, "2026-12-06 (session 37)")."""
+    (measurements.vertical_rate_error: 2.1 +- 1.5 deg/s 22 s into the drive; 3.7 +- 0.4 at
+    36 s while a run's course had to reach 4 deg), and at the end of the drive the bias is
+    4.3 +- 0.2 deg/s and the heading within 3 sigma of the truth (4.5 deg for 8). Left out, the
+    alignment left the bias as unknown as the profile says (0.0 +- 4.9 deg/s), and the heading
+    ran 180 deg off; a consumer unit's robot so published its heading 100 deg RMS off
+    (attitude NEES 32: docs/results/product_path.md, "2026-12-06 (session 37)")."""
     import ins_gnss_ros.nav.course as course_module
 
     bias = np.radians(4.0)
@@ -826,16 +827,18 @@ def test_a_start_on_the_move_takes_the_gyros_bias_about_the_vertical_from_its_ru
                 aligned = nav.estimates["bg"][2], np.sqrt(nav.covariance()[bz, bz])
         yaw = nav.space["att"].stop - 1
         error = (quat_to_euler(nav.solution.q_nb)[2] - true_yaw + np.pi) % (2 * np.pi) - np.pi
-        return aligned, error, np.sqrt(nav.covariance()[yaw, yaw])
+        final = nav.estimates["bg"][2], np.sqrt(nav.covariance()[bz, bz])
+        return aligned, final, error, np.sqrt(nav.covariance()[yaw, yaw])
 
-    (estimate, bias_sigma), error, sigma = drive()
-    assert abs(estimate - bias) < 3.0 * bias_sigma and bias_sigma < np.radians(0.5), \
+    (estimate, bias_sigma), final, error, sigma = drive()
+    assert abs(estimate - bias) < 3.0 * bias_sigma and bias_sigma < np.radians(2.0), \
         np.degrees([estimate, bias_sigma])
+    assert abs(final[0] - bias) < 3.0 * final[1] < np.radians(1.0), np.degrees(final)
     assert abs(error) < 3.0 * sigma, np.degrees([error, sigma])
     fit = course_module.run_velocity
     monkeypatch.setattr(course_module, "run_velocity",
                         lambda *args: (lambda f: f and f._replace(rate=None))(fit(*args)))
-    (estimate, bias_sigma), error, sigma = drive()
+    (estimate, bias_sigma), *_ = drive()
     assert bias_sigma > np.radians(2.0) and abs(estimate) < np.radians(1.0), \
         np.degrees([estimate, bias_sigma])
 

@@ -809,7 +809,8 @@ class Aiding:
             tilt_sigma, scale_sigma = nav.tilt_sigma(), nav.yaw_scale_sigma()
         velocity = self._course.add(t, lat, lon, h, cov, yaw, rate_sigma,
                                     yaw_checked=nav.heading_unconfirmed,
-                                    tilt_sigma=tilt_sigma, scale_sigma=scale_sigma)
+                                    tilt_sigma=tilt_sigma, scale_sigma=scale_sigma,
+                                    min_speed=nav.config.align_speed)
         if velocity is not None:
             self.navigator.add_measurement(velocity)
 

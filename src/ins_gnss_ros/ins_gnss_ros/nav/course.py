@@ -71,9 +71,18 @@ RUN_S, MIN_RUN_FIXES = 30.0, 6
 #: 1.28 m/s, 22 deg off for a sigma of 4; the squared errors over their variance 2.84 on
 #: average at release, 1.19 with it; test_course.py).
 MIN_SPEED_SIGMAS = 5.0
-#: Largest 1 sigma of the course of a run's velocity [rad]: the chord's (a displacement of
-#: MIN_SIGMAS standard deviations of its length, each axis's half of it across the track).
-MAX_COURSE_SIGMA = 1.0 / (MIN_SIGMAS * np.sqrt(2.0))
+#: Largest 1 sigma of the course of a run's velocity [rad], as of a course the heading aligns
+#: on with the IMU still (alignment.MAX_STILL_COURSE_SIGMA): released once its speed is known,
+#: a run errs as it claims (test_course.py). The chord's ten sigma (4 deg) held a robot at 0.7
+#: m/s with 1 m fixes and a consumer unit's unknown gyro rate unaligned for 30 s of straight
+#: motion (the fit's own 5 deg after 30 s, the slow error's 0.03 m/s another 2.5) and for 80 s
+#: where a turn came first (docs/results/product_path.md, "2026-12-07 (session 41)").
+#: A run that only checks a heading (GnssVelocity.checks_only) is released at the chord's
+#: sigma: a check wants a course that knows more than the heading it checks (the navigator's
+#: CONFIRM_COURSE_SIGMA, 5 deg with the side slip's 3), and a run released short of it would
+#: start again from its last fix, never confirming (a robot's AHRS so left unconfirmed, its
+#: published position 36 m uncertain after 90 s).
+MAX_COURSE_SIGMA, MAX_CHECK_COURSE_SIGMA = 0.2, 1.0 / (MIN_SIGMAS * np.sqrt(2.0))
 #: 1 sigma per horizontal axis of the mean rate of the fixes' slow error over a run, m/s: a
 #: single-point or SBAS receiver's error wanders by a metre or two over minutes (ionosphere,
 #: orbits, multipath of a slow vehicle); over two seconds the chord neglects it, over a run it
@@ -383,14 +392,17 @@ class CourseFromFixes:
 
     def add(self, t: float, lat: float, lon: float, h: float, cov: np.ndarray,
             yaw: float | None = None, yaw_rate_sigma: float = 0.0, yaw_checked: bool = False,
-            tilt_sigma: float = 0.0, scale_sigma: float = 0.0):
+            tilt_sigma: float = 0.0, scale_sigma: float = 0.0, min_speed: float = 0.0):
         """A fix at t (s; rad, rad, m) with its ENU covariance (m^2), already observed
         (:meth:`observe`), and the INS's yaw of the body x axis then (rad, counter-clockwise;
         None before the INS is levelled: no run is kept) with the sigma of its gyros' rate
         error about the vertical (rad/s), of their scale-factor error there (-) and of its
         tilt (rad); ``yaw_checked``: a heading source under check steers that yaw (a run's
-        velocity then only checks it: GnssVelocity.checks_only). Returns the velocity it
-        completes (of the chord, else of the run), or None."""
+        velocity then only checks it: GnssVelocity.checks_only); ``min_speed``: the speed
+        (m/s) below which the navigator takes no course, a run's velocity slower than it not
+        released (the run would start again from its last fix: a robot starting off from rest
+        aligned 2 s later). Returns the velocity it completes (of the chord, else of the run),
+        or None."""
         r = geodetic_to_ecef(lat, lon, h)
         R = ecef_to_enu_matrix(lat, lon)
         fix = GnssFix(t, lat, lon, h, cov)
@@ -402,7 +414,7 @@ class CourseFromFixes:
         velocity = self._chord(r, R, fix)
         if velocity is None and len(self._run) >= MIN_RUN_FIXES:
             velocity = self._run_velocity(R, yaw_rate_sigma, tilt_sigma, scale_sigma,
-                                          yaw_checked)
+                                          yaw_checked, min_speed)
         if velocity is not None:  # the next velocity of fixes not in this one
             self._window, self._run = self._window[-1:], self._run[-1:]
         return velocity
@@ -432,10 +444,11 @@ class CourseFromFixes:
         return GnssVelocity(0.5 * (first.t + t), d / dt, cov_v, fixes)
 
     def _run_velocity(self, R: np.ndarray, yaw_rate_sigma: float, tilt_sigma: float,
-                      scale_sigma: float, checks_only: bool):
+                      scale_sigma: float, checks_only: bool, min_speed: float):
         """The velocity of the run at its last fix (:func:`run_velocity`, ENU axes R there),
-        once its speed is known to MIN_SPEED_SIGMAS and its course to MAX_COURSE_SIGMA; a run
-        the fit does not hold loses its older half."""
+        once its speed is known to MIN_SPEED_SIGMAS and at least min_speed, and its course
+        known to MAX_COURSE_SIGMA (MAX_CHECK_COURSE_SIGMA where it only checks); a run the fit
+        does not hold loses its older half."""
         run = self._run
         r_end, last = run[-1][0], run[-1][2]
         tau = np.array([f.t - last.t for _, _, f in run])
@@ -451,8 +464,9 @@ class CourseFromFixes:
             del run[:len(run) // 2]
             return None
         across, speed2 = np.array([-v[1], v[0]]), v[0] ** 2 + v[1] ** 2
-        if speed2 < (MIN_SPEED_SIGMAS * speed_sigma) ** 2 or \
-                across @ cov[:2, :2] @ across > (MAX_COURSE_SIGMA * speed2) ** 2:
+        cap = MAX_CHECK_COURSE_SIGMA if checks_only else MAX_COURSE_SIGMA
+        if speed2 < max(MIN_SPEED_SIGMAS * speed_sigma, min_speed) ** 2 or \
+                across @ cov[:2, :2] @ across > (cap * speed2) ** 2:
             return None
         # the fixes within the chord's window, the navigator's to take after the alignment
         fixes = tuple((f, gain @ w) for (_, _, f), gain, w in zip(run, gains, white)
