@@ -2,7 +2,8 @@
 
 A 10 Hz, a 30 Hz and a 200 Hz IMU with 2 ms stamp jitter, a rolling start with fixes only and
 the IMU's own orientation, fix + velocity and fixes alone stamped by their driver on arrival,
-50-150 ms late, and a slow robot with 1 m fixes and no heading source, with an ADIS16405 and with
+50-150 ms late (the latter also on the seed whose straight acceleration took the latency's
+estimate below zero: 1.28x the raw fixes before it was kept at or above), and a slow robot with 1 m fixes and no heading source, with an ADIS16405 and with
 a consumer unit, 2 cm RTK fixes on the seed whose road tilts the antenna 1.5 m above the IMU
 while default.yaml knows its height to a metre, 2 m fixes whose driver reports 0.1 m, with the
 receiver's velocities and (a start on the move) without, and a start on the move with fixes only
@@ -33,7 +34,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 @pytest.mark.parametrize("cell, align_s, ratio, seed", [
     (0, 60.0, 0.5, 3), (3, 60.0, 0.5, 3), (17, 5.0, 0.8, 3), (24, 60.0, 0.5, 3),
-    (25, 60.0, 0.8, 3), (26, 60.0, 0.8, 3), (27, 60.0, 0.8, 3), (13, 60.0, 2.0, 6),
+    (25, 60.0, 0.8, 3), (25, 60.0, 0.8, 1), (26, 60.0, 0.8, 3), (27, 60.0, 0.8, 3), (13, 60.0, 2.0, 6),
     (28, 60.0, 0.5, 3), (29, 60.0, 0.5, 3), (30, 30.0, 0.8, 3), (16, 30.0, 0.8, 13),
     (16, 30.0, 0.8, 20), (31, 30.0, 0.8, 0)])
 def test_default_profile_navigates_a_simulated_drive(cell, align_s, ratio, seed):

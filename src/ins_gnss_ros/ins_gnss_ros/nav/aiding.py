@@ -146,6 +146,11 @@ ARRIVAL_STAMP_MIN_NS = 10_000
 #: Sigma of the receiver's latency behind such stamps (the filter's time-offset state "td"), s:
 #: receivers and serial links give 20-200 ms.
 ARRIVAL_LATENCY_SIGMA = 0.2
+#: Range of that latency's estimate, s: a message does not arrive before its epoch. Left
+#: free, a car's straight acceleration took it to -86 ms (the truth 50-150 ms) and 45 mg of
+#: accelerometer bias with it, the horizontal RMS of a drive with fixes alone 0.89x the raw
+#: fixes' (0.44x held at zero; docs/results/product_path.md, "2026-12-07 (session 41)").
+ARRIVAL_LATENCY_RANGE = (0.0, np.inf)
 
 
 @dataclass(frozen=True)
@@ -421,7 +426,8 @@ class Aiding:
             self.report(f"{name} stamped {how}, after the filter started: its latency is not "
                         "estimated (set the ekf's time_offset_sigma_s 0.1-0.2)")
         else:
-            self.navigator.add_extra_state("td", ExtraState(1, ARRIVAL_LATENCY_SIGMA))
+            self.navigator.add_extra_state("td", ExtraState(1, ARRIVAL_LATENCY_SIGMA),
+                                           ARRIVAL_LATENCY_RANGE)
             self.timing.gnss_latency_state = True
             self.report(f"{name} stamped {how}: the receiver's latency estimated (time offset, "
                         f"sigma {ARRIVAL_LATENCY_SIGMA:g} s)")

@@ -133,6 +133,8 @@ class Navigator:
         # Heading sources (their bias blocks) found none of the body's, with why: a property
         # of the installation, neither reset nor rewound
         self.refuted_headings: dict[str, str] = {}
+        # Physical ranges of extra blocks' estimates, projected onto after every correction
+        self._ranges = {"vd": meas.VELOCITY_LATENCY_RANGE}
         self.reset()
 
     # -- input -----------------------------------------------------------------------------
@@ -170,11 +172,11 @@ class Navigator:
         self._no_var = np.zeros(self._space.size)  # (_published_var: read, never written)
         self._no_var.flags.writeable = False
 
-    def add_extra_state(self, name, block):
+    def add_extra_state(self, name, block, valid_range=(-np.inf, np.inf)):
         """Estimate one more extra block (``NavigatorConfig.extras``; an ExtraState) from the
         start: what the first inputs tell of the sensors before the filter runs (a receiver
-        whose stamps are its messages' arrival: the time offset "td"). Nothing changes if the
-        filter has the block already.
+        whose stamps are its messages' arrival: the time offset "td"), its estimate kept within
+        ``valid_range`` (low, high). Nothing changes if the filter has the block already.
 
         Raises
         ------
@@ -187,6 +189,7 @@ class Navigator:
             raise RuntimeError(f"the filter has started: the extra state {name!r} cannot be "
                                "added")
         self.config = replace(self.config, extras={**self.config.extras, name: block})
+        self._ranges[name] = valid_range
         self._use_space()
         self._state.estimates[name] = np.zeros(block.size)
         self._recorder = Recorder(self._space, self.config.record,
@@ -1209,8 +1212,9 @@ class Navigator:
         if s.course_check is not None:
             history, corrections = s.course_check
             s.course_check = (history, corrections - dx[S["vel"]])
-        if "vd" in s.estimates:  # projected onto its physical range (measurements.py)
-            s.estimates["vd"] = np.clip(s.estimates["vd"], *meas.VELOCITY_LATENCY_RANGE)
+        for name, valid_range in self._ranges.items():  # projected onto its physical range
+            if name in estimates:
+                estimates[name] = np.clip(estimates[name], *valid_range)
         self._recorder.correct(s, dx, self._published_var())
 
     def _slip_update(self):
