@@ -249,20 +249,24 @@ def test_run_velocity_course_holds_what_the_tilt_does_to_the_turns():
             ((turn_error + scale * rate * 20.0) / 20.0) ** 2, rel=1e-6, abs=1e-15)
 
 
-def _first_run_velocity(rng, azimuth, speed, rate_error, rate_sigma, seconds=60.0):
+def _first_run_velocity(rng, azimuth, speed, rate_error, rate_sigma, seconds=60.0,
+                        min_speed=0.0, yaw0=None):
     """The first velocity CourseFromFixes gives of a robot moving straight along `azimuth`
-    (clockwise from north) at `speed` m/s with 1 m fixes at 2.5 Hz, the INS's yaw turning at
-    the gyros' rate error (rad/s) whose prior sigma is `rate_sigma`; None if none within
-    `seconds`."""
-    course, cov = CourseFromFixes(), np.diag([1.0, 1.0, 4.0])
-    yaw0 = rng.uniform(-math.pi, math.pi)
+    (clockwise from north) at speed(t) m/s with 1 m fixes at 2.5 Hz, the INS's yaw turning at
+    the gyros' rate error (rad/s) whose prior sigma is `rate_sigma`, from yaw0 (None: drawn);
+    None if none within `seconds`."""
+    course, cov, distance = CourseFromFixes(), np.diag([1.0, 1.0, 4.0]), 0.0
+    if yaw0 is None:
+        yaw0 = rng.uniform(-math.pi, math.pi)
     for k in range(round(seconds * 2.5)):
         t = k / 2.5
-        e, n = np.array([math.sin(azimuth), math.cos(azimuth)]) * speed * t \
+        distance += speed(t) / 2.5
+        e, n = np.array([math.sin(azimuth), math.cos(azimuth)]) * distance \
             + rng.standard_normal(2)
         lat, lon = LAT + n / M_PER_RAD, LON + e / (M_PER_RAD * math.cos(LAT))
         course.observe(t, lat, lon, 10.0)
-        v = course.add(t, lat, lon, 10.0, cov, yaw0 + rate_error * t, rate_sigma)
+        v = course.add(t, lat, lon, 10.0, cov, yaw0 + rate_error * t, rate_sigma,
+                       min_speed=min_speed)
         if v is not None:
             return v
     return None
@@ -283,7 +287,8 @@ def test_the_first_run_released_errs_as_it_claims(speed, rate_sigma_deg):
     for _ in range(30):
         azimuth = rng.uniform(-math.pi, math.pi)
         rate_error = math.radians(rng.uniform(-1.0, 1.0) * min(rate_sigma_deg, 5.0))
-        v = _first_run_velocity(rng, azimuth, speed, rate_error, math.radians(rate_sigma_deg))
+        v = _first_run_velocity(rng, azimuth, lambda t: speed, rate_error,
+                                math.radians(rate_sigma_deg))
         assert v is not None
         s = np.hypot(*v.v_enu[:2])
         across = np.array([-v.v_enu[1], v.v_enu[0]]) / s
@@ -327,20 +332,10 @@ def test_a_run_slower_than_the_navigator_aligns_at_is_not_released():
     0.43-0.48 m/s, below the navigator's align speed (0.5), which would take no course from it
     while the run started again; with that speed as min_speed the run goes on to it."""
     def first_speed(min_speed, seed):
-        rng, course = np.random.default_rng(seed), CourseFromFixes()
-        distance, azimuth = 0.0, 0.7
-        for k in range(100):
-            t = k / 2.5
-            distance += (0.3 if t < 20.0 else 1.0) / 2.5
-            e, n = np.array([math.sin(azimuth), math.cos(azimuth)]) * distance \
-                + rng.standard_normal(2)
-            lat, lon = LAT + n / M_PER_RAD, LON + e / (M_PER_RAD * math.cos(LAT))
-            course.observe(t, lat, lon, 10.0)
-            v = course.add(t, lat, lon, 10.0, np.diag([1.0, 1.0, 4.0]), 0.2, 1e-4,
-                           min_speed=min_speed)
-            if v is not None:
-                return np.hypot(*v.v_enu[:2])
-        return None
+        v = _first_run_velocity(np.random.default_rng(seed), 0.7,
+                                lambda t: 0.3 if t < 20.0 else 1.0, 0.0, 1e-4,
+                                seconds=40.0, min_speed=min_speed, yaw0=0.2)
+        return np.hypot(*v.v_enu[:2])
 
     for seed in range(4):
         assert first_speed(0.0, seed) < 0.5 <= first_speed(0.5, seed)
