@@ -365,13 +365,21 @@ def test_dead_reckoning_mode_and_reset_on_time_jump(sim):
     assert nav.solution is None and nav.mode == ALIGNING and len(nav.output().t) == 0
 
 
-def test_time_offset_state_recovers_100_ms(sim):
+@pytest.mark.parametrize("delay", [0.1, 0.25])
+@pytest.mark.parametrize("seed", [6, 7, 10, 13])
+def test_time_offset_state_recovers_the_receivers_latency(sim, delay, seed):
+    """Fixes and velocities late by 0.1 or 0.25 s: the "td" estimate within 3 sigma of the
+    latency 25 s after the car moves off and at the end. The acceleration the solution moved
+    the first measurements after its course alignment by, not turned with it, took the
+    estimate the wrong way: 0.25 s read 0.20-0.23 s, 10-13 sigma off at the end on seeds 6,
+    7, 10, 13, and 0.1 s read 7 ms low on average."""
     traj, imu, _, _ = sim
-    delayed = gnss(traj, np.random.default_rng(6), delay=0.1)
-    cfg = config(extras={"td": ExtraState(1, 0.2, 1e-8)})
-    out = run(imu, delayed, cfg)
-    td = out.estimates["td"][:, 0]
-    assert abs(td[-1] - 0.1) < 0.005, td[-1]
+    delayed = gnss(traj, np.random.default_rng(seed), delay=delay)
+    out = run(imu, delayed, config(extras={"td": ExtraState(1, 0.2, 1e-8)}))
+    i = out.space["td"].start
+    for k in (int(np.searchsorted(out.t, 40.0)), -1):
+        error = out.estimates["td"][k, 0] - delay
+        assert abs(error) < 3.0 * np.sqrt(out.P[k][i, i]), (out.t[k], error)
 
 
 def test_rates_the_turns_show_wrong_leave_the_solution_degraded_not_changed(sim):

@@ -805,7 +805,7 @@ class Navigator:
                 # more once the heading is known: nothing checks it there)
                 s.course_check = (((epoch, v[:2], s.nav.v_enu[:2].copy()),), np.zeros(3))
             if m.fixes:
-                self._fixes_of_course(m, gain, delta, epoch)
+                self._fixes_of_course(m, gain, epoch)
                 return
             if restart:
                 return
@@ -1003,7 +1003,7 @@ class Navigator:
         if bias in self._state.heading_steered_by:
             self._forget_heading()
 
-    def _fixes_of_course(self, m, gain, delta, epoch):
+    def _fixes_of_course(self, m, gain, epoch):
         """After an alignment on a velocity made of fixes (nav/course.py), those of its fixes
         the filter has not taken, as one update with their correlation to the alignment's
         errors (alignment.fixes_with_course); the velocity itself is not applied, its
@@ -1014,11 +1014,8 @@ class Navigator:
         s.t_fixes_aligned = m.fixes[-1][0].t
         if not fixes:
             return
-        # The last segment's acceleration turned with the solution: it moves the solution to
-        # the fixes, up to a second away.
-        a_enu = quat_rotate(quat_from_rotvec([0.0, 0.0, delta]), s.a_enu)
         innov = fixes_with_course(self._space, s.nav, s.ekf.P, fixes,
-                                  [self._epoch_of(f) for f, _ in fixes], gain, a_enu, s.omega,
+                                  [self._epoch_of(f) for f, _ in fixes], gain, s.a_enu, s.omega,
                                   self._lever)
         if self._update(innov, epoch).accepted:
             s.t_fix_accepted = fixes[-1][0].t
@@ -1271,6 +1268,12 @@ class Navigator:
         s.nav, s.ekf.P = rotate_yaw(s.nav, s.ekf.P, self._space, delta, sigma,
                                     self.config.sigma_yaw_align,
                                     s.pinned_antenna if pivot else None, velocity_gain)
+        # The last segment's acceleration turns with the solution: it moves the solution to
+        # the epochs of the measurements that follow and is their time offsets' coefficient
+        # (measurements.py, "td", "vd"); left as it was, a car's first velocity after a course
+        # alignment took 0.13 s off a 0.25 s receiver latency, the wrong way (docs/results/
+        # product_path.md, "2026-12-07 (session 42)").
+        s.a_enu = quat_rotate(quat_from_rotvec([0.0, 0.0, delta]), s.a_enu)
         s.heading_known, s.mode, s.t_last_aid = True, NAVIGATING, s.nav.t
         s.heading_steered_by = frozenset()
         s.t_model = -np.inf  # the system matrix holds the attitude: rebuilt at the next step
