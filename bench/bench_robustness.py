@@ -116,7 +116,11 @@ CELLS += [Cell("fix only 1 Hz", ("--gnss-rate", "1", "--no-gnss-vel")),
           # its heading held only by the course alignment's side slip (test_robustness.py
           # judges that heading; this matrix judges the position)
           Cell("slow robot started on the move, consumer MEMS unit, fix + velocity at 2.5 Hz, "
-               "no heading source", ("--static", "0", "--gnss-rate", "2.5"), scenario="robot")]
+               "no heading source", ("--static", "0", "--gnss-rate", "2.5"), scenario="robot"),
+          # a latency that varies from message to message as much as the receiver's whole
+          # latency in cell 24 (72 ms standard deviation)
+          Cell("fix + velocity stamped on arrival, 125-375 ms late",
+               ("--gnss-latency", "0.25", "--gnss-stamped-on-arrival"))]
 SHORT = [CELLS[0], CELLS[3], CELLS[10]]
 
 

@@ -9,6 +9,7 @@ class RecordingNavigator:
     config = SimpleNamespace(noise=SimpleNamespace(accel_psd=1e-6, gyro_psd=1e-8), extras={},
                              static_speed=0.1, align_speed=0.5)
     started = True
+    space = ()  # (started without extra states: the "td" of arrival stamps is not added)
     solution = None  # (levelled: the gyros' azimuth projects on body z)
     heading_by = None  # (a heading the motion has confirmed, or none)
     heading_unconfirmed = False

@@ -407,6 +407,18 @@ def test_time_offset_column():
     np.testing.assert_array_equal(model.H[:, SPACE["td"].start], v_ant)
 
 
+def test_a_stamps_scatter_adds_its_rate_times_it_to_the_noise():
+    # A stamp off its epoch by a random e (sigma s) moves the fix by v e and the velocity by a e.
+    v_ant, a_ant, s = np.array([5.0, -3.0, 0.2]), np.array([1.0, 2.0, 0.0]), 0.05
+    fix = M.gnss_position(SPACE, TRUE, TRUE.lat, TRUE.lon, TRUE.h, np.eye(3), dzdt=v_ant,
+                          stamp_sigma=s)
+    np.testing.assert_allclose(fix.R, np.eye(3) + s ** 2 * np.outer(v_ant, v_ant))
+    vel = M.gnss_velocity(SPACE, TRUE, TRUE.v_enu, np.eye(3), OMEGA, dzdt=a_ant, stamp_sigma=s)
+    np.testing.assert_allclose(vel.R, np.eye(3) + s ** 2 * np.outer(a_ant, a_ant))
+    assert np.array_equal(M.gnss_position(SPACE, TRUE, TRUE.lat, TRUE.lon, TRUE.h, np.eye(3),
+                                          dzdt=v_ant).R, np.eye(3))
+
+
 #: Two baselines of a 4-antenna array (body FLU, m) and the line-of-sight differences e_ref - e_i
 #: of three satellite pairs (ENU).
 DD_BASELINES = np.array([[-2.7, 0.0, 0.0], [0.0, -1.2, 0.0], [-2.7, -1.2, 0.05]])

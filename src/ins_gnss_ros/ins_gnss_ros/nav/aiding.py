@@ -151,6 +151,20 @@ ARRIVAL_LATENCY_SIGMA = 0.2
 #: accelerometer bias with it, the horizontal RMS of a drive with fixes alone 0.89x the raw
 #: fixes' (0.44x held at zero; docs/results/product_path.md, "2026-12-07 (session 41)").
 ARRIVAL_LATENCY_RANGE = (0.0, np.inf)
+#: Intervals between the arrival stamps of each such topic over which their scatter about the
+#: receiver's epochs is measured (stamp_scatter: within 0.8-1.5 of a uniform latency's over 100,
+#: 0.4-2.4 over 25), and the fewest that measure it.
+STAMP_INTERVALS = 100
+MIN_STAMP_INTERVALS = 10
+
+
+def stamp_scatter(stamps_ns) -> float:
+    """Standard deviation (s) of the stamps of a receiver's messages about its regular epochs:
+    each interval is the period plus the difference of two stamps' errors, so the intervals'
+    robust spread about their median over sqrt 2 (a lost epoch's double interval is an outlier
+    to it, as is a rate that drifts slowly)."""
+    d = np.diff(np.asarray(stamps_ns, np.int64)) * 1e-9
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
 
 
 @dataclass(frozen=True)
@@ -375,6 +389,9 @@ class Aiding:
         # navigator's mode)
         self.timing = ImuTimingCheck(gnss_latency_state="td" in navigator.config.extras)
         self.gnss_stamped_on_arrival = False  # gnss/* stamped on arrival or unset (arrival)
+        # their stamps since, per topic (stamp_scatter)
+        self._arrival_stamps = {name: deque(maxlen=STAMP_INTERVALS + 1)
+                                for name in GNSS_STAMPED}
         self._velocity_check = VelocityAgreement()
         noise = navigator.config.noise
         self._rest = RestDetector(noise.accel_psd, noise.gyro_psd)
@@ -411,12 +428,31 @@ class Aiding:
         epochs, 50-150 ms late fixes and velocities put 94 % of a simulated drive's valid
         nav/fix beyond 5 sigma (docs/results/product_path.md, "2026-12-05 (session 25)"); the
         state from the start costs correctly stamped fixes accuracy (an RTK receiver's: 2-20
-        times its sigma), so it is added only for such stamps."""
-        on_arrival = arrival_ns is not None and \
-            ARRIVAL_STAMP_MIN_NS <= arrival_ns - stamp_ns <= ARRIVAL_STAMP_MAX_NS
-        if name not in GNSS_STAMPED or self.gnss_stamped_on_arrival or \
-                not (stamp_ns == 0 or on_arrival):
+        times its sigma), so it is added only for such stamps. The latency's variation from
+        message to message, which no state follows, is measured from the stamps' scatter
+        (:func:`stamp_scatter`) and each message carries it (``stamp_sigma``): a receiver 125-375
+        ms late put up to 22 valid nav/fix of a simulated 90 s drive beyond 5 sigma without it,
+        none with it (seeds 0-7; docs/results/product_path.md, "2026-12-07 (session 42)")."""
+        if name not in GNSS_STAMPED:
             return
+        if not self.gnss_stamped_on_arrival:
+            on_arrival = arrival_ns is not None and \
+                ARRIVAL_STAMP_MIN_NS <= arrival_ns - stamp_ns <= ARRIVAL_STAMP_MAX_NS
+            if not (stamp_ns == 0 or on_arrival):
+                return
+            self._estimate_latency(name, stamp_ns, arrival_ns)
+        if stamp_ns or arrival_ns is not None:
+            self._arrival_stamps[name].append(stamp_ns or arrival_ns)
+
+    def _stamp_sigma(self, name: str) -> float:
+        """The scatter (s) of the input ``name``'s stamps about its epochs: measured where they
+        are its arrival, else 0."""
+        stamps = self._arrival_stamps[name]
+        return stamp_scatter(stamps) if len(stamps) > MIN_STAMP_INTERVALS else 0.0
+
+    def _estimate_latency(self, name: str, stamp_ns: int, arrival_ns: int | None) -> None:
+        """The receiver's latency behind the arrival stamps of ``name`` estimated
+        (:meth:`arrival`)."""
         self.gnss_stamped_on_arrival = True
         how = "unset" if stamp_ns == 0 else \
             f"on its arrival ({1e-6 * (arrival_ns - stamp_ns):.1f} ms before it)"
@@ -665,7 +701,8 @@ class Aiding:
             self.report("gnss/fix without altitude (NaN, a 2-D fix): the height left to the INS",
                         log=False)
         self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov, common_var,
-                                               height_known=not no_altitude))
+                                               height_known=not no_altitude,
+                                               stamp_sigma=self._stamp_sigma("gnss/fix")))
         if not on_test:
             self._course_velocity(t, lat, lon, h, cov)
         return self._seen("gnss/fix", t, True)
@@ -860,7 +897,8 @@ class Aiding:
         self._recent_velocities.append((t, np.array(v_enu[:2], float),
                                         0.5 * float(cov[0, 0] + cov[1, 1])))
         self.navigator.add_measurement(
-            GnssVelocity(t - self.policy.velocity_delay, v_enu, cov, aligns=aligns))
+            GnssVelocity(t - self.policy.velocity_delay, v_enu, cov, aligns=aligns,
+                         stamp_sigma=self._stamp_sigma("gnss/vel")))
         return self._seen("gnss/vel", t, True)
 
     def heading(self, t: float, azimuth: float, variance: float, declination: float | None,

@@ -571,7 +571,7 @@ def fixes_with_course(space, nav, P, fixes, epochs, gain, a_enu, omega, lever_b)
         st = extrapolate(nav, dt, a_enu)
         v_ant = lever_arm_velocity(st.v_enu, st.q_nb, omega, lever_b, st.lat)
         innov = gnss_position(space, st, fix.lat, fix.lon, fix.h, fix.cov_enu, lever_b,
-                              dzdt=v_ant, P=P)
+                              dzdt=v_ant, P=P, stamp_sigma=fix.stamp_sigma)
         H = innov.H.copy()
         H[:, space["vel"]] += dt * H[:, space["pos"]]  # the error at nav.t carried to epoch
         zs.append(innov.z)

@@ -23,7 +23,11 @@ class GnssFix:
 
     ``height_known`` False: a fix without an altitude (a 2-D fix), whose ``h`` and vertical
     variance stand for the solution's height and an uncertainty that carries next to no
-    information (nav/aiding.py): a filter starting on it takes that variance for its height."""
+    information (nav/aiding.py): a filter starting on it takes that variance for its height.
+
+    ``stamp_sigma`` (s): the standard deviation of t about the epoch (plus the filter's latency
+    estimate): a driver that stamps a message on its arrival passes on how much the receiver's
+    and the transport's latency vary, which moves the fix by the velocity times that error."""
 
     t: float
     lat: float
@@ -32,6 +36,7 @@ class GnssFix:
     cov_enu: np.ndarray
     common_var: tuple[float, float] = (0.0, 0.0)
     height_known: bool = True
+    stamp_sigma: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -48,7 +53,8 @@ class GnssVelocity:
     about the vertical may hold a turn): it confirms or refutes that heading and aligns none
     (refuted, the yaw it was made with followed the source or the turn).
     ``rate_error``: for a run's velocity, the gyros' rate error about the vertical the run
-    measured and its variance (rad/s, (rad/s)^2), which the alignment on it takes; else None."""
+    measured and its variance (rad/s, (rad/s)^2), which the alignment on it takes; else None.
+    ``stamp_sigma`` (s): as GnssFix's, the velocity moved by the acceleration times it."""
 
     t: float
     v_enu: np.ndarray
@@ -57,6 +63,7 @@ class GnssVelocity:
     aligns: bool = True
     checks_only: bool = False
     rate_error: tuple | None = None
+    stamp_sigma: float = 0.0
 
 
 @dataclass(frozen=True)

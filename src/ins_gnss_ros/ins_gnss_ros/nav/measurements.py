@@ -59,6 +59,16 @@ def _add_time_offset(space, H, dzdt):
         H[:, space["td"].start] = dzdt
 
 
+def _with_stamp_noise(R, dzdt, stamp_sigma):
+    """R with a stamp's own timing error of standard deviation stamp_sigma (s) added: it moves
+    the measurement by dz/dt times that error, as "td" does with its constant part."""
+    R = np.asarray(R, float)
+    if stamp_sigma > 0.0 and dzdt is not None:
+        dzdt = np.asarray(dzdt, float)
+        R = R + stamp_sigma ** 2 * np.outer(dzdt, dzdt)
+    return R
+
+
 def _add_lever_arm(space, H, dzdl):
     """Columns of the "lever_*" consider blocks: each is the true lever arm minus the
     configured one along its axis ("true minus estimate", ekf.py), so z moves by -dz/dl."""
@@ -83,7 +93,8 @@ def position_residual_enu(lat, lon, h, lat_ref, lon_ref, h_ref, ell=WGS84):
                                                ell.e2))
 
 
-def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=None, P=None):
+def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=None, P=None,
+                  stamp_sigma=0.0):
     """GNSS antenna position (loose coupling).
 
     Parameters
@@ -98,10 +109,12 @@ def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=
     lever_b : array_like, shape (3,)
         Antenna relative to the IMU, FLU, m.
     dzdt : array_like, shape (3,), optional
-        Antenna velocity ENU (m/s), for the time-offset state.
+        Antenna velocity ENU (m/s), for the time-offset state and the stamp's noise.
     P : (n, n) array_like, optional
         The filter's covariance: with "lever_*" blocks, R gains the second-order term of the
         attitude error times the lever arm's error (:func:`_lever_attitude_variance`).
+    stamp_sigma : float
+        Standard deviation of the stamp about the epoch, s (GnssFix.stamp_sigma).
 
     Returns
     -------
@@ -117,7 +130,7 @@ def gnss_position(space, state, lat, lon, h, cov_enu, lever_b=np.zeros(3), dzdt=
                            np.ascontiguousarray(lever_b, dtype=float), lat, lon, h, WGS84.a,
                            WGS84.e2, z, H, space["pos"].start, space["att"].start)
     _add_time_offset(space, H, dzdt)
-    R = np.asarray(cov_enu, float)
+    R = _with_stamp_noise(cov_enu, dzdt, stamp_sigma)
     if space.lever_arm:
         C = quat_to_dcm(state.q_nb)
         _add_lever_arm(space, H, C)
@@ -159,7 +172,7 @@ VELOCITY_LATENCY_RANGE = (0.0, 0.5)
 
 
 def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3), dzdt=None,
-                  latency=0.0, lever_rate=None):
+                  latency=0.0, lever_rate=None, stamp_sigma=0.0):
     """GNSS antenna velocity (loose coupling).
 
     Predicted v_a = v + C (omega_ib x l) - omega_ie x (C l) (Groves eq. 2.167). Its error:
@@ -183,13 +196,16 @@ def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3),
         Compensated angular rate, FLU, rad/s.
     lever_b : array_like, shape (3,)
     dzdt : array_like, shape (3,), optional
-        Antenna acceleration ENU (m/s^2), for the time-offset and velocity-latency states.
+        Antenna acceleration ENU (m/s^2), for the time-offset and velocity-latency states and
+        the stamp's noise.
     latency : float
         The running estimate of the velocity's latency ("vd" state), s.
     lever_rate : array_like, shape (3,), optional
         The angular rate of the "lever_*" columns (default ``omega_ib_b``): the true rotation
         is their coefficient, and a measured rate's noise would pass for rotation that tells
         the lever arm (a vehicle at rest), so the caller may give a smoothed one.
+    stamp_sigma : float
+        Standard deviation of the stamp about the epoch, s (GnssVelocity.stamp_sigma).
 
     Returns
     -------
@@ -209,7 +225,8 @@ def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3),
     if dzdt is not None and "vd" in space:
         pred = pred - np.asarray(dzdt, float) * latency
         H[:, space["vd"].start] = dzdt
-    return Innovation("gnss_vel", pred - np.asarray(v_enu, float), H, np.asarray(cov_enu, float))
+    return Innovation("gnss_vel", pred - np.asarray(v_enu, float), H,
+                      _with_stamp_noise(cov_enu, dzdt, stamp_sigma))
 
 
 def azimuth_of_axis(q_nb, axis_b=(1.0, 0.0, 0.0)):

@@ -738,7 +738,7 @@ class Navigator:
         self._fix_common_var = m.common_var
         v_ant = point_velocity(st.v_enu, st.q_nb, s.omega, self._lever, st.lat)
         innov = meas.gnss_position(self._space, st, m.lat, m.lon, m.h, m.cov_enu, self._lever,
-                                   dzdt=v_ant, P=s.ekf.P)
+                                   dzdt=v_ant, P=s.ekf.P, stamp_sigma=m.stamp_sigma)
         fix = (m.lat, m.lon, m.h)
         frozen = fix == s.last_fix and np.linalg.norm(v_ant) > self.config.frozen_speed
         s.last_fix = fix
@@ -814,7 +814,7 @@ class Navigator:
             return
         innov = meas.gnss_velocity(self._space, st, m.v_enu, m.cov_enu, s.omega, self._lever,
                                    dzdt=s.a_enu, latency=s.estimates.get("vd", (0.0,))[0],
-                                   lever_rate=s.omega_smooth)
+                                   lever_rate=s.omega_smooth, stamp_sigma=m.stamp_sigma)
         if aligned_by is not None:
             innov = without_cross_track(innov, m.v_enu)
         # A receiver's velocity does not repeat to the last bit while it moves: a repeat is an
