@@ -780,7 +780,7 @@ def test_the_varying_latency_of_arrival_stamps_goes_with_each_message():
     """A 5 Hz receiver 125-375 ms late (uniformly: 72 ms standard deviation), stamped on its
     arrival, one epoch in twenty lost: after 20 s its fixes and velocities carry the stamps'
     scatter about the epochs within 0.8-1.5 of the truth (stamp_scatter over 100 intervals),
-    and a receiver that stamps its epochs none."""
+    which /diagnostics gives per input, and a receiver that stamps its epochs none."""
     t0_ns = 1_767_225_600 * 10 ** 9
     rng = np.random.default_rng(3)
     epochs = np.arange(150) * 0.2
@@ -798,10 +798,13 @@ def test_the_varying_latency_of_arrival_stamps_goes_with_each_message():
         fixes = [m for m in nav.measurements if isinstance(m, GnssFix)]
         vels = [m for m in nav.measurements if isinstance(m, GnssVelocity)]
         ratios = [m.stamp_sigma / (0.25 / np.sqrt(12.0)) for m in (fixes[-1], vels[-1])]
+        line = front.inputs["gnss/fix"].summary(stamps[-1])
         if on_arrival:
             assert fixes[0].stamp_sigma == 0.0 and all(0.8 < r < 1.5 for r in ratios), ratios
+            assert f"arrival stamps scattered {1e3 * fixes[-1].stamp_sigma:.1f} ms" in line
         else:
             assert all(m.stamp_sigma == 0.0 for m in fixes + vels)
+            assert "scattered" not in line
 
 
 def _turning_robot(front, seconds, gyro_bias_z, yaw_rate=lambda t: 0.25 * np.sin(0.3 * t),

@@ -305,6 +305,7 @@ class InputStats:
     last_t: float = math.nan
     lead: float = math.nan  # the last stamp minus the newest increment's at its arrival, s
     problem: str | None = None  # why the last reading was refused, for a lasting cause
+    stamp_sigma: float = math.nan  # scatter of arrival stamps about the epochs, s
 
     def rate(self) -> float:
         """Mean rate of the readings, Hz (nan before two)."""
@@ -314,6 +315,8 @@ class InputStats:
     def summary(self, t: float) -> str:
         """One line for diagnostics at time t (s)."""
         lead = f", stamped {self.lead:+.2f} s from imu/delta" if math.isfinite(self.lead) else ""
+        if math.isfinite(self.stamp_sigma):
+            lead += f", arrival stamps scattered {1e3 * self.stamp_sigma:.1f} ms about its epochs"
         return (f"{self.rate():.2f} Hz, last {t - self.last_t:.1f} s ago{lead}, "
                 f"{self.received} received, {self.refused} refused")
 
@@ -444,11 +447,15 @@ class Aiding:
         if stamp_ns or arrival_ns is not None:
             self._arrival_stamps[name].append(stamp_ns or arrival_ns)
 
-    def _stamp_sigma(self, name: str) -> float:
-        """The scatter (s) of the input ``name``'s stamps about its epochs: measured where they
-        are its arrival, else 0."""
+    def _stamp_sigma(self, name: str, t: float) -> float:
+        """The scatter (s) of the input ``name``'s stamps about its epochs at its reading t (s):
+        measured where they are its arrival (and counted on /diagnostics), else 0."""
         stamps = self._arrival_stamps[name]
-        return stamp_scatter(stamps) if len(stamps) > MIN_STAMP_INTERVALS else 0.0
+        if len(stamps) <= MIN_STAMP_INTERVALS:
+            return 0.0
+        stats = self._stats(name, t)
+        stats.stamp_sigma = stamp_scatter(stamps)
+        return stats.stamp_sigma
 
     def _estimate_latency(self, name: str, stamp_ns: int, arrival_ns: int | None) -> None:
         """The receiver's latency behind the arrival stamps of ``name`` estimated
@@ -702,7 +709,7 @@ class Aiding:
                         log=False)
         self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov, common_var,
                                                height_known=not no_altitude,
-                                               stamp_sigma=self._stamp_sigma("gnss/fix")))
+                                               stamp_sigma=self._stamp_sigma("gnss/fix", t)))
         if not on_test:
             self._course_velocity(t, lat, lon, h, cov)
         return self._seen("gnss/fix", t, True)
@@ -898,7 +905,7 @@ class Aiding:
                                         0.5 * float(cov[0, 0] + cov[1, 1])))
         self.navigator.add_measurement(
             GnssVelocity(t - self.policy.velocity_delay, v_enu, cov, aligns=aligns,
-                         stamp_sigma=self._stamp_sigma("gnss/vel")))
+                         stamp_sigma=self._stamp_sigma("gnss/vel", t)))
         return self._seen("gnss/vel", t, True)
 
     def heading(self, t: float, azimuth: float, variance: float, declination: float | None,
