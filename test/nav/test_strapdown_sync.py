@@ -84,6 +84,39 @@ def test_sync_corrects_against_the_matching_state_and_falls_back_when_out_of_ste
     assert resent and c.sequence == 4 and c.t_ns == 1_090_000_000  # the newest state, at once
 
 
+
+def test_an_update_a_sample_after_the_last_is_corrected_at_once():
+    """The filter updates at two successive strapdown states; the second was published before
+    the first correction arrived. It is compared with that correction applied, so its own goes
+    out at once (it waited for a state carrying the first: the filter's next epoch, up to
+    cov_interval s later, the strapdown and the graph's compass behind the filter that long),
+    and the strapdown that applies both is on the filter's solution."""
+    loop = ClosedLoopStrapdown(NavState(1.0, 0.5, 0.0, np.zeros(3), LEVEL, np.nan), 5.0, 2.5)
+    kept = {}
+    sync = StrapdownSync(3.0, 0.0, 1.0, lambda key: (kept[key], SensorErrors()))
+
+    def publish():
+        state = loop.state
+        kept[state.t] = state
+        sync.add_state(int(round(state.t * 1e9)), loop.correction_sequence, state.t)
+
+    def solution(v_east):
+        return lambda t: NavState(1.0, 0.5, 0.0, np.array([v_east, 0.0, 0.0]), LEVEL, t)
+
+    at_rest(loop, 0.0, 1.0)
+    publish()
+    first, _ = sync.correction(1.0, solution(0.1), {}, 1, NAVIGATING)
+    at_rest(loop, 1.0, 1.01)  # the next state goes out before the correction arrives
+    publish()
+    assert sync.due(1.01, 2)
+    second, resent = sync.correction(1.01, solution(0.2), {}, 2, NAVIGATING)
+    assert not resent and second.sequence == 2 and second.t_ns == 1_010_000_000
+    assert np.allclose(second.velocity_error, [-0.1, 0.0, 0.0], atol=1e-3)  # on top of the first
+    loop.correct(first)
+    loop.correct(second)
+    assert loop.correction_sequence == 2
+    assert np.allclose(loop.state.v_enu, [0.2, 0.0, 0.0], atol=1e-3)
+
 def test_the_filter_is_reported_aligned_only_once_the_strapdown_applied_the_alignment():
     """The filter aligns between two corrections: nav/status may say NAVIGATING only from the
     strapdown state that carries the first correction made after the alignment, not while the

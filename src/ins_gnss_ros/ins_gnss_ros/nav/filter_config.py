@@ -161,7 +161,9 @@ PARAMS = (
           "difference between the held and the true specific force, m/s^2", 0.0, 100.0),
     Param("imu_gap.rate_sigma_dps", 5.0, "over a bridged imu/delta gap: sigma of the "
           "difference between the held and the true angular rate, deg/s", 0.0, 1000.0),
-    Param("sync.min_interval_s", 0.1, "shortest interval between two corrections, s", 0.0, 10.0),
+    Param("sync.min_interval_s", 0.0, "shortest interval between two corrections, s (0: one after "
+          "every update; the strapdown, and what follows it, lags the filter by up to this)",
+          0.0, 10.0),
     Param("sync.resend_after_s", 1.0,
           "send a correction against the newest ins/state if none matched for this long, s",
           0.1, 60.0),

@@ -42,7 +42,7 @@ import numpy as np
 
 from .increments import BRIDGED, LOST, SENSOR_BLOCKS, SensorErrors, classify_gap, held_increments
 from .modes import ALIGNING, DEAD_RECKONING, INVALID, NAVIGATING
-from .strapdown import NavState, Strapdown, correction_to
+from .strapdown import NavState, Strapdown, apply_correction, correction_to
 
 __all__ = ["Correction", "ClosedLoopStrapdown", "StrapdownSync"]
 
@@ -319,7 +319,8 @@ class StrapdownSync:
         return revision > self.synced_revision and t - self.last_sync_t >= self.min_interval
 
     def _match(self, t_ns: int):
-        """The newest kept item within 1 ms of t_ns carrying the current sequence, or None.
+        """The newest kept item within 1 ms of t_ns that is the filter's solution with at most
+        the last correction applied to it (:meth:`current`, :meth:`lacking`), or None.
 
         The kept states are in stamp order: bisection finds the 1 ms window instead of a scan of
         all of them, which ran on every message while a synchronisation was waiting.
@@ -328,7 +329,7 @@ class StrapdownSync:
         lo = bisect.bisect_right(states, t_ns - 1e6, key=key)
         hi = bisect.bisect_left(states, t_ns + 1e6, lo=lo, key=key)
         return next((states[i] for i in range(hi - 1, lo - 1, -1)
-                     if states[i][1] == self.sequence), None)
+                     if states[i][1] == self.sequence or self.lacking(*states[i][:2])), None)
 
     def correction(self, t: float, state_at, estimates: dict, revision: int, mode: str):
         """The correction that puts the strapdown on the filter's solution, or None (nothing to
@@ -368,6 +369,17 @@ class StrapdownSync:
         else:
             return None
         strapdown, applied = self.state_of(match[2])
+        last = self.lacking(*match[:2])
+        if last is not None:
+            # A state published before the last correction reached the strapdown, which
+            # applies it at its epoch, before this state's: compared with that applied (to
+            # the correction's change over the interval between them). Waiting for a state
+            # carrying it held every update that followed another within a sample for the
+            # filter's next epoch, up to cov_interval s (the graph's ins/state and its compass's
+            # levelling behind the filter's solution that long).
+            strapdown = apply_correction(strapdown, last.position_error, last.velocity_error,
+                                         last.attitude_error)
+            applied = applied + last.sensor
         target = state_at(strapdown.t)
         if target is None:
             return None, resent

@@ -251,6 +251,9 @@ class _Feeder:
         if compass_p is not None:
             self.compass = CompassFrontEnd(compass_p, lambda text, log=True: events.update([text]))
             self.compass_frame = compass_p["frame_id"]
+            # (update count, t) of the graph's latest nav/status: after each update and once a
+            # second without (EkfNode.publish_status)
+            self.status = (-1, -np.inf)
         self.levels_compass = self.compass is not None and \
             compass_p["attitude_source"] == "imu_data"
 
@@ -309,10 +312,13 @@ class _Feeder:
         q = navigator.attitude_at(t)
         if q is None:  # the strapdown's uncorrected start: its attitude unknown
             self.compass.ins_state(t, (1.0, 0.0, 0.0, 0.0), (np.nan,) * 3, True, 0)
-        else:  # corrected by the filter, whose tilt sigma nav/status would carry
-            nav, att = navigator.solution, navigator.space["att"].start
-            var = np.diagonal(navigator.covariance())[att:att + 2]
-            self.compass.tilt_std(*np.sqrt(var).tolist())
+        else:  # corrected by the filter, with the tilt sigma of the graph's nav/status
+            nav = navigator.solution
+            if navigator.update_count != self.status[0] or t - self.status[1] >= 1.0:
+                self.status = (navigator.update_count, t)
+                att = navigator.space["att"].start
+                var = np.diagonal(navigator.covariance())[att:att + 2]
+                self.compass.tilt_std(*np.sqrt(var).tolist())
             self.compass.ins_state(t, q, (nav.lat, nav.lon, nav.h), False, 1)
         reading = self.compass.mag(t, field)
         if reading is not None:
