@@ -550,7 +550,12 @@ class Aiding:
         if self.forced:
             return ("dead reckoning (degraded): forced in, their noise floors not yet decayed: "
                     + ", ".join(sorted(self.forced)))
-        return f"dead reckoning: no aiding accepted for {t - self.last_accepted_t:.1f} s"
+        unaided = t - self.last_accepted_t
+        if nav.course_direction_unconfirmed and unaided < nav.config.dr_timeout:
+            return ("dead reckoning: a GNSS update refused before the motion confirmed the "
+                    "direction of the heading aligned on the course (the body x axis may point "
+                    "against it: reversing, or the IMU mounted backwards)")
+        return f"dead reckoning: no aiding accepted for {unaided:.1f} s"
 
     def _problem(self) -> str | None:
         """The lasting cause an input's last reading was refused for (the first input's)."""

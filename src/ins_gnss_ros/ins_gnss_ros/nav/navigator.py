@@ -47,7 +47,7 @@ from .integrity import Integrity, rejection_start
 from .lever_arm import lever_arm_position, point_velocity
 from .measurement_types import GNSS_TYPES, GnssFix, GnssVelocity, HeadingFix, HeadingRefuted, \
     PhaseDifferences, Rest, SatelliteRanges, SpeedLog, StillImu, WheelOdometry, ZeroVelocity
-from .modes import ALIGNING, NAVIGATING
+from .modes import ALIGNING, DEAD_RECKONING, NAVIGATING
 from .propagation import extrapolate, propagate
 from .recording import Recorder, published_covariance
 from .rest_noise import RestNoise
@@ -331,6 +331,13 @@ class Navigator:
         self._catch_up()
         s = self._state
         return s.heading_known and (s.heading_by is not None or s.turn_in_bias)
+
+    @property
+    def course_direction_unconfirmed(self):
+        """The heading was aligned on the course at a start on the move and the motion has not
+        yet shown the body x axis along it (_check_course_direction)."""
+        self._catch_up()
+        return self._state.course_check is not None
 
     estimates = _view("_state", "estimates", "Running sensor, clock and extra-block estimates "
                       "by block name (not to be changed).")
@@ -976,12 +983,23 @@ class Navigator:
         return True
 
     def _heading_missed(self, innov, epoch):
-        """A GNSS update refused in motion before the motion confirmed a heading source's
-        alignment: the INS has run off on that heading (an AHRS's yaw relative to its start: a
-        simulated car's fixes 7 m off within 3.6 s, flagged valid with a 0.1 m sigma, before a
-        course of fixes could check it), so the source is refuted there."""
-        if self._state.heading_by is not None and not self._at_rest(epoch):
+        """A GNSS update refused in motion before the motion confirmed the heading. Aligned on
+        a heading source, the INS has run off on that heading (an AHRS's yaw relative to its
+        start: a simulated car's fixes 7 m off within 3.6 s, flagged valid with a 0.1 m sigma,
+        before a course of fixes could check it), so the source is refuted there. Aligned on
+        the course at a start on the move, the body x axis may point against the motion
+        (_check_course_direction, which needs some m/s of velocity change to tell): the
+        solution is not vouched for (DEAD_RECKONING) until a measurement is taken again (an
+        IMU mounted backwards published 7 valid fixes beyond 5 sigma in the manoeuvre before
+        the turn, its velocities refused from 0.3 s before the first: docs/results/
+        product_path.md, "2026-12-07 (session 43)")."""
+        s = self._state
+        if self._at_rest(epoch):
+            return
+        if s.heading_by is not None:
             self._refute_heading(f"missed {innov.name} beyond its gate")
+        elif s.course_check is not None and s.mode == NAVIGATING:
+            s.mode = DEAD_RECKONING
 
     def _refute_heading(self, what):
         """The heading source the heading was aligned on is not an absolute heading (``what``
