@@ -84,7 +84,6 @@ def test_sync_corrects_against_the_matching_state_and_falls_back_when_out_of_ste
     assert resent and c.sequence == 4 and c.t_ns == 1_090_000_000  # the newest state, at once
 
 
-
 def test_an_update_a_sample_after_the_last_is_corrected_at_once():
     """The filter updates at two successive strapdown states; the second was published before
     the first correction arrived. It is compared with that correction applied, so its own goes
@@ -116,6 +115,7 @@ def test_an_update_a_sample_after_the_last_is_corrected_at_once():
     loop.correct(second)
     assert loop.correction_sequence == 2
     assert np.allclose(loop.state.v_enu, [0.2, 0.0, 0.0], atol=1e-3)
+
 
 def test_the_filter_is_reported_aligned_only_once_the_strapdown_applied_the_alignment():
     """The filter aligns between two corrections: nav/status may say NAVIGATING only from the
