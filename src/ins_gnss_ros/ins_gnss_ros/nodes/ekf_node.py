@@ -71,7 +71,7 @@ from ..io import NS, codec, field_reader, new, ns_to_stamp, stamp_to_ns
 from ..nav import ALIGNING, NAVIGATING, Navigator
 from ..nav.aiding import Aiding, AidingPolicy, velocity_latency_summary
 from ..nav.error_model import LAYOUTS
-from ..nav.filter_config import PARAMS, navigator_config
+from ..nav.filter_config import PARAMS, STATUS_PERIOD_S, navigator_config
 from ..nav.frame_tree import FrameTree
 from ..nav.odom_frame import OdomTrack
 from ..nav.strapdown import NavState, apply_correction
@@ -209,7 +209,8 @@ class EkfNode(EkfServices, NavNode):
                 self.publish_solution(st, msg)
         # The mode is reported even when nothing updates, and at once when this state is the
         # first to carry the alignment.
-        if t - self.last_status_t >= 1.0 or (self.sync.alignment_applied and not was_applied):
+        if t - self.last_status_t >= STATUS_PERIOD_S or \
+                (self.sync.alignment_applied and not was_applied):
             self.publish_status(t, [])
 
     def on_tf_static(self, msg: TFMessage) -> None:

@@ -232,6 +232,7 @@ class _Feeder:
         # Message modules load with the first offline run, not with the trial package.
         from ins_gnss_ros.imu.preprocessor_params import orientation_headings_from_params
         from ins_gnss_ros.magnetic.compass_front_end import CompassFrontEnd
+        from ins_gnss_ros.nav.filter_config import STATUS_PERIOD_S
         from ins_gnss_ros.nodes.convert import compass_heading, increment_of
         from ins_gnss_ros.nodes.ekf_inputs import EkfInputs
 
@@ -251,9 +252,9 @@ class _Feeder:
         if compass_p is not None:
             self.compass = CompassFrontEnd(compass_p, lambda text, log=True: events.update([text]))
             self.compass_frame = compass_p["frame_id"]
-            # (update count, t) of the graph's latest nav/status: after each update and once a
-            # second without (EkfNode.publish_status)
-            self.status = (-1, -np.inf)
+            # (update count, t) of the graph's latest nav/status: after each update and every
+            # STATUS_PERIOD_S without (EkfNode.publish_status)
+            self.status, self.status_period = (-1, -np.inf), STATUS_PERIOD_S
         self.levels_compass = self.compass is not None and \
             compass_p["attitude_source"] == "imu_data"
 
@@ -314,7 +315,8 @@ class _Feeder:
             self.compass.ins_state(t, (1.0, 0.0, 0.0, 0.0), (np.nan,) * 3, True, 0)
         else:  # corrected by the filter, with the tilt sigma of the graph's nav/status
             nav = navigator.solution
-            if navigator.update_count != self.status[0] or t - self.status[1] >= 1.0:
+            if navigator.update_count != self.status[0] or \
+                    t - self.status[1] >= self.status_period:
                 self.status = (navigator.update_count, t)
                 att = navigator.space["att"].start
                 var = np.diagonal(navigator.covariance())[att:att + 2]
@@ -456,6 +458,7 @@ def output_messages(result, config, datum, frames, prefix="") -> Iterator:
 
     from ins_gnss_ros.io import msgtype_of, ns_to_stamp, sec_to_ns, sec_to_stamp_ns, serialize
     from ins_gnss_ros.nav import NAVIGATING, NavState
+    from ins_gnss_ros.nav.filter_config import STATUS_PERIOD_S
     from ins_gnss_ros.nav.increments import SensorErrors
     from ins_gnss_ros.nav.odom_frame import OdomTrack
     from ins_gnss_ros.nav.recording import published_covariance
@@ -542,7 +545,7 @@ def output_messages(result, config, datum, frames, prefix="") -> Iterator:
                 logged.append((int(rows_ns[r]), "/tf", "tf2_msgs/msg/TFMessage",
                                serialize(msg)))
             if t >= next_status:
-                next_status = t + 1.0
+                next_status = t + STATUS_PERIOD_S
                 since = []
                 while u < len(updates) and updates[u].t <= t:
                     since.append(updates[u])
