@@ -177,8 +177,9 @@ def main():
                   f"{np.hypot(m['horizontal_rms_m'], m['vertical_rms_m']):.4f} m RMS; NEES "
                   f"position {m['nees_position_mean']:.2f}, velocity "
                   f"{m['nees_velocity_mean']:.2f}, attitude {m['nees_attitude_mean']:.2f}")
-            estimate, truth, _, _ = load_run(out)
-            runs[f"ours, {mode}"] = estimate
+            run = load_run(out)
+            truth = run.truth
+            runs[f"ours, {mode}"] = run.estimate, run.published
     if not args.no_smsfusion:
         if not DATA.is_file():
             raise SystemExit(f"smsfusion's input not found: {DATA}")
@@ -186,12 +187,13 @@ def main():
         dt = float(np.median(np.diff(truth.time)))
         for name, params in (("defaults", (None, None)), ("tuned", SMS_TUNED)):
             est = run_smsfusion(DATA, *params)
-            runs[f"smsfusion {version('smsfusion')} {name}"] = est
-            runs[f"smsfusion {name}, half-sample shift"] = shifted(est, 0.5 * dt)
+            runs[f"smsfusion {version('smsfusion')} {name}"] = est, None
+            runs[f"smsfusion {name}, half-sample shift"] = shifted(est, 0.5 * dt), None
     print()
     print("Target (issue 5): roll 0.036, pitch 0.020, heading 0.013 deg RMS, position 0.05 m "
           "RMS, after 30 s")
-    errors = {name: evaluate(est, truth).errors for name, est in runs.items()}
+    errors = {name: evaluate(est, truth, published=published).errors
+              for name, (est, published) in runs.items()}
     for window, (start, end) in windows(truth.time).items():
         print(f"\n### {window}: t = {start - truth.time[0]:.0f} ... {end - truth.time[0]:.0f} s")
         print("| filter | roll deg | pitch deg | heading deg | east m | north m | up m | 3-D m "

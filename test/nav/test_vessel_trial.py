@@ -40,8 +40,8 @@ BENCH = _bench()
 def trial(tmp_path_factory):
     out = tmp_path_factory.mktemp("vessel") / "offline"
     replay_offline(REPO / BENCH.BAG, REPO / BENCH.CONFIG, out)
-    estimate, truth, _, _ = load_run(out)
-    return truth, evaluate(estimate, truth).errors
+    run = load_run(out)
+    return run.truth, evaluate(run.estimate, run.truth, published=run.published).errors
 
 
 # Per window: bound on roll, pitch, heading (deg RMS), 3-D position (m RMS). Achieved offline

@@ -248,7 +248,7 @@ def test_odometry_covariance_is_attached_only_near_published_messages():
     from nav_msgs.msg import Odometry
 
     from ins_gnss_ros.io import BagMessage, sec_to_stamp
-    from ins_gnss_ros.trial.report import attach_odometry_covariance
+    from ins_gnss_ros.trial.export import attach_odometry_covariance
 
     t = np.arange(0.0, 10.0, 0.1)
     estimate = _circle(t)
@@ -268,6 +268,76 @@ def test_odometry_covariance_is_attached_only_near_published_messages():
     published = ((t >= 2.0 - 1e-9) & (t <= 3.95 + 1e-9)) | ((t >= 4.95 - 1e-9) & (t <= 5.95))
     assert np.array_equal(known, published)
     assert np.allclose(out.pos_cov_enu[known], 4.0 * np.eye(3))
+
+
+def test_nees_judges_the_published_solution_with_its_own_covariance():
+    """The estimate between the filter's outputs (the strapdown's states) may lack an update
+    that the published covariance follows: the NEES is of the published solution's own
+    state, the statistics of the estimate's; truth epochs its samples do not bracket within
+    PUBLISHED_MAX_GAP_S get none."""
+    from ins_gnss_ros.trial.evaluate import PUBLISHED_MAX_GAP_S
+
+    truth = _circle(np.linspace(0.0, 19.9, 399))
+    estimate = _shift(truth, east=0.5)
+    # published at 10 Hz 0.1 m east with a 0.1 m sigma on each axis, with a gap from 8 s
+    t = np.round(np.arange(0.0, 20.0, 0.1), 6)
+    t = t[(t < 8.0) | (t > 8.0 + 2 * PUBLISHED_MAX_GAP_S)]
+    published = _shift(_circle(t), east=0.1)
+    published = Trajectory(**{**vars(published), "pos_cov_enu": np.broadcast_to(
+        0.01 * np.eye(3), (len(t), 3, 3))})
+    result = evaluate(estimate, truth, published=published)
+    assert result.stats["horizontal_m"].rms == pytest.approx(0.5, abs=1e-6)
+    nees = result.errors.nees_pos
+    gap = (truth.time > t[t < 8.0][-1] + 1e-9) & (truth.time < t[t > 8.0][0] + 1e-9)
+    assert np.isnan(nees[gap]).all() and np.isfinite(nees[~gap]).all()
+    # (between its samples, the chord of the circle: within 2 %)
+    assert nees[~gap] == pytest.approx(1.0, abs=0.02)
+    assert np.allclose(result.errors.pos_sigma[~gap], 0.1)
+    # the estimate's mean error taken out of the published solution's as well
+    off = evaluate(estimate, truth, remove_offset=True, published=published)
+    assert off.nees["position"] == pytest.approx(0.4 ** 2 / 0.01, rel=0.02)
+
+
+def test_published_solution_of_fix_and_odometry():
+    """nav/fix positions (deg) with the attitude, body velocity turned into ENU and the
+    covariances of the nav/odom of the same stamp; an odometry without its fix is left out."""
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import NavSatFix
+
+    from ins_gnss_ros.io import BagMessage, sec_to_stamp
+    from ins_gnss_ros.trial.report import published_solution
+
+    yaw = np.radians(30.0)  # body x 30 deg left of east
+    messages = []
+    for ts, with_fix in ((1.0, True), (1.1, False), (1.2, True)):
+        stamp = sec_to_stamp(ts)
+        odom = Odometry()
+        odom.header.stamp = stamp
+        odom.pose.pose.orientation.w, odom.pose.pose.orientation.z = np.cos(yaw / 2), np.sin(
+            yaw / 2)
+        odom.twist.twist.linear.x = 10.0
+        odom.pose.covariance = np.diag([1.0, 4.0, 9.0, 1e-4, 2e-4, 3e-4]).flatten().tolist()
+        twist = np.zeros((6, 6))
+        twist[:3, :3] = np.diag([0.04, 0.01, 0.09])  # along, across, up
+        odom.twist.covariance = twist.flatten().tolist()
+        messages.append(BagMessage("/nav/odom", int(round(ts * 1e9)), odom))
+        if with_fix:
+            fix = NavSatFix()
+            fix.header.stamp = stamp
+            fix.latitude, fix.longitude, fix.altitude = 45.0, 10.0 + ts, 100.0
+            messages.append(BagMessage("/nav/fix", int(round(ts * 1e9)), fix))
+    sol = published_solution(messages, int(0.5e9))
+    assert sol.time == pytest.approx([0.5, 0.7])
+    assert sol.lat == pytest.approx(np.radians([45.0, 45.0]))
+    assert sol.lon == pytest.approx(np.radians([11.0, 11.2]))
+    assert sol.vel_enu[0] == pytest.approx([10 * np.cos(yaw), 10 * np.sin(yaw), 0.0])
+    assert np.allclose(sol.pos_cov_enu[0], np.diag([1.0, 4.0, 9.0]))
+    assert np.allclose(sol.att_cov[0], np.diag([1e-4, 2e-4, 3e-4]))
+    c, s_ = np.cos(yaw), np.sin(yaw)
+    east_var = 0.04 * c * c + 0.01 * s_ * s_
+    assert sol.vel_cov_enu[0, 0, 0] == pytest.approx(east_var)
+    assert sol.vel_cov_enu[0, 2, 2] == pytest.approx(0.09)
+    assert published_solution(messages[:2], 0) is None  # one solution: nothing to interpolate
 
 
 def test_truth_at_the_antenna_and_lagging_velocities_are_referred_to_the_estimate():

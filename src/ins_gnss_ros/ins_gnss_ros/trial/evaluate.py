@@ -31,6 +31,11 @@ from ins_gnss_ros.trial.outages import in_outage
 #: Largest spacing, s, of estimate samples across which the estimate is interpolated; truth
 #: epochs inside larger gaps of the estimate are not evaluated.
 DEFAULT_MAX_GAP_S = 1.0
+#: The same for a published solution's covariances, s (five periods of the ekf's default 10 Hz
+#: output): held or interpolated across a longer gap, a covariance would vouch for states no
+#: filter published (a drive with a lossy IMU link: the covariance from before a GNSS outage
+#: given to states at its end, position NEES 478).
+PUBLISHED_MAX_GAP_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -276,14 +281,22 @@ def interpolate(trajectory, t):
                       att_cov=linear(trajectory.att_cov))
 
 
-def evaluate(estimate, truth, windows=None, max_gap=DEFAULT_MAX_GAP_S, remove_offset=False):
+def evaluate(estimate, truth, windows=None, max_gap=DEFAULT_MAX_GAP_S, remove_offset=False,
+             published=None):
     """Compare an estimated trajectory with truth.
 
     Parameters
     ----------
     estimate, truth : Trajectory
         On the same time scale. Velocity and attitude errors are computed where both have them;
-        covariances are taken from `estimate`.
+        covariances are taken from `estimate`, or from `published`.
+    published : Trajectory, optional
+        The solution a filter published with its covariances, at its own (lower) rate: the
+        NEES and sigma bounds are of it, at the truth epochs its samples bracket within
+        PUBLISHED_MAX_GAP_S (NaN elsewhere). A covariance judges the state it was published
+        with: an estimate sampled between the filter's outputs need not hold every update
+        that covariance follows (the strapdown's state at the sample before a fix's epoch,
+        published before the filter had the fix, beside the filter's solution with it).
     windows : ndarray, shape (k, 2), optional
         GNSS outage windows [start, end), s (see :mod:`ins_gnss_ros.trial.outages`).
     max_gap : float
@@ -311,6 +324,8 @@ def evaluate(estimate, truth, windows=None, max_gap=DEFAULT_MAX_GAP_S, remove_of
         offset = errors.pos_enu.mean(axis=0)
         pos = errors.pos_enu - offset
         errors = replace(errors, pos_enu=pos, nees_pos=_nees(pos, est.pos_cov_enu))
+    if published is not None:
+        errors = replace(errors, **_published_bounds(published, true, offset))
     stats = {
         "horizontal_m": Statistic.of(errors.horizontal),
         "vertical_m": Statistic.of(errors.pos_enu[:, 2]),
@@ -327,6 +342,35 @@ def evaluate(estimate, truth, windows=None, max_gap=DEFAULT_MAX_GAP_S, remove_of
     return Evaluation(errors=errors, stats=stats, nees=_mean_nees(errors), offset_enu=offset,
                       outages=outage_drifts(errors, windows, true) if windows is not None else (),
                       nees_by_aiding=by_aiding)
+
+
+#: The ErrorSeries fields a covariance gives.
+_BOUNDS = ("pos_sigma", "vel_sigma", "euler_sigma", "nees_pos", "nees_vel", "nees_att")
+
+
+def _published_bounds(published, true, offset):
+    """The sigma and NEES fields of an ErrorSeries at the truth epochs `true`, of the
+    published solution's errors and covariances (NaN where its samples do not bracket the
+    epoch); `offset`: the estimate's mean position error taken out, or None."""
+    n = len(true.time)
+    keep = _bracketed(published.time, true.time, PUBLISHED_MAX_GAP_S) if len(published) > 1 \
+        else np.zeros(n, bool)
+    if not keep.any():
+        return dict.fromkeys(_BOUNDS)
+    pub = interpolate(published, true.time[keep])
+    series = _error_series(pub, _subset(true, keep))
+    if offset is not None:
+        series = replace(series, nees_pos=_nees(series.pos_enu - offset, pub.pos_cov_enu))
+    out = {}
+    for name in _BOUNDS:
+        values = getattr(series, name)
+        if values is None:
+            out[name] = None
+            continue
+        full = np.full((n,) + values.shape[1:], np.nan)
+        full[keep] = values
+        out[name] = full
+    return out
 
 
 def _mean_nees(errors, epochs=slice(None)):

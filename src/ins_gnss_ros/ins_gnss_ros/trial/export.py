@@ -2,7 +2,7 @@
 
 Solutions of ``OUT/bag`` (a replay, an offline replay or a smoothed run): ``ins/state`` (the
 filter-corrected states) with the covariances of ``nav/odom`` interpolated to them
-(report.attach_odometry_covariance); a smoothed run also has ``forward`` (``forward/ins/state``)
+(attach_odometry_covariance); a smoothed run also has ``forward`` (``forward/ins/state``)
 and, with ``--point``, ``point`` and ``forward_point`` (``point/state``: IMU rate, no
 covariance). Each goes to ``OUT/export/<solution>.<format>``:
 
@@ -35,6 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from ins_gnss_ros import io as bagio
+from ins_gnss_ros.nav.rotations import quat_to_dcm
+from ins_gnss_ros.trial.evaluate import PUBLISHED_MAX_GAP_S, Trajectory
 
 #: Export formats.
 FORMATS = ("csv", "kml", "pos")
@@ -112,10 +114,44 @@ def _mode(out) -> str | None:
         return None
 
 
+def attach_odometry_covariance(estimate: Trajectory, messages, t0_ns: int) -> Trajectory:
+    """``estimate`` with position, velocity and attitude covariances from nav/Odometry messages,
+    interpolated linearly to its epochs. Epochs in a gap of the output longer than
+    PUBLISHED_MAX_GAP_S, before the first message or after the last get NaN: their
+    covariance is unknown, and holding or interpolating the covariances around it would give
+    them to states no filter vouched for (the strapdown's start-up state before the first
+    correction, its states out of step with the filter)."""
+    if not messages or estimate.q_nb is None:
+        return estimate
+    t = np.array([(bagio.msg_stamp_ns(m.msg) - t0_ns) * 1e-9 for m in messages])
+    pose = np.array([np.reshape(m.msg.pose.covariance, (6, 6)) for m in messages])
+    twist = np.array([np.reshape(m.msg.twist.covariance, (6, 6)) for m in messages])
+    order = np.argsort(t, kind="stable")
+    t, pose, twist = t[order], pose[order], twist[order]
+    right = np.clip(np.searchsorted(t, estimate.time), 0, len(t) - 1)
+    left = np.clip(right - 1, 0, len(t) - 1)
+    in_gap = (t[right] - t[left] > PUBLISHED_MAX_GAP_S) & (t[right] != estimate.time)
+    unknown = in_gap | (estimate.time < t[0]) | (estimate.time > t[-1])
+
+    def at_estimate(cov):
+        flat = cov.reshape(len(t), -1)
+        out = np.column_stack([np.interp(estimate.time, t, c) for c in flat.T])
+        out[unknown] = np.nan
+        return out.reshape(-1, 3, 3)
+
+    c_nb = quat_to_dcm(estimate.q_nb)
+    vel_body = at_estimate(twist[:, :3, :3])
+    return Trajectory(time=estimate.time, lat=estimate.lat, lon=estimate.lon,
+                      height=estimate.height, vel_enu=estimate.vel_enu, q_nb=estimate.q_nb,
+                      pos_cov_enu=at_estimate(pose[:, :3, :3]),
+                      vel_cov_enu=c_nb @ vel_body @ np.swapaxes(c_nb, 1, 2),
+                      att_cov=at_estimate(pose[:, 3:, 3:]))
+
+
 def load_solution(bag, state_topic, odom_topic=None):
     """(Trajectory with POSIX times and covariances where known, mode per epoch) of the
     corrected states of a topic; None when there are none."""
-    from ins_gnss_ros.trial.report import attach_odometry_covariance, trajectory_from_states
+    from ins_gnss_ros.trial.report import trajectory_from_states
 
     messages = bagio.read_bag(bag, [state_topic] + ([odom_topic] if odom_topic else []))
     states = [m for m in messages if m.topic == state_topic]

@@ -2,16 +2,19 @@
 a Markdown report.
 
 The estimate is ``ins/state`` of the replay's output bag (position, ENU velocity, attitude); when
-the filter also published ``nav/odom``, its covariances are attached to the estimate so that the
-evaluation gives NEES and sigma bounds: the pose covariance (x, y, z in the ENU ``map`` frame,
-rotations about its fixed axes = the ENU rotation vector) and the twist covariance (base_link,
-REP-147 child frame) rotated into ENU, C P C^T. Truth is ``truth/state`` of the input bag (named
-in ``OUT/replay.json``, or given). Components the truth lacks (NaN, e.g. attitude of an RTK-only
-truth) are not evaluated. The statistics themselves are :mod:`ins_gnss_ros.trial.evaluate`'s.
+the filter also published ``nav/odom``, the NEES and sigma bounds are of the solution it
+published with its covariances (:func:`published_solution`): the position of ``nav/fix``, the
+attitude and velocity of the ``nav/odom`` of the same stamp, its pose covariance (x, y, z in the
+ENU ``map`` frame, rotations about its fixed axes = the ENU rotation vector) and its twist
+covariance (base_link, REP-147 child frame) rotated into ENU, C P C^T. Truth is ``truth/state``
+of the input bag (named in ``OUT/replay.json``, or given). Components the truth lacks (NaN, e.g.
+attitude of an RTK-only truth) are not evaluated. The statistics themselves are
+:mod:`ins_gnss_ros.trial.evaluate`'s.
 """
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +26,8 @@ from ins_gnss_ros.trial.evaluate import Trajectory, _subset, evaluate, markdown_
 from ins_gnss_ros.trial.inputs import iter_topic
 
 #: Output-bag topics.
-STATE_TOPIC, ODOM_TOPIC, TRUTH_TOPIC = "/ins/state", "/nav/odom", "/truth/state"
+STATE_TOPIC, ODOM_TOPIC, FIX_TOPIC, TRUTH_TOPIC = \
+    "/ins/state", "/nav/odom", "/nav/fix", "/truth/state"
 
 
 def trajectory_from_states(messages, t0_ns: int) -> Trajectory | None:
@@ -50,61 +54,62 @@ def trajectory_from_states(messages, t0_ns: int) -> Trajectory | None:
                       vel_enu=vel, q_nb=q)
 
 
-#: Farthest an estimate epoch may lie from a nav/odom message and still be given its
-#: covariance, s (five periods of the ekf's default 10 Hz output).
-MAX_COVARIANCE_GAP_S = 0.5
+def published_solution(messages, t0_ns: int) -> Trajectory | None:
+    """The solution the ekf published with its covariances (times in s after ``t0_ns``): at
+    each ``nav/odom`` with a ``nav/fix`` of the same stamp (both of base_link, published
+    together), the fix's position, the odometry's attitude and velocity (the twist turned into
+    ENU) and covariances. None without both."""
+    fixes = {bagio.msg_stamp_ns(m.msg): m.msg for m in messages if m.topic == FIX_TOPIC}
+    odom = sorted((bagio.msg_stamp_ns(m.msg), m.msg) for m in messages
+                  if m.topic == ODOM_TOPIC and bagio.msg_stamp_ns(m.msg) in fixes)
+    if len(odom) < 2:
+        return None
+    stamps = np.array([stamp for stamp, _ in odom], np.int64)
+    fix = [fixes[stamp] for stamp in stamps.tolist()]
+    pose = np.array([np.reshape(msg.pose.covariance, (6, 6)) for _, msg in odom])
+    twist = np.array([np.reshape(msg.twist.covariance, (6, 6)) for _, msg in odom])
+    q_nb = quat_normalize(np.array([(o.w, o.x, o.y, o.z) for o in
+                                    (msg.pose.pose.orientation for _, msg in odom)]))
+    v_body = np.array([(v.x, v.y, v.z) for v in (msg.twist.twist.linear for _, msg in odom)])
+    c_nb = quat_to_dcm(q_nb)
+    return Trajectory(time=(stamps - t0_ns) * 1e-9,
+                      lat=np.radians([f.latitude for f in fix]),
+                      lon=np.radians([f.longitude for f in fix]),
+                      height=np.array([f.altitude for f in fix]),
+                      vel_enu=np.einsum("nij,nj->ni", c_nb, v_body), q_nb=q_nb,
+                      pos_cov_enu=pose[:, :3, :3], att_cov=pose[:, 3:, 3:],
+                      vel_cov_enu=c_nb @ twist[:, :3, :3] @ np.swapaxes(c_nb, 1, 2))
 
 
-def attach_odometry_covariance(estimate: Trajectory, messages, t0_ns: int) -> Trajectory:
-    """``estimate`` with position, velocity and attitude covariances from nav/Odometry messages,
-    interpolated linearly to its epochs. Epochs in a gap of the output longer than
-    MAX_COVARIANCE_GAP_S, before the first message or after the last get NaN: their
-    covariance is unknown, and holding or interpolating the covariances around it would judge
-    a state no filter vouched for (the strapdown's start-up state before the first correction,
-    its states out of step with the filter) against them (a drive with a lossy IMU link: the
-    covariance from before a GNSS outage given to states at its end, position NEES 478)."""
-    if not messages or estimate.q_nb is None:
-        return estimate
-    t = np.array([(bagio.msg_stamp_ns(m.msg) - t0_ns) * 1e-9 for m in messages])
-    pose = np.array([np.reshape(m.msg.pose.covariance, (6, 6)) for m in messages])
-    twist = np.array([np.reshape(m.msg.twist.covariance, (6, 6)) for m in messages])
-    order = np.argsort(t, kind="stable")
-    t, pose, twist = t[order], pose[order], twist[order]
-    right = np.clip(np.searchsorted(t, estimate.time), 0, len(t) - 1)
-    left = np.clip(right - 1, 0, len(t) - 1)
-    in_gap = (t[right] - t[left] > MAX_COVARIANCE_GAP_S) & (t[right] != estimate.time)
-    unknown = in_gap | (estimate.time < t[0]) | (estimate.time > t[-1])
+@dataclass(frozen=True)
+class Run:
+    """What a replay output folder is evaluated on (:func:`load_run`).
 
-    def at_estimate(cov):
-        flat = cov.reshape(len(t), -1)
-        out = np.column_stack([np.interp(estimate.time, t, c) for c in flat.T])
-        out[unknown] = np.nan
-        return out.reshape(-1, 3, 3)
-
-    c_nb = quat_to_dcm(estimate.q_nb)
-    vel_body = at_estimate(twist[:, :3, :3])
-    return Trajectory(time=estimate.time, lat=estimate.lat, lon=estimate.lon,
-                      height=estimate.height, vel_enu=estimate.vel_enu, q_nb=estimate.q_nb,
-                      pos_cov_enu=at_estimate(pose[:, :3, :3]),
-                      vel_cov_enu=c_nb @ vel_body @ np.swapaxes(c_nb, 1, 2),
-                      att_cov=at_estimate(pose[:, 3:, 3:]))
-
-
-def load_run(out, truth_bag=None, state_topic=STATE_TOPIC):
-    """Estimate, truth and outage windows of a replay output folder.
-
-    ``state_topic``: the estimate's InsState topic (a smoothed run's ``/point/state``: then
-    without covariances, nav/odom being of base_link).
-
-    Returns
-    -------
+    Attributes
+    ----------
     estimate, truth : Trajectory
-        Times in s after the first truth epoch.
+        Times in s after the first truth epoch; the estimate without covariances.
+    published : Trajectory or None
+        The solution the ekf published with its covariances (:func:`published_solution`), on
+        the same time scale; None without nav/odom (or for a smoothed run's ``/point/state``,
+        nav/odom being of base_link).
     windows : ndarray, shape (k, 2)
         Outage windows on the same time scale.
     summary : dict
         ``replay.json`` (empty if absent).
     """
+
+    estimate: Trajectory
+    published: Trajectory | None
+    truth: Trajectory
+    windows: np.ndarray
+    summary: dict
+
+
+def load_run(out, truth_bag=None, state_topic=STATE_TOPIC) -> Run:
+    """The estimate (``state_topic``, InsState: a smoothed run's ``/point/state`` or
+    ``ins/state``), the published solution, truth and outage windows of a replay output
+    folder."""
     out = Path(out)
     summary_path = out / "replay.json"
     summary = {}
@@ -124,7 +129,7 @@ def load_run(out, truth_bag=None, state_topic=STATE_TOPIC):
         raise ValueError(f"{truth_bag}: no {TRUTH_TOPIC} messages to evaluate against")
     t0_ns = truth_msgs[0].t_ns
     truth = trajectory_from_states(truth_msgs, t0_ns)
-    outputs = bagio.read_bag(output_bag, [state_topic] + [ODOM_TOPIC] * (
+    outputs = bagio.read_bag(output_bag, [state_topic] + [ODOM_TOPIC, FIX_TOPIC] * (
         state_topic == STATE_TOPIC))
     states = [m for m in outputs if m.topic == state_topic]
     # A strapdown state no filter has corrected yet (sequence 0) is its start-up parameters,
@@ -133,14 +138,13 @@ def load_run(out, truth_bag=None, state_topic=STATE_TOPIC):
     estimate = trajectory_from_states(corrected or states, t0_ns)
     if estimate is None or truth is None:
         raise ValueError(f"{output_bag}: no {state_topic} with finite positions to evaluate")
-    estimate = attach_odometry_covariance(
-        estimate, [m for m in outputs if m.topic == ODOM_TOPIC], t0_ns)
     # A satellite window (trial replay --satellites) is evaluated like an outage: the drift
     # within it is what the reduced constellation lets through.
     windows_ns = np.concatenate([np.asarray(summary.get(key, []), dtype=np.int64).reshape(-1, 2)
                                  for key in ("outage_windows_ns", "satellite_windows_ns")])
     windows_ns = windows_ns[np.argsort(windows_ns[:, 0])]
-    return estimate, truth, (windows_ns - t0_ns) * 1e-9, summary
+    return Run(estimate, published_solution(outputs, t0_ns), truth,
+               (windows_ns - t0_ns) * 1e-9, summary)
 
 
 def referred_to_truth(estimate: Trajectory, truth: Trajectory, truth_point=None,
@@ -210,17 +214,21 @@ def evaluate_run(out, truth_bag=None, plots=True, skip_s=0.0, truth_point=None,
     if point is not None and truth_point is not None:
         raise ValueError("give a truth point or an evaluation point, not both")
     recorded = point is not None and _recorded_point(out) == list(np.asarray(point, float))
-    estimate, truth, windows, summary = load_run(
-        out, truth_bag, "/point/state" if recorded else STATE_TOPIC)
-    estimate, truth = referred_to_truth(estimate, truth, truth_point, truth_velocity_delay)
+    run = load_run(out, truth_bag, "/point/state" if recorded else STATE_TOPIC)
+    windows, summary, published = run.windows, run.summary, run.published
+    estimate, truth = referred_to_truth(run.estimate, run.truth, truth_point,
+                                        truth_velocity_delay)
+    if published is not None and truth_point is not None:
+        published = referred_to_truth(published, truth, truth_point)[0]
     if point is not None:
         estimate, truth = at_point(estimate, truth, point, recorded)
+        published = None  # its covariances are base_link's
     keep = truth.time >= estimate.time[0] + skip_s
     if not keep.any():
         raise ValueError(f"no truth epoch after the first {skip_s:g} s of the estimate")
     truth = _subset(truth, keep)
     evaluation = evaluate(estimate, truth, windows if len(windows) else None,
-                          remove_offset=remove_offset)
+                          remove_offset=remove_offset, published=published)
     images = write_plots(evaluation, estimate, truth, out / "plots",
                          windows if len(windows) else None) if plots else []
     report = out / "report.md"
