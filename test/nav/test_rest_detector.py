@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from ins_gnss_ros.nav.rest_detector import MAX_FIX_WAIT_S, RestDetector
 
@@ -128,9 +129,41 @@ def test_the_velocities_scatter_in_still_runs_is_the_receiver_s_noise():
         det.increment(t, w * DT, f * DT, DT)
         if k % 40 == 0:  # 5 Hz
             v = np.array([12.0 + 2.0 * max(min(t - 20.0, 1.0), 0.0), 0.0])  # 12 -> 14 m/s
-            det.velocity(*(v + sigma * rng.standard_normal(2)))
+            det.velocity(t, *(v + sigma * rng.standard_normal(2)))
             noises.append((t, det.velocity_noise()))
     first = next(t for t, n in noises if not math.isnan(n))
     assert first <= 2.0  # 6 velocities of a still run: 10 degrees of freedom
     # ~390 degrees of freedom over the two runs: within 10 % (3.9 sigma of the estimate)
     assert abs(noises[-1][1] / sigma - 1.0) < 0.1
+
+
+@pytest.mark.parametrize("lead", [0.7, 1.3])
+def test_velocities_count_by_their_time_not_their_arrival(lead):
+    """Velocities that arrive ahead of the IMU increments of their time (the node graph, whose
+    preprocessor holds the first second of samples for /tf_static) count as they do arriving
+    after them: the receiver's noise measured on the same velocities, at every velocity once
+    the IMU has reached it. A run started still, accelerating from 20 to 21 s."""
+    rng = np.random.default_rng(5)
+    samples, velocities = [], []
+    for k in range(1, round(30.0 / DT) + 1):
+        t = k * DT
+        moving = 20.0 < t < 21.0
+        f = np.array([2.0 * moving, 0.0, 9.81]) + math.sqrt(ACCEL_PSD / DT) * rng.standard_normal(3)
+        w = math.sqrt(GYRO_PSD / DT) * rng.standard_normal(3)
+        samples.append((t, w * DT, f * DT))
+        if k % 40 == 0:
+            v = np.array([12.0 + 2.0 * max(min(t - 20.0, 1.0), 0.0), 0.0])
+            velocities.append((t, *(v + 0.3 * rng.standard_normal(2))))
+
+    def noises(lead_s):
+        det, out, queue = RestDetector(ACCEL_PSD, GYRO_PSD), {}, list(velocities)
+        for t, dtheta, dv in samples:
+            while queue and queue[0][0] <= t + lead_s:
+                det.velocity(*queue.pop(0))
+            det.increment(t, dtheta, dv, DT)
+            out.update({tv: det.velocity_noise() for tv, *_ in velocities if t - DT < tv <= t})
+        return out
+
+    on_time, ahead = noises(0.0), noises(lead)
+    assert list(on_time) == list(ahead)
+    assert np.allclose(list(on_time.values()), list(ahead.values()), equal_nan=True)

@@ -886,7 +886,7 @@ class Aiding:
             self.report("gnss/vel refused: it disagrees with the fixes' displacement")
             return self._seen("gnss/vel", t, False)
         if self._rest_wanted():
-            self._rest.velocity(float(v_enu[0]), float(v_enu[1]))
+            self._rest.velocity(t, float(v_enu[0]), float(v_enu[1]))
         scatter = self._rest.velocity_noise()  # NaN until measured
         if _unknown(cov):
             sigma = max(UNKNOWN_VELOCITY_SIGMA, scatter)

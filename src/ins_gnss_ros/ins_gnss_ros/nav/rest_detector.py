@@ -54,8 +54,8 @@ REST_SPEED = 0.5
 MOTION_QUANTILE = 0.999
 #: Degrees of freedom of a receiver velocity's scatter in still runs before it is its noise.
 MIN_VELOCITY_DOF = 10
-#: Longest a fix waits for the IMU blocks of its time, s (beyond it the IMU is missing, not
-#: late: the fix counts for no run).
+#: Longest a fix or a receiver velocity waits for the IMU blocks of its time, s (beyond it the
+#: IMU is missing, not late: it counts for no run).
 MAX_FIX_WAIT_S = 5.0
 
 
@@ -87,7 +87,7 @@ class RestDetector:
         self._fixes = None           # least-squares sums of the run's fixes
         self._velocities = None      # the run's receiver velocities: [n, sum east, sum north,
         #                              sum of squares east, north]
-        self._velocities_pending = []  # those of the open block, counted if it closes still
+        self._velocities_pending = []  # (t, east, north) ahead of the judged blocks
         self._velocity_scatter = [0.0, 0]  # squared deviations and dof of the ended runs
         self._moving_unseen = False  # the fixes showed motion the IMU cannot: until it moves
         self._judged_until = -math.inf  # end of the last IMU block judged, s
@@ -133,7 +133,8 @@ class RestDetector:
         self._block = None
         self._any_block = True
         self._judged_until = t
-        pending, self._velocities_pending = self._velocities_pending, []
+        velocities = [v for v in self._velocities_pending if v[0] <= t]
+        del self._velocities_pending[:len(velocities)]
         reached = [f for f in self._fixes_waiting if f[0] <= t]
         del self._fixes_waiting[:len(reached)]
         if self._still(b):
@@ -142,7 +143,7 @@ class RestDetector:
                 self.still_since = b[0]
             if math.isnan(self.blocks_still_since):
                 self.blocks_still_since = b[0]
-            for v_east, v_north in pending:
+            for _, v_east, v_north in velocities:
                 self._add_velocity(v_east, v_north)
             for fix in reached:
                 self._add_fix(*fix)
@@ -180,11 +181,23 @@ class RestDetector:
         self._velocity_scatter[1] += dof
         self._velocities = None
 
-    def velocity(self, v_east: float, v_north: float) -> None:
-        """A receiver velocity (m/s): within a still run the velocity is constant (rest, or
-        steady straight motion), so its scatter there is the receiver's noise. It counts once
-        the IMU block it falls in closes still (the first block of a motion ends the run)."""
-        self._velocities_pending.append((v_east, v_north))
+    def velocity(self, t: float, v_east: float, v_north: float) -> None:
+        """A receiver velocity (m/s) of time t (s): within a still run the velocity is constant
+        (rest, or steady straight motion), so its scatter there is the receiver's noise. It
+        counts once the IMU block it falls in closes still (the first block of a motion ends
+        the run); one behind the judged blocks counts in the still run it falls in. Placed by
+        its time, as the fixes are (:meth:`fix`), not by its arrival: counted in the block
+        that closed next, the node graph, whose increments reach the filter a second after the
+        receiver's first velocities (the preprocessor waits for /tf_static), measured the
+        receiver's noise on other velocities than `trial replay --offline` and aligned a
+        robot's heading a fix earlier (docs/results/product_path.md, "2026-12-07 (session
+        44)")."""
+        if t > self._judged_until:
+            pending = self._velocities_pending
+            pending.append((t, v_east, v_north))
+            del pending[:sum(1 for v in pending if v[0] < t - MAX_FIX_WAIT_S)]
+        elif self.still_since <= t <= self.still_until == self._judged_until:
+            self._add_velocity(v_east, v_north)
 
     def _add_velocity(self, v_east: float, v_north: float) -> None:
         if self._velocities is None:
