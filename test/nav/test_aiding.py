@@ -497,20 +497,23 @@ def test_fixes_without_velocities_refute_their_covariance_in_motion_before_a_cou
 G, ACCEL, SPEED0 = 9.81, 1.5, 5.0
 
 
-def _accelerating_car(nav, seconds, velocities):
-    """Feed nav that car's 100 Hz IMU and 5 Hz fixes (with velocities or without) for
-    `seconds`, yielding after each GNSS epoch."""
+def _accelerating_car(nav, seconds, velocities, fix_first=False):
+    """Feed nav that car's 100 Hz IMU and 5 Hz fixes (with velocities or without; each epoch's
+    fix after its velocity, or before it) for `seconds`, yielding after each GNSS epoch."""
     lat0, lon0, dt = 59.9, 30.3, 0.01
     for k in range(1, round(seconds / dt) + 1):
         t = k * dt
         nav.add_imu(t, np.zeros(3), np.array([ACCEL, 0.0, G]) * dt)
         if k % 20 == 0:
             east = SPEED0 * t + 0.5 * ACCEL * t * t
+            measurements = [GnssFix(t, np.radians(lat0), np.radians(lon0 + east / (
+                M_PER_DEG * np.cos(np.radians(lat0)))), 10.0, np.eye(3) * 0.25)]
             if velocities:
-                nav.add_measurement(GnssVelocity(t, np.array([SPEED0 + ACCEL * t, 0.0, 0.0]),
-                                                 np.eye(3) * 0.05 ** 2))
-            nav.add_measurement(GnssFix(t, np.radians(lat0), np.radians(lon0 + east / (
-                M_PER_DEG * np.cos(np.radians(lat0)))), 10.0, np.eye(3) * 0.25))
+                velocity = GnssVelocity(t, np.array([SPEED0 + ACCEL * t, 0.0, 0.0]),
+                                        np.eye(3) * 0.05 ** 2)
+                measurements.insert(len(measurements) if fix_first else 0, velocity)
+            for m in measurements:
+                nav.add_measurement(m)
             yield
 
 
@@ -532,6 +535,23 @@ def test_a_start_on_the_move_while_accelerating_is_as_tilted_as_the_acceleration
     roll, pitch, _ = quat_to_euler(nav.solution.q_nb)
     assert abs(roll) < 3.0 * sigmas[-1][0] and abs(pitch) < 3.0 * sigmas[-1][1]
     assert abs(pitch) < 0.3 * ACCEL / G
+
+
+def test_a_heading_alignment_is_a_correction_its_followers_hear_of():
+    """Started on a fix before the receiver's first velocity, the INS velocity knows no
+    direction: the velocity that comes next aligns the heading and restarts the velocity, and no
+    update follows it. The alignment counts as a correction of the solution (``revision``),
+    so that the strapdown node gets it at once: it stayed on the unaligned heading until the
+    next accepted update, a fix interval (docs/results/product_path.md, "2026-12-07 (session
+    44)")."""
+    nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_uncalibrated"})))
+    before = None
+    for _ in _accelerating_car(nav, 3.0, velocities=True, fix_first=True):
+        if nav.heading_known:
+            break
+        before = nav.revision if nav.started else None
+    assert nav.heading_known and before is not None
+    assert nav.revision > before
 
 
 def test_a_start_on_the_move_without_velocities_takes_the_acceleration_as_unknown():

@@ -1295,4 +1295,9 @@ class Navigator:
         s.heading_known, s.mode, s.t_last_aid = True, NAVIGATING, s.nav.t
         s.heading_steered_by = frozenset()
         s.t_model = -np.inf  # the system matrix holds the attitude: rebuilt at the next step
+        # The followers hear of it at once: a start on the move whose velocity restarts with
+        # the course (no update follows) left the graph's strapdown on the unaligned heading
+        # until the next accepted update, a fix interval (docs/results/product_path.md,
+        # "2026-12-07 (session 44)").
+        self._revision += 1
         self._recorder.correct(s, np.zeros(self._space.size), self._published_var())

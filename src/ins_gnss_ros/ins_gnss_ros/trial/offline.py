@@ -362,7 +362,11 @@ class _Feeder:
         # The arrival clock is the log time, as the replayed graph's (its bus time). Times in s
         # as the nodes read them from the messages' stamps (io.ns_to_sec).
         stamp = self.stamp_ns(sec * bagio.NS + nanosec, row)
-        for out in self.preprocessor.add(stamp, row.t_ns, w, f):
+        # Each sample's own orientation goes with it (the node's: the sample's message): the
+        # preprocessor holds the first samples while it measures the rate.
+        orientation = ((ow, ox, oy, oz), orientation_covariance) \
+            if self.orientation is not None else None
+        for out in self.preprocessor.add(stamp, row.t_ns, w, f, orientation):
             t = bagio.ns_to_sec(out.t_ns)
             if out.rates is None:
                 self.events[f"imu sample rejected: {out.reason}"] += 1
@@ -370,8 +374,7 @@ class _Feeder:
                 if self.levels_compass:  # as imu/data serves mag_compass
                     self.compass.imu(t, out.rates[1])
                 if self.orientation is not None:
-                    heading = self.orientation.add(out.t_ns, (ow, ox, oy, oz),
-                                                   orientation_covariance)
+                    heading = self.orientation.add(out.t_ns, *out.tag)
                     if heading is not None:
                         self.aiding.heading(t, *heading, self.declination, source="imu/heading")
             for inc in out.increments:
