@@ -185,7 +185,8 @@ class RestDetector:
         """A receiver velocity (m/s) of time t (s): within a still run the velocity is constant
         (rest, or steady straight motion), so its scatter there is the receiver's noise. It
         counts once the IMU block it falls in closes still (the first block of a motion ends
-        the run); one behind the judged blocks counts in the still run it falls in. Placed by
+        the run); one behind the judged blocks counts if it falls in the still run going on
+        (one of a run already ended is left out). Placed by
         its time, as the fixes are (:meth:`fix`), not by its arrival: counted in the block
         that closed next, the node graph, whose increments reach the filter a second after the
         receiver's first velocities (the preprocessor waits for /tf_static), measured the
