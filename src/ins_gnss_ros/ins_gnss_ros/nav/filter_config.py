@@ -175,12 +175,12 @@ PARAMS = (
     Param("datum.altitude_m", 0.0, "map-frame origin ellipsoidal height, m", -1000.0, 1e5),
 )
 
-#: Heading topics of the ekf -> the parameter that turns each on (nav/aiding.HEADING_SOURCES
-#: says which bias state each has).
 #: nav/status comes after every update and at least this often, s (the ekf node; --offline
 #: writes it at this period and hands its compass the tilt sigma on the node's schedule).
 STATUS_PERIOD_S = 1.0
 
+#: Heading topics of the ekf -> the parameter that turns each on (nav/aiding.HEADING_SOURCES
+#: says which bias state each has).
 HEADING_INPUTS = {"gnss/heading": "use_heading", "mag/heading": "use_magnetic_heading",
                   "imu/heading": "use_imu_heading"}
 

@@ -65,6 +65,20 @@ def _sum3(values) -> float:
     return a + b + c
 
 
+def _wait(queue: list, item: tuple) -> None:
+    """Queue an input (its time first) ahead of the judged IMU blocks, forgetting those
+    older than ``MAX_FIX_WAIT_S`` before it."""
+    queue.append(item)
+    del queue[:sum(1 for waiting in queue if waiting[0] < item[0] - MAX_FIX_WAIT_S)]
+
+
+def _reached(queue: list, t: float) -> list:
+    """The queued inputs of time t (s) or before, taken off the queue (in time order)."""
+    reached = [item for item in queue if item[0] <= t]
+    del queue[:len(reached)]
+    return reached
+
+
 class RestDetector:
     """Decides from IMU increments and GNSS fixes whether the vehicle stands.
 
@@ -133,10 +147,8 @@ class RestDetector:
         self._block = None
         self._any_block = True
         self._judged_until = t
-        velocities = [v for v in self._velocities_pending if v[0] <= t]
-        del self._velocities_pending[:len(velocities)]
-        reached = [f for f in self._fixes_waiting if f[0] <= t]
-        del self._fixes_waiting[:len(reached)]
+        velocities = _reached(self._velocities_pending, t)
+        reached = _reached(self._fixes_waiting, t)
         if self._still(b):
             self.still_until = t
             if math.isnan(self.still_since):
@@ -186,17 +198,14 @@ class RestDetector:
         (rest, or steady straight motion), so its scatter there is the receiver's noise. It
         counts once the IMU block it falls in closes still (the first block of a motion ends
         the run); one behind the judged blocks counts if it falls in the still run going on
-        (one of a run already ended is left out). Placed by
-        its time, as the fixes are (:meth:`fix`), not by its arrival: counted in the block
-        that closed next, the node graph, whose increments reach the filter a second after the
-        receiver's first velocities (the preprocessor waits for /tf_static), measured the
-        receiver's noise on other velocities than `trial replay --offline` and aligned a
-        robot's heading a fix earlier (docs/results/product_path.md, "2026-12-07 (session
-        44)")."""
+        (one of a run already ended is left out). Placed by its time, as the fixes are
+        (:meth:`fix`), not by its arrival: counted in the block that closed next, the node
+        graph, whose increments reach the filter a second after the receiver's first
+        velocities (the preprocessor waits for /tf_static), measured the receiver's noise on
+        other velocities than `trial replay --offline` and aligned a robot's heading a fix
+        earlier (docs/results/product_path.md, "2026-12-07 (session 44)")."""
         if t > self._judged_until:
-            pending = self._velocities_pending
-            pending.append((t, v_east, v_north))
-            del pending[:sum(1 for v in pending if v[0] < t - MAX_FIX_WAIT_S)]
+            _wait(self._velocities_pending, (t, v_east, v_north))
         elif self.still_since <= t <= self.still_until == self._judged_until:
             self._add_velocity(v_east, v_north)
 
@@ -242,9 +251,7 @@ class RestDetector:
         confirmed rest 3 s after `trial replay --offline` (docs/results/product_path.md,
         "2026-12-06 (session 38)")."""
         if t > self._judged_until:
-            waiting = self._fixes_waiting
-            waiting.append((t, lat, lon, h, cov_enu, absolute_var))
-            del waiting[:sum(1 for f in waiting if f[0] < t - MAX_FIX_WAIT_S)]
+            _wait(self._fixes_waiting, (t, lat, lon, h, cov_enu, absolute_var))
             return self.at_rest
         return self._add_fix(t, lat, lon, h, cov_enu, absolute_var)
 
