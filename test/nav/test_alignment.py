@@ -200,6 +200,7 @@ def test_levelled_start_and_yaw_rotation():
     st = al.levelled_state(levelling, 0.8, 0.1, 10.0, lever, 2.0, 5.0)
     np.testing.assert_allclose(quat_to_euler(st.q_nb), [0.02, -0.01, 0.0], atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(st.v_enu), 2.0)  # moving along body x
+    assert st.v_enu[2] == 0.0  # over the ground: the receiver's speed is horizontal
     noise = se.filter_noise(se.MEMS_ADIS16405, "rw")
     space = StateSpace(make_layout("15", noise))
     P = al.initial_covariance(space, noise, 1.0, 0.1, 0.02)
@@ -207,6 +208,20 @@ def test_levelled_start_and_yaw_rotation():
     st2, P2 = al.rotate_yaw(st, P, space, 90 * DEG, 0.001, 0.02)
     np.testing.assert_allclose(quat_to_euler(st2.q_nb)[2], 90 * DEG, atol=1e-9)
     assert P2[space["att"].stop - 1, space["att"].stop - 1] == pytest.approx(0.02 ** 2)
+
+
+def test_a_start_on_the_move_levelled_on_an_acceleration_starts_level():
+    """Levelled while speeding up at 1 m/s^2, the body x axis comes out pitched by about 5.8
+    deg: the start's velocity is still the receiver's speed over the ground, along that axis's
+    horizontal direction, not 1 m/s up or down it (the filter took such a climb for 160 mg of
+    z accelerometer bias)."""
+    f_b = np.array([1.0, 0.0, 9.8])  # level, accelerating forward
+    levelling = al.Levelling().add(np.zeros((100, 3)), np.tile(f_b * 0.01, (100, 1)), 0.01)
+    st = al.levelled_state(levelling, 0.8, 0.1, 10.0, np.zeros(3), 10.0, 5.0)
+    assert abs(quat_to_euler(st.q_nb)[1]) == pytest.approx(np.arctan2(1.0, 9.8))
+    x = quat_to_dcm(st.q_nb)[:, 0]
+    np.testing.assert_allclose(st.v_enu, 10.0 * np.append(x[:2] / np.hypot(*x[:2]), 0.0),
+                               atol=1e-12)
 
 
 def test_the_start_couples_the_imus_place_to_an_uncertain_lever_arm():

@@ -325,13 +325,19 @@ def levelled_state(levelling, lat, lon, h, lever_b, speed, t):
     -------
     NavState
         At rest, or moving at speed along the body x axis (started in motion: no side-slip
-        assumed in the yaw-free frame).
+        assumed in the yaw-free frame), horizontally: the speed is the receiver's over the
+        ground, and the levelled x axis is pitched by whatever the vehicle's acceleration
+        left in the levelling (a simulated car speeding up at 0.7 m/s^2, levelled 5.7 deg
+        off, started climbing at 1.1 m/s, took it for 160 mg of z accelerometer bias and
+        ran dead reckoning for most of 90 s: docs/results/product_path.md, "2026-12-07
+        (session 45)").
     """
     q = levelling.attitude()
     lat, lon, h = lever_arm_position(lat, lon, h, q, -lever_b)
     v = np.zeros(3)
     if np.isfinite(speed) and speed > 0.0:
-        v = quat_rotate(q, [speed, 0.0, 0.0])
+        x = quat_rotate(q, [1.0, 0.0, 0.0])
+        v[:2] = speed * x[:2] / np.hypot(x[0], x[1])
     return NavState(lat, lon, h, v, q, t)
 
 
