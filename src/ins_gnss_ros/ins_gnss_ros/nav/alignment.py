@@ -327,8 +327,8 @@ def levelled_state(levelling, lat, lon, h, lever_b, speed, t):
         At rest, or moving at speed along the body x axis (started in motion: no side-slip
         assumed in the yaw-free frame), horizontally: the speed is the receiver's over the
         ground, and the levelled x axis is pitched by whatever the vehicle's acceleration
-        left in the levelling (a simulated car speeding up at 0.7 m/s^2, levelled 5.7 deg
-        off, started climbing at 1.1 m/s, took it for 160 mg of z accelerometer bias and
+        left in the levelling (a simulated car speeding up at 0.7-1.4 m/s^2, levelled 5.7
+        deg off, started climbing at 1.1 m/s, took it for 160 mg of z accelerometer bias and
         ran dead reckoning for most of 90 s: docs/results/product_path.md, "2026-12-07
         (session 45)").
     """
