@@ -32,9 +32,10 @@ from . import _kernels
 from . import measurements as meas
 from . import modes
 from .alignment import SIDE_SLIP_SIGMA, Levelling, couple_start_to_lever_arm, \
-    couple_tilt_to_accelerometers, course_error_gain, fixes_with_course, initial_covariance, \
-    levelled_state, restart_velocity, rotate_yaw, take_static_gyro_bias, without_cross_track, \
-    yaw_error_from_course, yaw_error_from_heading, yaw_error_from_motion
+    couple_tilt_to_accelerometers, course_error_gain, course_gradient, fixes_with_course, \
+    initial_covariance, levelled_state, restart_velocity, rotate_yaw, take_static_gyro_bias, \
+    without_cross_track, yaw_error_from_course, yaw_error_from_heading, yaw_error_from_motion, \
+    yaw_of_x
 from .conventions import wrap_pi
 from .earth import WGS84, normal_gravity
 from .ekf import ErrorStateEKF, StateSpace, at_prior
@@ -53,7 +54,7 @@ from .recording import Recorder, published_covariance
 from .rest_noise import RestNoise
 from .rotations import quat_from_rotvec, quat_rotate, quat_to_dcm
 from .rewind import Rewind, RunState
-from .strapdown import apply_error_state
+from .strapdown import apply_correction, apply_error_state
 from .vehicle_constraint import LEARN_S, SLIP_HOLD_SIGMA, SLIP_RATE, SLIP_RATE_ARM, \
     LearnedConstraint, hold_side_slip
 
@@ -72,6 +73,9 @@ HEADING_CONFIRM_SIGMAS = 4.0
 #: Largest sigma of a course that checks a heading source's alignment, rad: with the heading's
 #: few degrees, misses beyond about 25 deg are told.
 CONFIRM_COURSE_SIGMA = np.radians(5.0)
+#: Standard deviations of its covariance and the side slip by which the INS velocity's course
+#: must miss the body x axis for the heading to align on the axis (Navigator._velocity_off_x).
+DRIFT_SIGMAS = 3.0
 #: Velocity sigma of a start with neither a GNSS speed nor rest known, m/s per axis.
 UNKNOWN_SPEED_SIGMA = 30.0
 #: The receiver's velocity change, m/s, from which the INS's own one tells which way the body x
@@ -784,17 +788,28 @@ class Navigator:
         aligned_by = None  # the INS velocity's course gradient where m turned the yaw against it
         if s.mode == ALIGNING and not s.heading_known and s.gnss_speed >= cfg.align_speed \
                 and m.aligns:
-            vel = self._space["vel"].start
-            v, sigma_ins = np.asarray(m.v_enu, float), np.sqrt(s.ekf.P[vel, vel])
+            vel = self._space["vel"]
+            v, sigma_ins = np.asarray(m.v_enu, float), np.sqrt(s.ekf.P[vel.start, vel.start])
             # The INS ran unaided too long (a start on the move without a receiver speed) for
-            # its velocity to keep a direction: the body x axis takes the course, and the INS
-            # that velocity.
+            # its velocity to keep a direction, or its velocity ran off the body x axis
+            # (_velocity_off_x): the body x axis takes the course, and the INS that velocity.
             restart = sigma_ins >= UNINFORMED_VELOCITY * s.gnss_speed
+            drift = 0.0
+            if not restart and np.hypot(*s.nav.v_enu[:2]) > 0.3 * s.gnss_speed:
+                drift = self._velocity_off_x(vel)
+                restart = drift != 0.0
             if restart:
                 delta, sigma = yaw_error_from_course(v, m.cov_enu, s.nav.q_nb)
             else:
                 delta, sigma, aligned_by = yaw_error_from_motion(v, m.cov_enu, s.nav.v_enu,
                                                                  s.nav.q_nb)
+            if drift:
+                # the distance run followed the INS velocity, not the body x axis: turned by the
+                # velocity's course (the alignment below turns it by the body's)
+                run = meas.position_residual_enu(s.nav.lat, s.nav.lon, s.nav.h,
+                                                 *s.pinned_antenna)
+                s.nav = apply_correction(s.nav, run - quat_rotate(
+                    quat_from_rotvec([0.0, 0.0, -drift]), run), np.zeros(3), np.zeros(3))
             self._rotate_yaw(delta, sigma, aligned_by)
             gain = course_error_gain(s.nav, self._space, v, s.pinned_antenna, restart)
             if restart:
@@ -939,6 +954,24 @@ class Navigator:
             return unknown
         accel = np.hypot(v1[0] - v0[0], v1[1] - v0[1]) / (t1 - t0)
         return float(np.hypot(cfg.sigma_tilt0, accel / g))
+
+    def _velocity_off_x(self, vel):
+        """The angle (rad) by which the INS velocity's course, aligning on the move, has turned
+        away from the body x axis beyond what its covariance and a forward-moving vehicle's
+        side slip allow (DRIFT_SIGMAS of the two), else 0: the body axis is the better heading
+        then. An INS that runs unaided tilts by what its gyros' biases leave, and its velocity
+        turns with the tilt's share of gravity; the linearised covariance misses that when a
+        bias lies sigmas out (a simulated consumer unit's 12.8 deg/s x gyro bias, 2.6 sigma:
+        its velocity 30 deg off the body axis after 3.6 s at a sigma of 7.8, the heading
+        aligned on it ran away at 11 deg/s: docs/results/product_path.md, "2026-12-07 (session
+        45)"). More than a quarter turn off, the vehicle reverses (or the IMU is mounted
+        backwards): the velocity is the heading's, as ever."""
+        s = self._state
+        v = s.nav.v_enu
+        drift = wrap_pi(np.arctan2(v[1], v[0]) - yaw_of_x(s.nav.q_nb))
+        across = course_gradient(v)
+        var = across @ s.ekf.P[vel, vel] @ across + SIDE_SLIP_SIGMA ** 2
+        return drift if np.pi / 2 > abs(drift) > DRIFT_SIGMAS * np.sqrt(var) else 0.0
 
     def _check_course_direction(self, m, st, epoch):
         """Whether the body x axis a start on the move aligned on the course points along the
