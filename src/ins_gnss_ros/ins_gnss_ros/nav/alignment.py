@@ -55,6 +55,9 @@ SIDE_SLIP_SIGMA = np.radians(3.0)
 #: alone (0.3 m/s per axis: 0.5 m/s on a quarter of the epochs) with a random course, five
 #: sigmas once in exp(12.5) = 270,000 epochs.
 MAX_STILL_COURSE_SIGMA = 0.2
+#: Smallest INS horizontal speed, as a share of the receiver's, whose direction a heading
+#: aligns against (:func:`yaw_error_from_motion`): slower, motion started before the filter.
+MIN_INS_SPEED_SHARE = 0.3
 
 
 def level(f_b):
@@ -456,7 +459,7 @@ def yaw_error_from_motion(v_gnss, cov_gnss, v_ins, q_nb):
         the velocity covariance (the yaw variance after it is sigma^2 + c' P_vv c / |v_ins|^2).
         None where the body x axis was compared instead.
     """
-    if np.hypot(*v_ins[:2]) > 0.3 * np.hypot(*v_gnss[:2]):
+    if np.hypot(*v_ins[:2]) > MIN_INS_SPEED_SHARE * np.hypot(*v_gnss[:2]):
         course, sigma = yaw_from_velocity(v_gnss, cov_gnss)
         return course - np.arctan2(v_ins[1], v_ins[0]), sigma, course_gradient(v_ins)
     return (*yaw_error_from_course(v_gnss, cov_gnss, q_nb), None)
@@ -608,7 +611,8 @@ def yaw_error_from_heading(azimuth, variance, q_nb):
     return yaw - yaw_of_x(q_nb), sigma
 
 
-def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, pivot=None, velocity_gain=None):
+def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, pivot=None, velocity_gain=None,
+               run_turn=None):
     """Turn a solution and its covariance by delta about Up (the heading alignment).
 
     Parameters
@@ -632,6 +636,10 @@ def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, pivot=None, velocity_ga
         velocity error before the turn (ENU, rad/(m/s)). The yaw error after the turn is then
         phi_U = velocity_gain . dv - n (n the measured course's error, of sigma): correlated
         with the velocity error it came from, whose cross-track part it cancels.
+    run_turn : float, optional
+        The rotation of the offset from the pivot [rad], where it is not delta: a yaw aligned
+        on the body x axis while the INS velocity, which the distance run followed, had turned
+        off it.
 
     Returns
     -------
@@ -642,7 +650,7 @@ def rotate_yaw(nav, P, space, delta, sigma, sigma_floor, pivot=None, velocity_ga
     run = np.zeros(3)  # the distance turned with the yaw, ENU m
     if pivot is not None:
         d = position_residual_enu(nav.lat, nav.lon, nav.h, *pivot)
-        run = quat_rotate(rz, d)
+        run = quat_rotate(rz if run_turn is None else quat_from_rotvec([0.0, 0.0, run_turn]), d)
         nav = apply_correction(nav, d - run, np.zeros(3), np.zeros(3))
     nav = replace(nav, q_nb=quat_normalize(quat_mul(rz, nav.q_nb)),
                   v_enu=quat_rotate(rz, nav.v_enu))

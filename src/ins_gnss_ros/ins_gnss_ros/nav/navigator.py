@@ -31,11 +31,11 @@ import numpy as np
 from . import _kernels
 from . import measurements as meas
 from . import modes
-from .alignment import SIDE_SLIP_SIGMA, Levelling, couple_start_to_lever_arm, \
-    couple_tilt_to_accelerometers, course_error_gain, course_gradient, fixes_with_course, \
-    initial_covariance, levelled_state, restart_velocity, rotate_yaw, take_static_gyro_bias, \
-    without_cross_track, yaw_error_from_course, yaw_error_from_heading, yaw_error_from_motion, \
-    yaw_of_x
+from .alignment import MIN_INS_SPEED_SHARE, SIDE_SLIP_SIGMA, Levelling, \
+    couple_start_to_lever_arm, couple_tilt_to_accelerometers, course_error_gain, \
+    course_gradient, fixes_with_course, initial_covariance, levelled_state, restart_velocity, \
+    rotate_yaw, take_static_gyro_bias, without_cross_track, yaw_error_from_course, \
+    yaw_error_from_heading, yaw_error_from_motion, yaw_of_x
 from .conventions import wrap_pi
 from .earth import WGS84, normal_gravity
 from .ekf import ErrorStateEKF, StateSpace, at_prior
@@ -54,7 +54,7 @@ from .recording import Recorder, published_covariance
 from .rest_noise import RestNoise
 from .rotations import quat_from_rotvec, quat_rotate, quat_to_dcm
 from .rewind import Rewind, RunState
-from .strapdown import apply_correction, apply_error_state
+from .strapdown import apply_error_state
 from .vehicle_constraint import LEARN_S, SLIP_HOLD_SIGMA, SLIP_RATE, SLIP_RATE_ARM, \
     LearnedConstraint, hold_side_slip
 
@@ -794,23 +794,15 @@ class Navigator:
             # its velocity to keep a direction, or its velocity ran off the body x axis
             # (_velocity_off_x): the body x axis takes the course, and the INS that velocity.
             restart = sigma_ins >= UNINFORMED_VELOCITY * s.gnss_speed
-            drift = 0.0
-            if not restart and np.hypot(*s.nav.v_enu[:2]) > 0.3 * s.gnss_speed:
-                drift = self._velocity_off_x(vel)
-                restart = drift != 0.0
+            drift = 0.0 if restart else self._velocity_off_x(vel)
+            restart = restart or drift != 0.0
             if restart:
                 delta, sigma = yaw_error_from_course(v, m.cov_enu, s.nav.q_nb)
             else:
                 delta, sigma, aligned_by = yaw_error_from_motion(v, m.cov_enu, s.nav.v_enu,
                                                                  s.nav.q_nb)
-            if drift:
-                # the distance run followed the INS velocity, not the body x axis: turned by the
-                # velocity's course (the alignment below turns it by the body's)
-                run = meas.position_residual_enu(s.nav.lat, s.nav.lon, s.nav.h,
-                                                 *s.pinned_antenna)
-                s.nav = apply_correction(s.nav, run - quat_rotate(
-                    quat_from_rotvec([0.0, 0.0, -drift]), run), np.zeros(3), np.zeros(3))
-            self._rotate_yaw(delta, sigma, aligned_by)
+            # the distance run followed the INS velocity: it turns by the velocity's course
+            self._rotate_yaw(delta, sigma, aligned_by, run_turn=delta - drift)
             gain = course_error_gain(s.nav, self._space, v, s.pinned_antenna, restart)
             if restart:
                 s.nav, s.ekf.P = restart_velocity(s.nav, s.ekf.P, self._space, v, m.cov_enu,
@@ -958,16 +950,19 @@ class Navigator:
     def _velocity_off_x(self, vel):
         """The angle (rad) by which the INS velocity's course, aligning on the move, has turned
         away from the body x axis beyond what its covariance and a forward-moving vehicle's
-        side slip allow (DRIFT_SIGMAS of the two), else 0: the body axis is the better heading
-        then. An INS that runs unaided tilts by what its gyros' biases leave, and its velocity
-        turns with the tilt's share of gravity; the linearised covariance misses that when a
-        bias lies sigmas out (a simulated consumer unit's 12.8 deg/s x gyro bias, 2.6 sigma:
+        side slip allow (DRIFT_SIGMAS of the two), else 0 (also for an INS too slow to
+        compare, alignment.MIN_INS_SPEED_SHARE): the body axis is the better heading then. An
+        INS that runs unaided tilts by what its gyros' biases leave, and its velocity turns
+        with the tilt's share of gravity; the linearised covariance misses that when a bias
+        lies sigmas out (a simulated consumer unit's 12.8 deg/s x gyro bias, 2.6 sigma:
         its velocity 30 deg off the body axis after 3.6 s at a sigma of 7.8, the heading
         aligned on it ran away at 11 deg/s: docs/results/product_path.md, "2026-12-07 (session
         45)"). More than a quarter turn off, the vehicle reverses (or the IMU is mounted
         backwards): the velocity is the heading's, as ever."""
         s = self._state
         v = s.nav.v_enu
+        if np.hypot(v[0], v[1]) <= MIN_INS_SPEED_SHARE * s.gnss_speed:
+            return 0.0
         drift = wrap_pi(np.arctan2(v[1], v[0]) - yaw_of_x(s.nav.q_nb))
         across = course_gradient(v)
         var = across @ s.ekf.P[vel, vel] @ across + SIDE_SLIP_SIGMA ** 2
@@ -1310,7 +1305,7 @@ class Navigator:
         s.ekf.P, s.estimates["nhc"] = P, np.zeros(2)
         self._recorder.correct(s, dx, self._published_var())
 
-    def _rotate_yaw(self, delta, sigma, velocity_gain=None, pivot=True):
+    def _rotate_yaw(self, delta, sigma, velocity_gain=None, pivot=True, run_turn=None):
         """The heading alignment (alignment.rotate_yaw; ``pivot``: about the pinned antenna,
         else about the solution itself): from here on NAVIGATING."""
         s = self._state
@@ -1318,7 +1313,7 @@ class Navigator:
             self._end_slip_hold()
         s.nav, s.ekf.P = rotate_yaw(s.nav, s.ekf.P, self._space, delta, sigma,
                                     self.config.sigma_yaw_align,
-                                    s.pinned_antenna if pivot else None, velocity_gain)
+                                    s.pinned_antenna if pivot else None, velocity_gain, run_turn)
         # The last segment's acceleration turns with the solution: it moves the solution to
         # the epochs of the measurements that follow and is their time offsets' coefficient
         # (measurements.py, "td", "vd"); left as it was, a car's first velocity after a course
