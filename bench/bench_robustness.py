@@ -124,7 +124,10 @@ CELLS += [Cell("fix only 1 Hz", ("--gnss-rate", "1", "--no-gnss-vel")),
           # the turn-on gyro biases of a consumer unit, never measured at rest, tilt the INS
           # while it aligns on the move
           Cell("rolling start, consumer MEMS unit, fix + velocity",
-               ("--static", "0", "--imu-grade", "consumer_mems"))]
+               ("--static", "0", "--imu-grade", "consumer_mems")),
+          # the levelled x axis pitched with the road: the start's climb is the receiver's
+          Cell("rolling start up an 8 % grade, fix + velocity",
+               ("--static", "0", "--start-grade", "0.08"))]
 SHORT = [CELLS[0], CELLS[3], CELLS[10]]
 
 

@@ -224,6 +224,20 @@ def test_a_start_on_the_move_levelled_on_an_acceleration_starts_level():
                                atol=1e-12)
 
 
+def test_a_start_on_the_move_up_a_grade_climbs_as_the_receiver_says():
+    """At 10 m/s up an 8 % grade, levelled at a steady speed: the body x axis pitches with the
+    road, and the start climbs at the receiver's 0.8 m/s (it was held level: 8 sigma of the
+    start's 0.1 m/s)."""
+    grade = np.arctan(0.08)
+    f_b = 9.8 * np.array([np.sin(grade), 0.0, np.cos(grade)])  # gravity's share along x
+    levelling = al.Levelling().add(np.zeros((100, 3)), np.tile(f_b * 0.01, (100, 1)), 0.01)
+    st = al.levelled_state(levelling, 0.8, 0.1, 10.0, np.zeros(3), 9.97, 5.0, climb=0.8)
+    assert quat_to_euler(st.q_nb)[1] == pytest.approx(-grade)  # REP-103: nose up
+    x = quat_to_dcm(st.q_nb)[:, 0]
+    np.testing.assert_allclose(st.v_enu, np.append(9.97 * x[:2] / np.hypot(*x[:2]), 0.8),
+                               atol=1e-12)
+
+
 def test_the_start_couples_the_imus_place_to_an_uncertain_lever_arm():
     """The IMU starts at the first fix less C l: with the lever arm uncertain (consider blocks,
     true minus configured), its position errs by the start's own error plus C dl, so the

@@ -309,7 +309,7 @@ def take_static_gyro_bias(levelling, space, noise, P, estimates):
     return bias is not None
 
 
-def levelled_state(levelling, lat, lon, h, lever_b, speed, t):
+def levelled_state(levelling, lat, lon, h, lever_b, speed, t, climb=0.0):
     """The first solution: levelled with yaw 0 at the IMU below an antenna fix.
 
     Parameters
@@ -323,17 +323,19 @@ def levelled_state(levelling, lat, lon, h, lever_b, speed, t):
         Horizontal speed [m/s]: 0 at rest, the last GNSS speed in motion (NaN if none yet).
     t : float
         Time of the state [s].
+    climb : float
+        The receiver's vertical velocity in motion [m/s, up] (0 where it has none).
 
     Returns
     -------
     NavState
         At rest, or moving at speed along the body x axis (started in motion: no side-slip
-        assumed in the yaw-free frame), horizontally: the speed is the receiver's over the
-        ground, and the levelled x axis is pitched by whatever the vehicle's acceleration
-        left in the levelling (a simulated car speeding up at 0.7-1.4 m/s^2, levelled 5.7
-        deg off, started climbing at 1.1 m/s, took it for 160 mg of z accelerometer bias and
-        ran dead reckoning for most of 90 s: docs/results/product_path.md, "2026-12-07
-        (session 45)").
+        assumed in the yaw-free frame), horizontally, climbing as the receiver says: the
+        levelled x axis is pitched by the grade and by whatever the vehicle's acceleration
+        left in the levelling, so its pitch tells neither (a simulated car speeding up at
+        0.7-1.4 m/s^2, levelled 5.7 deg off, started climbing at 1.1 m/s along it, took it for
+        160 mg of z accelerometer bias and ran dead reckoning for most of 90 s:
+        docs/results/product_path.md, "2026-12-07 (session 45)").
     """
     q = levelling.attitude()
     lat, lon, h = lever_arm_position(lat, lon, h, q, -lever_b)
@@ -341,6 +343,7 @@ def levelled_state(levelling, lat, lon, h, lever_b, speed, t):
     if np.isfinite(speed) and speed > 0.0:
         x = quat_rotate(q, [1.0, 0.0, 0.0])
         v[:2] = speed * x[:2] / np.hypot(x[0], x[1])
+        v[2] = climb
     return NavState(lat, lon, h, v, q, t)
 
 

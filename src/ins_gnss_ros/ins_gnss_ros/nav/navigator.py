@@ -563,7 +563,7 @@ class Navigator:
                 s.next_sample = k
             if isinstance(m, GnssVelocity):
                 s.gnss_speed = float(np.hypot(*m.v_enu[:2]))
-                v = (epoch, tuple(np.asarray(m.v_enu, float)[:2].tolist()))
+                v = (epoch, tuple(np.asarray(m.v_enu, float).tolist()))
                 s.levelling_velocities = (s.levelling_velocities or (v,))[:1] + (v,)
             elif isinstance(m, (ZeroVelocity, Rest)):
                 s.t_rest = epoch
@@ -595,8 +595,10 @@ class Navigator:
                 # mean about the vertical, as bias.
                 s.turn_in_bias = taken and not at_rest
             s.pinned_antenna = (m.lat, m.lon, m.h)
+            climb = s.levelling_velocities[-1][1][2] if s.levelling_velocities and not at_rest \
+                else 0.0
             nav = levelled_state(s.levelling, m.lat, m.lon, m.h, self._lever,
-                                 0.0 if at_rest else s.gnss_speed, float(buf.time(k - 1)))
+                                 0.0 if at_rest else s.gnss_speed, float(buf.time(k - 1)), climb)
             s.started_on_x = bool(np.any(nav.v_enu))
             couple_tilt_to_accelerometers(P0, self._space, nav, s.levelling.mean_specific_force(),
                                           sigma_tilt)

@@ -91,7 +91,7 @@ class RunState:
         are in the alignment (alignment.fixes_with_course), not applied again.
     levelling_velocities : tuple or None
         The first and the last receiver velocity while levelling before the start: (epoch s,
-        (east, north) m/s) each.
+        (east, north, up) m/s) each.
     started_on_x : bool
         The filter started on the move, its velocity along the body x axis
         (alignment.levelled_state): the heading aligned against it takes that axis for the

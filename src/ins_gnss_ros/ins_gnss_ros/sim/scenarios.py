@@ -129,8 +129,13 @@ def _test_area(route: Route) -> None:
 ROLLING_START_SPEED = 10.0
 
 
+def _start_pitch(grade: float) -> float:
+    """Pitch (ROS: positive nose down) of a road of this grade (rise over run), rad."""
+    return -float(np.arctan(grade))
+
+
 def car(duration: float = 600.0, seed: int = 0, rate: float = 200.0, static: float = 30.0,
-        start=CAR_START, oversample: int = 4) -> Scenario:
+        start=CAR_START, oversample: int = 4, start_grade: float = 0.0) -> Scenario:
     """Seed 004 Lab 1 car trial: town driving, circles and figure-eights, stops, shading.
 
     Parameters
@@ -147,13 +152,18 @@ def car(duration: float = 600.0, seed: int = 0, rate: float = 200.0, static: flo
         Start position (rad, rad, m).
     oversample : int
         See :func:`ins_gnss_ros.sim.trajectory.generate`.
+    start_grade : float
+        Grade of the road at the start, rise over run (0.08: 8 % uphill), held until the
+        drive's first change of grade.
 
     Returns
     -------
     Scenario
     """
     rng = np.random.default_rng(seed)
-    route = Route(yaw0=rng.uniform(-np.pi, np.pi), speed0=0.0 if static > 0 else ROLLING_START_SPEED)
+    route = Route(yaw0=rng.uniform(-np.pi, np.pi),
+                  speed0=0.0 if static > 0 else ROLLING_START_SPEED,
+                  pitch0=_start_pitch(start_grade))
     route.hold(static)
     for _ in range(3):
         _town_block(route, rng)
@@ -166,12 +176,14 @@ def car(duration: float = 600.0, seed: int = 0, rate: float = 200.0, static: flo
 
 
 def robot(duration: float = 600.0, seed: int = 0, rate: float = 200.0, static: float = 30.0,
-          start=CAR_START, oversample: int = 4) -> Scenario:
+          start=CAR_START, oversample: int = 4, start_grade: float = 0.0) -> Scenario:
     """A wheeled ground robot: a standstill of ``static`` s (0: starting at a run's speed),
     then straight runs of 15-30 s, each at 0.5-1.5 m/s (reached at 0.5 m/s^2), joined by
-    left or right turns of 90 deg on a 3 m radius. Parameters as :func:`car`'s."""
+    left or right turns of 90 deg on a 3 m radius (the start's grade held throughout).
+    Parameters as :func:`car`'s."""
     rng = np.random.default_rng(seed)
-    route = Route(yaw0=rng.uniform(-np.pi, np.pi), speed0=0.0 if static > 0 else 1.0)
+    route = Route(yaw0=rng.uniform(-np.pi, np.pi), speed0=0.0 if static > 0 else 1.0,
+                  pitch0=_start_pitch(start_grade))
     route.hold(static)
     while route.t < duration:
         route.change_speed(rng.uniform(0.5, 1.5), 0.5).hold(rng.uniform(15.0, 30.0))

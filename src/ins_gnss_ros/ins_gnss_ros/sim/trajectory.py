@@ -128,13 +128,16 @@ class Route:
         Initial speed, m/s.
     ramp : float
         Default duration of yaw-rate transitions (turn entry and exit), s.
+    pitch0 : float
+        Initial pitch (ROS: positive nose down), rad: a route begun on a grade.
     """
 
-    def __init__(self, yaw0: float = 0.0, speed0: float = 0.0, ramp: float = 1.5):
+    def __init__(self, yaw0: float = 0.0, speed0: float = 0.0, ramp: float = 1.5,
+                 pitch0: float = 0.0):
         self.yaw0 = float(yaw0)
         self.speed = SmoothSteps(float(speed0))
         self.yaw_rate = SmoothSteps()
-        self.pitch = SmoothSteps()
+        self.pitch = SmoothSteps(float(pitch0))
         self.bank = SmoothSteps()
         self.ramp = float(ramp)
         self.t = 0.0

@@ -75,6 +75,8 @@ def _simulate_args(p):
                    "car on another drive: the same VEHICLE_SEED; default: an ideal sensor)")
     p.add_argument("--static", type=float, default=None, metavar="S",
                    help="car, robot: standstill before the drive, s (0: rolling start; default 30)")
+    p.add_argument("--start-grade", type=float, default=0.0, metavar="RISE/RUN",
+                   help="car, robot: the road's grade at the start (0.08: 8 %% uphill)")
     p.add_argument("--gnss-rate", type=float, default=SimOptions.gnss_rate, help="Hz")
     p.add_argument("--no-gnss-vel", action="store_true", help="fixes only, no gnss/vel")
     p.add_argument("--no-gnss-cov", action="store_true",
@@ -283,6 +285,7 @@ def cmd_simulate(args) -> int:
                                imu_rate=args.imu_rate, imu_stamp_jitter=args.imu_stamp_jitter,
                                imu_orientation_sigma=args.imu_orientation,
                                mag_iron=args.mag_iron, start_static=args.static,
+                               start_grade=args.start_grade,
                                gnss_rate=args.gnss_rate, gnss_velocity=not args.no_gnss_vel,
                                gnss_covariance=not args.no_gnss_cov,
                                gnss_sigma_h=args.gnss_sigma_h, gnss_sigma_v=args.gnss_sigma_v,

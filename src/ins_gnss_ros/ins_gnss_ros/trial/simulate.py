@@ -75,6 +75,9 @@ class SimOptions:
     start_static : float or None
         Car and robot scenarios: the standstill before the drive, s (0: a rolling start; None:
         the scenario's 30 s).
+    start_grade : float
+        Car and robot scenarios: the road's grade at the start, rise over run (0.08: 8 %
+        uphill).
     imu_orientation_sigma : float
         Write the IMU's own orientation into ``imu/data_raw`` (an AHRS), its yaw referred to
         magnetic north (the WMM declination) and off by a constant error of this 1-sigma plus
@@ -151,6 +154,7 @@ class SimOptions:
     imu_stamp_jitter: float = 0.0
     imu_orientation_sigma: float = 0.0
     start_static: float | None = None
+    start_grade: float = 0.0
     imu_topic: str = "data_raw"
     gnss_rate: float = 5.0
     gnss_velocity: bool = True
@@ -223,8 +227,11 @@ def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions
     # ones as they were.
     seeds = np.random.SeedSequence(seed).generate_state(6)
     start = {} if options.start_static is None else {"static": options.start_static}
+    if options.start_grade:
+        start["start_grade"] = options.start_grade
     if start and scenario not in ("car", "robot"):
-        raise ValueError("start_static is an option of the car and robot scenarios")
+        raise ValueError("start_static and start_grade are options of the car and robot "
+                         "scenarios")
     sc = scenarios.SCENARIOS[scenario](duration=duration, seed=seed,
                                        rate=trajectory_rate(options, scenario), **start)
     traj = sc.trajectory
