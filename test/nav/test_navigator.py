@@ -15,6 +15,7 @@ from ins_gnss_ros.nav.error_model import nav_error
 from ins_gnss_ros.nav.increments import SensorErrors
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
 from ins_gnss_ros.nav.measurement_types import ZeroVelocity
+from ins_gnss_ros.nav.measurements import GNSS_VEL_UP
 from ins_gnss_ros.nav.navigator import unknown_direction_var
 from ins_gnss_ros.nav.recording import published_covariance
 from ins_gnss_ros.nav.rotations import quat_angle_between, quat_to_dcm
@@ -346,6 +347,24 @@ def test_imu_memory_stays_bounded_without_a_fix_and_the_first_fix_levels_on_rece
     nav.add_imu(n * dt + dt, np.zeros(3), C_end.T @ [0.0, 0.0, g] * dt)
     assert nav.solution is not None
     np.testing.assert_allclose(quat_to_dcm(nav.solution.q_nb)[2], C_end[2], atol=1e-9)
+
+
+def test_a_vertical_velocity_gone_wrong_leaves_the_horizontal_rows_and_the_mode(sim):
+    """The receiver's vertical velocity 0.3 m/s off for 6 s: its row goes apart, refused and
+    then forced as a kind of its own (GNSS_VEL_UP), while the horizontal rows are taken and the
+    solution stays NAVIGATING (the whole velocity refused, then forced, left it
+    DEAD_RECKONING)."""
+    traj, imu, meas, clean = sim
+    climb = np.array([0.0, 0.0, 0.3])
+    faulty = [replace(m, v_enu=m.v_enu + climb) if isinstance(m, GnssVelocity) and
+              60.0 < m.t <= 66.0 else m for m in meas]
+    out = run(imu, faulty, config())
+    window = [u for u in out.updates if 60.0 < u.t <= 66.0]
+    horizontal = [u for u in window if u.name == "gnss_vel"]
+    up = [u for u in window if u.name == GNSS_VEL_UP]
+    assert len(horizontal) == 24 and all(u.accepted for u in horizontal)
+    assert not up[0].accepted and any(u.reason == "forced" for u in up)
+    assert np.all(out.mode[(out.t > 60.0) & (out.t <= 80.0)] == NAVIGATING)
 
 
 def test_dead_reckoning_mode_and_reset_on_time_jump(sim):

@@ -10,7 +10,7 @@ from ins_gnss_ros.nav.ekf import ErrorStateEKF, StateSpace
 from ins_gnss_ros.nav.error_model import make_layout
 from ins_gnss_ros.nav.imu_buffer import ImuBuffer
 from ins_gnss_ros.nav.integrity import Integrity
-from ins_gnss_ros.nav.measurements import Innovation
+from ins_gnss_ros.nav.measurements import GNSS_VEL_UP, Innovation
 from ins_gnss_ros.nav.navigator_config import NavigatorConfig
 from ins_gnss_ros.nav.rewind import Rewind, RunState
 from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405, filter_noise
@@ -106,7 +106,8 @@ def test_a_forced_kind_keeps_a_floor_that_decays_while_it_is_accepted():
     res = guard.update(ekf, SPACE, jump, 5.0, 2.0, lambda s, v: widened.append(v))
     assert res.reason == "forced" and res.accepted and len(widened) == 1
     floor = guard.floors["gnss_pos"]
-    assert floor.blocks == ["pos"] and floor.var[0] == 900.0
+    assert [(name, list(axes)) for name, axes in floor.blocks] == [("pos", [0, 1, 2])]
+    assert floor.var[0] == 900.0
     assert guard.degraded(5.0)
     var = guard.variances(SPACE)
     pos = SPACE["pos"]
@@ -121,3 +122,30 @@ def test_a_forced_kind_keeps_a_floor_that_decays_while_it_is_accepted():
     guard.rejected("gnss_pos", 16.0)  # rejected again: not confirmed for 10 s from then
     guard.accepted("gnss_pos")
     assert guard.degraded(17.0) and guard.degraded(25.9) and not guard.degraded(26.0)
+
+
+def test_the_vertical_velocity_forced_floors_its_own_axis_and_does_not_vouch():
+    """The receiver's vertical velocity, gated apart from its horizontal rows: forced, it
+    widens and floors the vertical velocity alone, and neither its rejections nor its floor
+    degrade the solution (integrity.NOT_VOUCHING); the horizontal rows' do."""
+    guard = Integrity(NavigatorConfig(noise=NOISE))
+    ekf = ErrorStateEKF(SPACE, NOISE, np.eye(SPACE.size) * 0.01)
+    H = np.zeros((3, SPACE.size))
+    H[:, SPACE["vel"]] = np.eye(3)
+    velocity = Innovation("gnss_vel", np.array([0.5, 0.0, 0.5]), H, np.eye(3) * 0.0025)
+    up, vel = velocity.rows([2], GNSS_VEL_UP), SPACE["vel"].start
+    for t in (1.0, 2.0, 3.0):
+        guard.rejected(GNSS_VEL_UP, t)
+    assert not guard.degraded(3.0)  # beyond suspect_time: a vouching kind would be
+    widened = []
+    res = guard.update(ekf, SPACE, up, 3.2, 1.0, lambda s, v: widened.append((s, v)))
+    assert res.reason == "forced" and len(widened) == 1
+    assert list(widened[0][0]) == [vel + 2] and list(widened[0][1]) == [0.25]
+    var = guard.variances(SPACE)
+    assert var[vel + 2] == 0.25 and not np.delete(var, vel + 2).any()
+    assert not guard.degraded(3.2)
+    ekf.take_correction()
+    horizontal = velocity.rows([0, 1])
+    assert guard.update(ekf, SPACE, horizontal, 3.4, 1.0, lambda s, v: None).reason == "forced"
+    assert np.array_equal(guard.variances(SPACE)[vel:vel + 3], [0.25, 0.0, 0.25])
+    assert guard.degraded(3.4)

@@ -30,6 +30,7 @@ from .heading_noise import HeadingNoise
 from .heading_turns import HeadingTurns
 from .imu_timing import ImuTimingCheck
 from .increments import BRIDGED, CONTIGUOUS, LOST, classify_gap, held_increments
+from .integrity import NOT_VOUCHING
 from .local_frame import to_map
 from .rotations import quat_to_dcm
 from .measurement_types import GnssFix, GnssVelocity, HeadingFix, HeadingRefuted, \
@@ -515,7 +516,7 @@ class Aiding:
     def note_updates(self, updates) -> None:
         """The navigator's update records since the last call (for :meth:`explain`)."""
         for u in updates:
-            if u.reason == "forced":
+            if u.reason == "forced" and u.name not in NOT_VOUCHING:
                 self.forced.add(u.name)
             if u.accepted:
                 self.last_accepted_t = max(self.last_accepted_t, u.t)

@@ -41,6 +41,15 @@ disagreement before an outage of the real car drive kept the solution DEAD_RECKO
 last 110 s of the drive, and the velocities forced after each 15 s outage (the INS drifts
 1.3 m/s in one with config/default.yaml) most of the time between outages.
 
+A kind in :data:`NOT_VOUCHING` is gated, forced and floored as any other, but neither its
+rejections nor its floor degrade the solution: the receiver's vertical velocity, updated apart
+from its horizontal one while it is :meth:`Integrity.troubled` (the INS's vertical channel is
+its least stable: a consumer unit's ran 0.2-0.5 m/s off under a sigma of 0.015 on a car
+speeding up with its pitch 1.3 deg off; the whole velocity refused, then forced, kept a
+simulated drive DEAD_RECKONING for 20 s while every fix was taken: docs/results/
+product_path.md, "2026-12-07 (session 46)"). The fixes still vouch for the height, and the
+floor is published.
+
 The solution is degraded too while an aiding kind keeps being rejected for `suspect_time` before
 it is forced: the other kinds may still be accepted (a GNSS clock jump shifts the velocities a
 little and the positions a lot), but the solution and the rejected kind disagree; and while the
@@ -55,10 +64,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .gating import chi2_gate, normalised_innovation
+from .measurements import GNSS_VEL_UP
 
 #: A kind absent for more than this many times max_reject_time ends its continuous rejection:
 #: a kind arriving at 0.5 Hz still continues one at the default 2 s.
 GAP_FACTOR = 2.0
+#: Kinds whose disagreement with the solution does not put it in doubt (module docstring).
+NOT_VOUCHING = frozenset({GNSS_VEL_UP})
 
 
 def rejection_start(span, epoch, max_reject_time):
@@ -80,8 +92,9 @@ class NoiseFloor:
         Floor variances, one per measurement component (measurement units squared).
     t : float
         Epoch of its last decay, s.
-    blocks : list of str
-        State blocks ("pos", "vel") the kind measures directly.
+    blocks : list of (str, ndarray)
+        State blocks ("pos", "vel") the kind measures directly, each with the axis of the
+        block each of the kind's components measures.
     r : float
         Largest variance of the kind's own noise at its last measurement.
     suspect : float
@@ -129,7 +142,7 @@ class Integrity:
             s.
         rejected_since : float or None
             Start of the kind's current continuous rejection (:func:`rejection_start`), s.
-        widen_prior : callable (slice, variances)
+        widen_prior : callable (indices, variances)
             Told of each widening of a state block by a forced update (the record's P-).
         held : array_like of int, optional
             States the update leaves as they are (:meth:`ErrorStateEKF.update`).
@@ -181,28 +194,31 @@ class Integrity:
         cfg = self.config
         ratio2 = cfg.degraded_ratio ** 2
         return any(np.max(f.var) > ratio2 * f.r and epoch - f.suspect < cfg.confirm_time
-                   for f in self.floors.values()) or any(
+                   for name, f in self.floors.items() if name not in NOT_VOUCHING) or any(
             epoch - first >= cfg.suspect_time and epoch - last <= cfg.suspect_time
-            for first, last in self.rejecting.values())
+            for name, (first, last) in self.rejecting.items() if name not in NOT_VOUCHING)
 
     def variances(self, space):
         """What the noise floors add to the diagonal of the covariance published, (n,): on the
         state blocks each forced kind measures directly, the floor it keeps."""
         var = np.zeros(space.size)
         for floor in self.floors.values():
-            for name in floor.blocks:
-                var[space[name]] += floor.variances(3)
+            for name, axes in floor.blocks:
+                var[space[name].start + axes] += floor.var
         return var
+
+    def troubled(self, ekf, innov):
+        """Whether innov's kind keeps a floor or is being rejected, or innov lies beyond its
+        gate as the filter stands (nothing is updated or recorded)."""
+        if innov.name in self.floors or innov.name in self.rejecting:
+            return True
+        prob = self.config.gate_prob
+        return prob is not None and not _within_gate(ekf, innov, prob)
 
     def _within_floor(self, ekf, innov, floor):
         """Beyond the gate of H P H^T + R, but within that of H P H^T + R + F (the floor)."""
-        nu = innov.z - innov.H @ ekf.x
-        S = innov.H @ ekf.P @ innov.H.T + innov.R
-        gate = chi2_gate(len(nu), self.config.gate_prob)
-        if normalised_innovation(nu, 0.5 * (S + S.T)) <= gate:
-            return False
-        S = S + np.diag(floor.variances(len(nu)))
-        return normalised_innovation(nu, 0.5 * (S + S.T)) <= gate
+        prob = self.config.gate_prob
+        return not _within_gate(ekf, innov, prob) and _within_gate(ekf, innov, prob, floor)
 
     def _force(self, ekf, space, innov, epoch, widen_prior):
         """Widen the blocks `innov` measures directly by its innovation and set its kind's
@@ -210,14 +226,30 @@ class Integrity:
         nu2 = (innov.z - innov.H @ ekf.x) ** 2
         blocks = []
         for name in ("pos", "vel"):
-            block = innov.H[:, space[name]]
-            if block.shape[0] == 3 and np.allclose(block, np.eye(3)):
-                s = space[name]
-                blocks.append(name)
-                ekf.P[s, s] += np.diag(nu2)
-                widen_prior(s, nu2)
+            axes = _measured_axes(innov.H[:, space[name]])
+            if axes is not None:
+                blocks.append((name, axes))
+                k = space[name].start + axes
+                ekf.P[k, k] += nu2
+                widen_prior(k, nu2)
         old = self.floors.get(innov.name)
         if old is not None:
             nu2 = np.maximum(nu2, old.variances(len(nu2)))
         self.floors[innov.name] = NoiseFloor(nu2, epoch, blocks,
                                              float(np.max(np.diag(innov.R))), epoch)
+
+
+def _within_gate(ekf, innov, prob, floor=None):
+    """Whether innov's NIS under H P H^T + R (+ the floor's variances) is within its gate."""
+    nu = innov.z - innov.H @ ekf.x
+    S = innov.H @ ekf.P @ innov.H.T + innov.R
+    if floor is not None:
+        S = S + np.diag(floor.variances(len(nu)))
+    return normalised_innovation(nu, 0.5 * (S + S.T)) <= chi2_gate(len(nu), prob)
+
+
+def _measured_axes(block):
+    """The axis each row of a measurement's H over a 3-axis state block measures directly (each
+    row one of the identity's, as a position or velocity in those axes), or None."""
+    axes = np.argmax(block, axis=1)
+    return axes if np.allclose(block, np.eye(block.shape[1])[axes]) else None

@@ -44,6 +44,13 @@ class Innovation:
     H: np.ndarray
     R: np.ndarray
 
+    def rows(self, index, name=None):
+        """These rows alone (their noise's covariance with the others dropped), as kind `name`
+        (default this one's)."""
+        index = np.asarray(index)
+        return Innovation(self.name if name is None else name, self.z[index], self.H[index],
+                          self.R[np.ix_(index, index)])
+
 
 _I3 = np.eye(3)
 
@@ -227,6 +234,11 @@ def gnss_velocity(space, state, v_enu, cov_enu, omega_ib_b, lever_b=np.zeros(3),
         H[:, space["vd"].start] = dzdt
     return Innovation("gnss_vel", pred - np.asarray(v_enu, float), H,
                       _with_stamp_noise(cov_enu, dzdt, stamp_sigma))
+
+
+#: Kind of the receiver velocity's vertical row, updated apart from its horizontal ones
+#: ("gnss_vel"): gated on its own, it does not vouch for the solution (integrity.NOT_VOUCHING).
+GNSS_VEL_UP = "gnss_vel_up"
 
 
 def azimuth_of_axis(q_nb, axis_b=(1.0, 0.0, 0.0)):

@@ -261,11 +261,13 @@ class Recorder:
         if self._record:
             self._out.set_last({"mode": mode})
 
-    def widen_prior(self, s, variances):
-        """Add `variances` to the block `s` (slice) of the current epoch's P-: process noise of
-        this epoch as far as the smoother is concerned."""
+    def widen_prior(self, index, variances):
+        """Add `variances` to the diagonal of the current epoch's P- at `index` (a slice or the
+        states' indices): process noise of this epoch as far as the smoother is concerned."""
         if self._record and self._store_covariance:
-            self._out.data["Pp"][self._out.n - 1][s, s] += np.diag(variances)
+            P = self._out.data["Pp"][self._out.n - 1]
+            k = np.arange(len(P))[index]
+            P[k, k] += variances
 
     # -- update results ----------------------------------------------------------------------
     @property
