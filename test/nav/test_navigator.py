@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from ins_gnss_ros.nav.earth import radii
-from ins_gnss_ros.nav.ekf import ExtraState
+from ins_gnss_ros.nav.ekf import ErrorStateEKF, ExtraState
 from ins_gnss_ros.nav.error_model import nav_error
 from ins_gnss_ros.nav.increments import SensorErrors
 from ins_gnss_ros.nav.lever_arm import lever_arm_position, lever_arm_velocity
@@ -18,7 +18,7 @@ from ins_gnss_ros.nav.measurement_types import ZeroVelocity
 from ins_gnss_ros.nav.measurements import GNSS_VEL_UP
 from ins_gnss_ros.nav.navigator import unknown_direction_var
 from ins_gnss_ros.nav.recording import published_covariance
-from ins_gnss_ros.nav.rotations import quat_angle_between, quat_to_dcm
+from ins_gnss_ros.nav.rotations import quat_angle_between, quat_from_euler, quat_to_dcm
 from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, \
     GnssVelocity, Navigator, NavigatorConfig, point_track
 from ins_gnss_ros.nav.sensor_errors import MEMS_ADIS16405, filter_noise
@@ -163,6 +163,30 @@ def test_a_start_from_rest_without_a_heading_publishes_what_the_unknown_yaw_does
     # e = (R - I) d + x with x P's own share: by Cauchy-Schwarz e'e / (1.5 d'd + x's variance)
     # stays below 4 / 1.5 (the bound above) plus x's own chi-square (2-D, 6.0 at 95 %)
     assert worst_published < 4.0 / 1.5 + 6.0
+
+
+def test_an_ins_velocity_run_off_the_body_axis_is_told_beyond_its_sigmas_and_the_side_slip():
+    """Aligning on the move, the INS velocity's course against the body x axis
+    (Navigator._velocity_off_x): told where it misses by more than DRIFT_SIGMAS of its own
+    covariance and the 3 deg side slip (0.1 m/s per axis at 10 m/s with the side slip: 3.05
+    deg, 9.2 deg at three sigmas), not within them, nor more than a quarter turn off
+    (reversing), nor for an INS slower than a share of the receiver's speed."""
+    nav = Navigator(config())
+    s, space = nav._state, nav._space
+    s.gnss_speed = 10.0
+    s.ekf = ErrorStateEKF(space, nav.config.noise, np.eye(space.size) * 0.01)
+
+    def off(course_deg, speed=10.0):
+        c = np.radians(course_deg)
+        s.nav = NavState(0.8, 0.1, 10.0, speed * np.array([np.cos(c), np.sin(c), 0.0]),
+                         quat_from_euler(0.0, 0.0, np.radians(30.0)), 0.0)
+        return np.degrees(nav._velocity_off_x(space["vel"]))
+
+    assert off(60.0) == pytest.approx(30.0)    # told
+    assert off(20.0) == pytest.approx(-10.0)   # told, the other way
+    assert off(38.0) == 0.0                    # 8 deg: within three sigmas
+    assert off(-70.0) == 0.0                   # 100 deg: reversing
+    assert off(60.0, speed=2.0) == 0.0         # the INS at a fifth of the receiver's speed
 
 
 def test_the_alignment_turns_the_solution_about_the_antenna_the_fixes_pinned():
