@@ -47,7 +47,8 @@ Integrity: a measurement kind rejected at the gate for 2 s is forced in with its
 admitted on both sides (the navigator's integrity logic); until the noise floor this leaves decays
 (``forced.*``), ``nav/status`` says ``MODE_DEAD_RECKONING`` (degraded: the solution is not
 confirmed by its aiding), the published covariances include the floor, and /diagnostics
-counts ``<kind> forced in: degraded until confirmed``.
+counts ``<kind> forced in: degraded until confirmed`` (for the receiver's vertical velocity,
+which does not degrade the solution, ``gnss_vel_up forced in: its floor published``).
 A gap in ``imu/delta`` of up to ``max_imu_gap_s`` is bridged by holding the rates of the
 increment after it, in increments of its length (as the ``strapdown`` node bridges it), with
 the process noise of ``imu_gap.*`` over the gap; GNSS epochs inside the gap are applied there.
@@ -73,6 +74,7 @@ from ..nav.aiding import Aiding, AidingPolicy, velocity_latency_summary
 from ..nav.error_model import LAYOUTS
 from ..nav.filter_config import PARAMS, STATUS_PERIOD_S, navigator_config
 from ..nav.frame_tree import FrameTree
+from ..nav.integrity import NOT_VOUCHING
 from ..nav.odom_frame import OdomTrack
 from ..nav.strapdown import NavState, apply_correction
 from ..nav.strapdown_sync import StrapdownSync
@@ -345,7 +347,9 @@ class EkfNode(EkfServices, NavNode):
             if not u.accepted and u.reason not in ("aligning",):
                 self.diag.count(f"{u.name} rejected: {u.reason}", log=False)
             elif u.reason == "forced":
-                self.diag.count(f"{u.name} forced in: degraded until confirmed")
+                self.diag.count(f"{u.name} forced in: " + (
+                    "its floor published" if u.name in NOT_VOUCHING
+                    else "degraded until confirmed"))
         self.aiding.note_updates(updates)
         mode = self.sync.mode(nav.mode)
         explanation = self.aiding.explain(t, imu_running=np.isfinite(self.aiding.last_increment_t))
