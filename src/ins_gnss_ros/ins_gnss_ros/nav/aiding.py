@@ -383,6 +383,7 @@ class Aiding:
         # epoch has come: _add_scatter's arguments); the latest gnss/vel (stamp s, east and
         # north m/s, horizontal variance per axis m^2/s^2).
         self._fix_scatter: dict[int, WhiteNoise] = {}
+        self._refuted_statuses: set[int] = set()  # whose fixes' covariance their scatter refuted
         self._last_second_difference = None
         self._pending_difference = None
         self._recent_velocities: deque = deque(maxlen=RECENT_VELOCITIES)
@@ -657,7 +658,11 @@ class Aiding:
         assumed = not covariance_known or _unknown(cov)
         reported_var = None if assumed else \
             max(0.5 * float(cov[0, 0] + cov[1, 1]), self.policy.position_sigma_floor ** 2)
-        if assumed or self._fix_covariance_refuted(status):
+        refuted = not assumed and self._fix_covariance_refuted(status)
+        first_refuted = refuted and status not in self._refuted_statuses
+        if refuted:
+            self._refuted_statuses.add(status)
+        if assumed or refuted:
             sigma = UNKNOWN_FIX_SIGMA[min(status, 2)]
             cov = np.diag([sigma ** 2, sigma ** 2, (2.0 * sigma) ** 2])
             why = "without covariance" if assumed else \
@@ -715,7 +720,8 @@ class Aiding:
                         log=False)
         self.navigator.add_measurement(GnssFix(t, lat, lon, h, cov, common_var,
                                                height_known=not no_altitude,
-                                               stamp_sigma=self._stamp_sigma("gnss/fix", t)))
+                                               stamp_sigma=self._stamp_sigma("gnss/fix", t),
+                                               refutes_covariance=first_refuted))
         if not on_test:
             self._course_velocity(t, lat, lon, h, cov)
         return self._seen("gnss/fix", t, True)

@@ -27,7 +27,11 @@ class GnssFix:
 
     ``stamp_sigma`` (s): the standard deviation of t about the epoch (plus the filter's latency
     estimate): a driver that stamps a message on its arrival passes on how much the receiver's
-    and the transport's latency vary, which moves the fix by the velocity times that error."""
+    and the transport's latency vary, which moves the fix by the velocity times that error.
+
+    ``refutes_covariance``: the first fix whose status' reported covariance the fixes' scatter
+    refuted (a driver's placeholder, nav/aiding.py), ``cov_enu`` the one now taken for them:
+    the position the fixes before it pinned with the placeholder is known no better."""
 
     t: float
     lat: float
@@ -37,6 +41,7 @@ class GnssFix:
     common_var: tuple[float, float] = (0.0, 0.0)
     height_known: bool = True
     stamp_sigma: float = 0.0
+    refutes_covariance: bool = False
 
 
 @dataclass(frozen=True)
