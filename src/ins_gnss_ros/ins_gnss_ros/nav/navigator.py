@@ -743,14 +743,14 @@ class Navigator:
 
     def _gnss_fix(self, m, st, epoch):
         s = self._state
-        if m.refutes_covariance:  # (whatever becomes of this fix: the others pinned it)
-            self._forget_position(m.cov_enu)
         if m.t <= s.t_fixes_aligned:
             self._refuse(m, epoch, "in the alignment")
             return
         if self._held_for_alignment(m, st, epoch):
             return
         self._fix_common_var = m.common_var
+        if m.refutes_covariance:
+            self._forget_position(m.cov_enu)
         v_ant = point_velocity(st.v_enu, st.q_nb, s.omega, self._lever, st.lat)
         innov = meas.gnss_position(self._space, st, m.lat, m.lon, m.h, m.cov_enu, self._lever,
                                    dzdt=v_ant, P=s.ekf.P, stamp_sigma=m.stamp_sigma)
