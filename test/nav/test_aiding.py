@@ -12,8 +12,9 @@ from ins_gnss_ros.nav.ekf import ExtraState
 from ins_gnss_ros.nav.earth import earth_rate_enu, normal_gravity
 from ins_gnss_ros.nav.filter_config import PARAMS, navigator_config
 from ins_gnss_ros.nav.imu_timing import Verdict
-from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, GnssFix, GnssVelocity, HeadingFix, \
-    PhaseDifferences, WheelOdometry, ZeroVelocity
+from ins_gnss_ros.nav import ALIGNING, DEAD_RECKONING, NAVIGATING, GnssFix, GnssVelocity, \
+    HeadingFix, PhaseDifferences, WheelOdometry, ZeroVelocity
+from ins_gnss_ros.nav.measurements import position_residual_enu
 from ins_gnss_ros.nav.navigator import Navigator
 from ins_gnss_ros.nav.recording import published_covariance
 from ins_gnss_ros.nav.rotations import quat_to_euler
@@ -597,6 +598,34 @@ def test_a_start_on_the_move_without_velocities_takes_the_acceleration_as_unknow
     _, pitch, _ = quat_to_euler(nav.solution.q_nb)
     assert abs(pitch) == pytest.approx(ACCEL / G, rel=0.05)
     assert abs(pitch) < 2.0 * sigma[1]
+
+
+def test_an_aircraft_started_on_the_move_with_fixes_alone_restarts_at_their_course():
+    """An aircraft flying east at 190 m/s when the data begin, fixes alone (0.5 m at 5 Hz): the
+    INS starts at zero velocity with a moving vehicle's 30 m/s sigma, which kept the standing
+    INS's velocity a direction to align against (sigma under 0.3 of the course's speed); the
+    course turned the heading but left the velocity, the course's fixes 300 m off were gated,
+    forced in later, and the gyros' biases took up the miss (the simulated aircraft: heading
+    110 deg RMS, 85 m; docs/results/product_path.md, "2026-12-07 (session 47)"). An INS that
+    slow restarts at the course, its position as far from the fixes as it ran behind them."""
+    nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_uncalibrated"})))
+    front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
+    rng = np.random.default_rng(3)
+    lat0, lon0, dt, speed = 59.9, 30.3, 0.01, 190.0
+    for k in range(1, 1501):
+        t = k * dt
+        front.increment(t, np.zeros(3), np.array([0.0, 0.0, G]) * dt, dt)
+        if k % 20 == 0:
+            e, n = np.array([speed * t, 0.0]) + 0.5 * rng.standard_normal(2)
+            front.fix(t, lat0 + n / M_PER_DEG, lon0 + e / (M_PER_DEG * np.cos(np.radians(lat0))),
+                      10.0, np.diag([0.25, 0.25, 1.0]), 0, covariance_known=True)
+    assert nav.mode == NAVIGATING
+    np.testing.assert_allclose(nav.solution.v_enu, [speed, 0.0, 0.0], atol=1.0)
+    off = position_residual_enu(nav.solution.lat, nav.solution.lon, nav.solution.h,
+                                np.radians(lat0), np.radians(lon0 + speed * nav.solution.t / (
+                                    M_PER_DEG * np.cos(np.radians(lat0)))), 10.0)
+    pos = nav.space["pos"]
+    assert np.all(np.abs(off[:2]) < 3.0 * np.sqrt(np.diag(nav.covariance())[pos][:2])), off
 
 
 def test_an_ins_aligning_on_the_move_is_kept_level_on_gravity(monkeypatch):

@@ -795,9 +795,11 @@ class Navigator:
             vel = self._space["vel"]
             v, sigma_ins = np.asarray(m.v_enu, float), np.sqrt(s.ekf.P[vel.start, vel.start])
             # The INS ran unaided too long (a start on the move without a receiver speed) for
-            # its velocity to keep a direction, or its velocity ran off the body x axis
-            # (_velocity_off_x): the body x axis takes the course, and the INS that velocity.
-            restart = sigma_ins >= UNINFORMED_VELOCITY * s.gnss_speed
+            # its velocity to keep a direction, or too slow to have one (the motion started
+            # before the filter), or its velocity ran off the body x axis (_velocity_off_x):
+            # the body x axis takes the course, and the INS that velocity.
+            too_slow = np.hypot(*s.nav.v_enu[:2]) <= MIN_INS_SPEED_SHARE * s.gnss_speed
+            restart = sigma_ins >= UNINFORMED_VELOCITY * s.gnss_speed or too_slow
             drift = 0.0 if restart else self._velocity_off_x(vel)
             restart = restart or drift != 0.0
             if restart:
@@ -823,6 +825,15 @@ class Navigator:
                 # more once the heading is known: nothing checks it there)
                 s.course_check = (((epoch, v[:2], s.nav.v_enu[:2].copy()),), np.zeros(3))
             if m.fixes:
+                if too_slow:
+                    # The position ran from the start at a speed that was not the vehicle's:
+                    # as far from the course's last fix as that left it, at least (an
+                    # aircraft started at 190 m/s with fixes alone, 30 m/s sigma: 300 m
+                    # behind them, the fixes gated; docs/results/product_path.md,
+                    # "2026-12-07 (session 47)").
+                    last, here = m.fixes[-1][0], extrapolate(s.nav, epoch - s.nav.t, s.a_enu)
+                    self._forget_position(np.diag(meas.position_residual_enu(
+                        here.lat, here.lon, here.h, last.lat, last.lon, last.h) ** 2))
                 self._fixes_of_course(m, gain, epoch)
                 return
             if restart:
