@@ -127,7 +127,13 @@ CELLS += [Cell("fix only 1 Hz", ("--gnss-rate", "1", "--no-gnss-vel")),
                ("--static", "0", "--imu-grade", "consumer_mems")),
           # the levelled x axis pitched with the road: the start's climb is the receiver's
           Cell("rolling start up an 8 % grade, fix + velocity",
-               ("--static", "0", "--start-grade", "0.08"))]
+               ("--static", "0", "--start-grade", "0.08")),
+          # started in flight at 100-200 m/s: the INS standing at the start is far from the
+          # course it aligns on
+          Cell("aircraft started in flight, fix only 5 Hz", ("--no-gnss-vel",),
+               scenario="aircraft"),
+          # under way in waves: the IMU still by blocks between the waves
+          Cell("vessel under way in waves, fix + velocity", (), scenario="sea")]
 SHORT = [CELLS[0], CELLS[3], CELLS[10]]
 
 

@@ -762,6 +762,33 @@ def test_a_noisy_receiver_s_velocity_at_rest_neither_aligns_nor_holds_the_fixes(
     assert len(taken) > 120 and len(held) <= 3, held
 
 
+@pytest.mark.parametrize("speed, aligned", [(10.0, True), (2.0, False)])
+def test_a_course_beyond_any_receiver_s_noise_aligns_while_the_imu_is_still(speed, aligned):
+    """A vehicle under way east at a steady speed when the data begin (its IMU still by blocks:
+    a vessel between waves), 0.5 m fixes and 0.05 m/s velocities at 5 Hz: at 10 m/s the first
+    velocity after the start (1.2 s) aligns the heading, its course known beyond any receiver's
+    noise (RECEIVER_NOISE_BOUND), where it waited for the receiver's noise measured there (2.0
+    s; a simulated vessel in waves, its IMU still by blocks, 12 s unaided:
+    docs/results/product_path.md, "2026-12-07 (session 47)"). At 2 m/s such noise could be the
+    course: the heading waits for the noise measured (1.4 s)."""
+    nav = Navigator(navigator_config(resolve(PARAMS, {})))
+    front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
+    rng = np.random.default_rng(7)
+    lat0, lon0 = 59.9, 30.3
+    for k in range(1, 7):  # 1.2 s
+        t = k / 5.0
+        still_imu(front, t - 0.2, t, np.zeros(3), seed=k)
+        e, n = speed * t + 0.5 * rng.standard_normal(), 0.5 * rng.standard_normal()
+        front.fix(t, lat0 + n / M_PER_DEG, lon0 + e / (M_PER_DEG * np.cos(np.radians(lat0))),
+                  10.0, np.diag([0.25, 0.25, 1.0]), 0, covariance_known=True)
+        front.velocity(t, np.array([speed, 0.0, 0.0]) + 0.05 * rng.standard_normal(3),
+                       np.eye(3) * 0.05 ** 2)
+    assert nav.heading_known == aligned
+    if aligned:
+        yaw = nav.space["att"].stop - 1
+        assert abs(quat_to_euler(nav.solution.q_nb)[2]) < 3.0 * np.sqrt(nav.covariance()[yaw, yaw])
+
+
 def test_diagnostics_say_the_first_fixes_wait_for_the_imu():
     nav = Navigator(navigator_config(resolve(PARAMS, {}), record=False))
     front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)

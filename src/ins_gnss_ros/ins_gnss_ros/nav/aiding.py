@@ -71,6 +71,11 @@ SHARE_TIME_CONSTANT = 2.0
 #: taken instead (RestDetector.velocity_noise): taken at 0.2 m/s, a receiver scattering 0.3
 #: m/s at rest aligned the heading on its noise in two of five simulated standstills.
 UNKNOWN_VELOCITY_SIGMA = 0.2
+#: Velocity noise per horizontal axis no receiver's reaches, m/s: five times the conservative
+#: end above, three times the robustness matrix's noisiest receiver (0.3 m/s). A course known
+#: beyond it (alignment.course_is_known: from 5 m/s) is motion, whatever the receiver's noise
+#: where the IMU is still.
+RECEIVER_NOISE_BOUND = 1.0
 #: A receiver's speed tells rest by the navigator's static_speed when its reported sigma per
 #: horizontal axis is at most this fraction of static_speed: a standing vehicle's speed then
 #: passes static_speed by noise on at most a third of the epochs (exp(-1 / (2 f^2)) = 1/3). A
@@ -908,10 +913,12 @@ class Aiding:
         self._speed = (math.hypot(v_enu[0], v_enu[1]), sigma)
         # While the IMU is still (rest, or steady straight motion; its still runs restart as
         # the block means drift, hence the hold) a speed may be noise with a random course:
-        # the heading is aligned on it only once the receiver's noise is measured there and
-        # the course is known beyond it.
-        aligns = t - self._rest.still_until > REST_HOLD or \
-            (not math.isnan(scatter) and course_is_known(v_enu, cov))
+        # the heading is aligned on it only once the course is known beyond the receiver's
+        # noise measured there, or, until it is, beyond any receiver's. A vessel under way
+        # at 10 m/s in waves, its IMU still by blocks, waited 12 s unaided for the noise
+        # (docs/results/product_path.md, "2026-12-07 (session 47)").
+        aligns = t - self._rest.still_until > REST_HOLD or course_is_known(
+            v_enu, _floored(cov, RECEIVER_NOISE_BOUND) if math.isnan(scatter) else cov)
         cov = _floored(cov, self.policy.velocity_sigma_floor)
         self._recent_velocities.append((t, np.array(v_enu[:2], float),
                                         0.5 * float(cov[0, 0] + cov[1, 1])))
