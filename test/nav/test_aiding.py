@@ -606,7 +606,7 @@ def test_an_aircraft_started_on_the_move_with_fixes_alone_restarts_at_their_cour
     INS's velocity a direction to align against (sigma under 0.3 of the course's speed); the
     course turned the heading but left the velocity, the course's fixes 300 m off were gated,
     forced in later, and the gyros' biases took up the miss (the simulated aircraft: heading
-    110 deg RMS, 85 m; docs/results/product_path.md, "2026-12-07 (session 47)"). An INS that
+    113 deg RMS, 85 m; docs/results/product_path.md, "2026-12-07 (session 47)"). An INS that
     slow restarts at the course, its position as far from the fixes as it ran behind them."""
     nav = Navigator(navigator_config(resolve(PARAMS, {"imu_grade": "mems_uncalibrated"})))
     front = Aiding(nav, AidingPolicy(), lambda text, log=True: None)
