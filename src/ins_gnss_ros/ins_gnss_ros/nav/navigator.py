@@ -114,7 +114,10 @@ def _view(part, name, doc):
 #: Time constant of the rate in the GNSS velocity's lever-arm consider columns, s: the
 #: segments' gyro noise averaged down (at rest it would pass for rotation that tells the lever
 #: arm: a simulated car grew sure of its IMU's height, 0.2 m sigma for a 1.6 m error), a ship's
-#: roll of several seconds kept.
+#: roll of several seconds kept. Smoothed twice with the lag taken out (Brown's double
+#: exponential smoothing): smoothed once, the rate lagged a hull's roll by about this, 20 deg of
+#: an 8 s wave, and the antenna's unknown height pulled a simulated vessel's tilt (attitude NEES
+#: 27 -> 9; docs/results/product_path.md, "2026-12-07 (session 47)").
 LEVER_RATE_TAU = 0.5
 
 
@@ -643,9 +646,10 @@ class Navigator:
         self._recorder.samples(rows[0], track)
         if self._space.lever_arm:
             # the GNSS velocity's lever-arm consider columns take a smoothed rate
-            # (measurements.py)
-            s.omega_smooth = s.omega_smooth - np.expm1(-s.omega_time / LEVER_RATE_TAU) * (
-                s.omega - s.omega_smooth)
+            # (measurements.py, LEVER_RATE_TAU)
+            decay = np.expm1(-s.omega_time / LEVER_RATE_TAU)
+            s.omega_smooth = s.omega_smooth - decay * (s.omega - s.omega_smooth)
+            s.omega_smooth2 = s.omega_smooth2 - decay * (s.omega_smooth - s.omega_smooth2)
         if at_rest:
             # The ZARU averages the gyros over all of the rest since the last one (_zero_rate),
             # as measured: the estimates may move before it.
@@ -844,7 +848,8 @@ class Navigator:
         def innovation(st):
             return meas.gnss_velocity(self._space, st, m.v_enu, m.cov_enu, s.omega, self._lever,
                                       dzdt=s.a_enu, latency=s.estimates.get("vd", (0.0,))[0],
-                                      lever_rate=s.omega_smooth, stamp_sigma=m.stamp_sigma)
+                                      lever_rate=2.0 * s.omega_smooth - s.omega_smooth2,
+                                      stamp_sigma=m.stamp_sigma)
         innov = innovation(st)
         # The vertical row goes apart, after the horizontal ones and as a kind of its own
         # (integrity.NOT_VOUCHING), while it is beyond its own gate or its kind is forced or

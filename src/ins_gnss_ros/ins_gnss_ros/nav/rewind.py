@@ -69,8 +69,10 @@ class RunState:
         Mean compensated angular rate of the last segment, body FLU, rad/s.
     omega_time : float
         Length of that segment.
-    omega_smooth : (3,) ndarray
-        That rate smoothed over ``LEVER_RATE_TAU`` s of segments (navigator.py), rad/s.
+    omega_smooth, omega_smooth2 : (3,) ndarray
+        That rate smoothed over ``LEVER_RATE_TAU`` s of segments (navigator.py), and that
+        smoothed again, rad/s: 2 omega_smooth - omega_smooth2 follows the rate without the
+        smoothing's lag (Brown's double exponential smoothing).
     rest_dtheta, rest_time : (3,) ndarray, float
         The gyros' angle increments (as measured, before the running estimates' compensation)
         summed over the segments at rest since the last ZARU, rad, and their length, s.
@@ -135,6 +137,7 @@ class RunState:
     omega: np.ndarray = field(default_factory=lambda: np.zeros(3))
     omega_time: float = 1.0
     omega_smooth: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    omega_smooth2: np.ndarray = field(default_factory=lambda: np.zeros(3))
     rest_dtheta: np.ndarray = field(default_factory=lambda: np.zeros(3))
     rest_time: float = 0.0
     turn: np.ndarray = field(default_factory=lambda: np.zeros(3))
