@@ -40,6 +40,15 @@ import pytest
 REPO = Path(__file__).resolve().parents[2]
 
 
+def _cell(cell, seed):
+    """The bench's judgement of one matrix cell, 60 s on one seed."""
+    run = subprocess.run([sys.executable, str(REPO / "bench" / "bench_robustness.py"), "--json",
+                          "--duration", "60", "--cells", str(cell), "--seeds", str(seed)],
+                         capture_output=True, text=True, cwd=REPO, timeout=600)
+    assert run.returncode == 0, run.stderr[-2000:]
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
 @pytest.mark.parametrize("cell, align_s, ratio, seed", [
     (0, 60.0, 0.5, 3), (3, 60.0, 0.5, 3), (17, 5.0, 0.8, 3), (24, 60.0, 0.5, 3),
     (25, 60.0, 0.8, 3), (25, 60.0, 0.8, 1), (26, 60.0, 0.8, 3), (27, 60.0, 0.8, 3), (13, 60.0, 2.0, 6),
@@ -47,11 +56,7 @@ REPO = Path(__file__).resolve().parents[2]
     (16, 30.0, 0.8, 20), (31, 30.0, 0.8, 0), (34, 60.0, 0.5, 5), (35, 30.0, 0.5, 1),
     (37, 30.0, 0.8, 1)])
 def test_default_profile_navigates_a_simulated_drive(cell, align_s, ratio, seed):
-    run = subprocess.run([sys.executable, str(REPO / "bench" / "bench_robustness.py"), "--json",
-                          "--duration", "60", "--cells", str(cell), "--seeds", str(seed)],
-                         capture_output=True, text=True, cwd=REPO, timeout=600)
-    assert run.returncode == 0, run.stderr[-2000:]
-    result = json.loads(run.stdout.strip().splitlines()[-1])
+    result = _cell(cell, seed)
     assert result["align_s"] <= align_s, result
     assert result["ratio"] <= ratio, result
     assert result["valid_early"] == 0 and result["valid_beyond_5_sigma"] == 0, result
@@ -65,11 +70,7 @@ def test_a_consumer_unit_s_tilt_is_as_certain_as_it_says():
     to 0.2 deg while it was 2 deg off (attitude NEES 88 over this minute, 248 over 90 s). With
     those two cross-axis terms as states (error_model.LAYOUTS "17"): 3.4
     (docs/results/product_path.md, "2026-12-07 (session 40)")."""
-    run = subprocess.run([sys.executable, str(REPO / "bench" / "bench_robustness.py"), "--json",
-                          "--duration", "60", "--cells", "6", "--seeds", "3"],
-                         capture_output=True, text=True, cwd=REPO, timeout=600)
-    assert run.returncode == 0, run.stderr[-2000:]
-    result = json.loads(run.stdout.strip().splitlines()[-1])
+    result = _cell(6, 3)
     assert result["attitude_nees"] < 10.0, result
 
 
@@ -81,11 +82,7 @@ def test_a_vessel_s_tilt_is_as_certain_as_it_says():
     the lag (navigator.LEVER_RATE_TAU): 3.5. The vessel waited 9 s for its heading before a
     course known beyond any receiver's noise aligned it while the IMU is still
     (docs/results/product_path.md, "2026-12-07 (session 47)")."""
-    run = subprocess.run([sys.executable, str(REPO / "bench" / "bench_robustness.py"), "--json",
-                          "--duration", "60", "--cells", "38", "--seeds", "4"],
-                         capture_output=True, text=True, cwd=REPO, timeout=600)
-    assert run.returncode == 0, run.stderr[-2000:]
-    result = json.loads(run.stdout.strip().splitlines()[-1])
+    result = _cell(38, 4)
     assert result["align_s"] <= 5.0 and result["ratio"] <= 0.5, result
     assert result["valid_early"] == 0 and result["valid_beyond_5_sigma"] == 0, result
     assert result["attitude_nees"] < 6.0, result
@@ -99,11 +96,7 @@ def test_a_start_on_the_move_while_speeding_up_navigates_from_its_alignment():
     velocities and published 54 valid fixes of 586 (attitude NEES 33). The speed is now put
     over the ground (alignment.levelled_state; docs/results/product_path.md, "2026-12-07
     (session 45)")."""
-    run = subprocess.run([sys.executable, str(REPO / "bench" / "bench_robustness.py"), "--json",
-                          "--duration", "60", "--cells", "15", "--seeds", "5"],
-                         capture_output=True, text=True, cwd=REPO, timeout=600)
-    assert run.returncode == 0, run.stderr[-2000:]
-    result = json.loads(run.stdout.strip().splitlines()[-1])
+    result = _cell(15, 5)
     assert result["align_s"] <= 5.0 and result["ratio"] <= 0.5, result
     assert result["valid_early"] == 0 and result["valid_beyond_5_sigma"] == 0, result
     assert result["valid_fixes"] >= 0.95 * 10.0 * (60.0 - result["align_s"]), result
@@ -117,11 +110,7 @@ def test_a_consumer_unit_s_vertical_velocity_gone_off_leaves_the_solution_naviga
     DEAD_RECKONING for 20 s with every fix taken (411 valid fixes of 586 over this minute). The
     vertical row now goes apart while it is beyond its own gate, and does not vouch
     (integrity.NOT_VOUCHING; docs/results/product_path.md, "2026-12-07 (session 46)")."""
-    run = subprocess.run([sys.executable, str(REPO / "bench" / "bench_robustness.py"), "--json",
-                          "--duration", "60", "--cells", "35", "--seeds", "4"],
-                         capture_output=True, text=True, cwd=REPO, timeout=600)
-    assert run.returncode == 0, run.stderr[-2000:]
-    result = json.loads(run.stdout.strip().splitlines()[-1])
+    result = _cell(35, 4)
     assert result["valid_early"] == 0 and result["valid_beyond_5_sigma"] == 0, result
     assert result["valid_fixes"] >= 0.95 * 10.0 * (60.0 - result["align_s"]), result
 
