@@ -984,19 +984,18 @@ class Navigator:
     def _velocity_off_x(self, vel):
         """The angle (rad) by which the INS velocity's course, aligning on the move, has turned
         away from the body x axis beyond what its covariance and a forward-moving vehicle's
-        side slip allow (DRIFT_SIGMAS of the two), else 0 (also for an INS too slow to
-        compare, alignment.MIN_INS_SPEED_SHARE): the body axis is the better heading then. An
-        INS that runs unaided tilts by what its gyros' biases leave, and its velocity turns
-        with the tilt's share of gravity; the linearised covariance misses that when a bias
-        lies sigmas out (a simulated consumer unit's 12.8 deg/s x gyro bias, 2.6 sigma:
-        its velocity 30 deg off the body axis after 3.6 s at a sigma of 7.8, the heading
-        aligned on it ran away at 11 deg/s: docs/results/product_path.md, "2026-12-07 (session
-        45)"). More than a quarter turn off, the vehicle reverses (or the IMU is mounted
-        backwards): the velocity is the heading's, as ever."""
+        side slip allow (DRIFT_SIGMAS of the two), else 0: the body axis is the better heading
+        then (an INS too slow to compare, alignment.MIN_INS_SPEED_SHARE, the caller restarts
+        at the course before asking). An INS that runs unaided tilts by what its gyros' biases
+        leave, and its velocity turns with the tilt's share of gravity; the linearised
+        covariance misses that when a bias lies sigmas out (a simulated consumer unit's 12.8
+        deg/s x gyro bias, 2.6 sigma: its velocity 30 deg off the body axis after 3.6 s at a
+        sigma of 7.8, the heading aligned on it ran away at 11 deg/s:
+        docs/results/product_path.md, "2026-12-07 (session 45)"). More than a quarter turn
+        off, the vehicle reverses (or the IMU is mounted backwards): the velocity is the
+        heading's, as ever."""
         s = self._state
         v = s.nav.v_enu
-        if np.hypot(v[0], v[1]) <= MIN_INS_SPEED_SHARE * s.gnss_speed:
-            return 0.0
         drift = wrap_pi(np.arctan2(v[1], v[0]) - yaw_of_x(s.nav.q_nb))
         across = course_gradient(v)
         var = across @ s.ekf.P[vel, vel] @ across + SIDE_SLIP_SIGMA ** 2
