@@ -140,6 +140,21 @@ def test_unknown_direction_var_covers_a_vector_turned_by_any_yaw():
     assert np.max(np.hypot(*err.T)) / np.sqrt(unknown_direction_var(5.0)) <= np.sqrt(4 / 1.5)
 
 
+def test_an_unmeasured_lever_arm_is_published_turned_into_the_map():
+    # NavigatorConfig.lever_published_var: the IMU lies C l from the antenna the fixes place,
+    # l known to 0.5 m along the body x axis and 0.2 m across it; headed north (yaw 90 deg
+    # from east), the x axis's variance is the north's and the y axis's the east's, and the
+    # filter's own P is left alone.
+    nav = Navigator(config(lever_published_var=np.array([0.25, 0.04, 0.0])))
+    s, space = nav._state, nav._space
+    s.nav = NavState(0.8, 0.1, 10.0, np.zeros(3), quat_from_euler(0.0, 0.0, np.pi / 2), 0.0)
+    s.heading_known, s.heading_by = True, None
+    var = nav._published_var()
+    east = space["pos"].start
+    np.testing.assert_allclose(var[east:east + 3], [0.04, 0.25, 0.0], atol=1e-12)
+    assert not np.delete(var, np.arange(east, east + 3)).any()
+
+
 def test_a_start_from_rest_without_a_heading_publishes_what_the_unknown_yaw_does():
     # Fixes only, at rest for 15 s, then driving: the fixes pin the antenna (the IMU is off by
     # the unknown turn of the lever arm) and are refused in motion while aligning, so the INS

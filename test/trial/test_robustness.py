@@ -25,8 +25,9 @@ position may hide: a consumer unit's car, whose tilt must be as certain as its c
 a slow consumer robot's heading; one a start on the move while the car speeds up, which must
 navigate (valid fixes) from its alignment on with an honest attitude, and one a consumer unit's
 start on the move whose vertical velocity runs off, which must navigate all the same. An
-aircraft started in flight with fixes alone must navigate as a car does, and a vessel's tilt in
-waves, its antenna's height unknown, must be as certain as it says.
+aircraft started in flight with fixes alone must navigate as a car does, a vessel's tilt in
+waves, its antenna's height unknown, must be as certain as it says, and a car whose antenna lies
+ahead of and beside the IMU, which default.yaml does not know, must say so in its covariance.
 """
 from __future__ import annotations
 
@@ -86,6 +87,18 @@ def test_a_vessel_s_tilt_is_as_certain_as_it_says():
     assert result["align_s"] <= 5.0 and result["ratio"] <= 0.5, result
     assert result["valid_early"] == 0 and result["valid_beyond_5_sigma"] == 0, result
     assert result["attitude_nees"] < 6.0, result
+
+
+def test_an_antenna_offset_nobody_measured_is_in_the_published_covariance():
+    """A car whose antenna lies 0.8 m ahead of and 0.4 m left of the IMU (cell 39), which
+    default.yaml does not know: its fixes place the antenna, the IMU's position is 0.9 m off
+    whatever the filter does, and every valid fix was beyond 5 sigma of a published
+    covariance of centimetres (581 of 581 over 90 s). The offset's uncertainty is now in the
+    published covariance (lever_arm_published_sigma_m; docs/results/product_path.md,
+    "2026-12-08 (session 48)")."""
+    result = _cell(39, 3)
+    assert result["valid_early"] == 0 and result["valid_beyond_5_sigma"] == 0, result
+    assert result["valid_fixes"] >= 0.95 * 10.0 * (60.0 - result["align_s"]), result
 
 
 def test_a_start_on_the_move_while_speeding_up_navigates_from_its_alignment():

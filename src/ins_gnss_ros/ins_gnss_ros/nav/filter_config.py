@@ -43,6 +43,10 @@ PARAMS = (
     Param("lever_arm_sigma_m", [0.0, 0.0, 0.0],
           "uncertainty of lever_arm per axis (FLU), m, carried in the covariance and never "
           "estimated (a consider state; all 0: the lever arm is exact)", 0.0, 100.0, length=3),
+    Param("lever_arm_published_sigma_m", [0.0, 0.0, 0.0],
+          "uncertainty of lever_arm per axis (FLU), m, added to the published position "
+          "covariance only (an installation nobody measured; a consider state, "
+          "lever_arm_sigma_m, weighs the fixes by it too)", 0.0, 100.0, length=3),
     Param("gate_probability", 0.9999, "chi-square gate probability of every update", 0.5, 1.0),
     Param("covariance_interval_s", 0.1, "covariance propagation interval, s", 0.005, 1.0),
     Param("gnss.position_sigma_floor_m", 0.02, "floor of the GNSS position sigma per axis, m",
@@ -242,6 +246,7 @@ def navigator_config(p: dict, record: bool = False) -> NavigatorConfig:
     return NavigatorConfig(
         noise=noise_model(p),
         layout=p["layout"], extras=extras, lever_arm_b=np.array(p["lever_arm"], float),
+        lever_published_var=np.square(np.array(p["lever_arm_published_sigma_m"], float)),
         cov_interval=p["covariance_interval_s"], gate_prob=p["gate_probability"],
         sigma_pos0=p["init.position_sigma_m"], sigma_vel0=p["init.velocity_sigma_mps"],
         sigma_tilt0=np.radians(p["init.tilt_sigma_deg"]),

@@ -423,20 +423,31 @@ class Navigator:
         forced measurement kinds (integrity.py) and, on the position, the error common to the
         fixes the filter follows (GnssFix.common_var: the filter's position is relative to
         them), the part of an uncertain lever arm's offset P does not carry
-        (:meth:`_lever_offset_var`) and, until the heading is aligned, UNKNOWN_YAW_VAR on the
+        (:meth:`_lever_offset_var`) and an unmeasured one's (NavigatorConfig.
+        lever_published_var) and, until the heading is aligned, UNKNOWN_YAW_VAR on the
         yaw and what that unknown yaw does to the horizontal velocity and position (the IMU's
         offset from the antenna the fixes pinned: :func:`unknown_direction_var`); the latter
         also while a heading source's alignment waits for the motion to confirm it (its
         heading may be none of the body's: _check_heading_on_course)."""
         aligned = self._state.heading_known
         confirmed = aligned and self._state.heading_by is None
+        unmeasured = self.config.lever_published_var
         if not self._integrity.floors and not any(self._fix_common_var) and confirmed and \
-                not self._space.lever_arm:
+                not self._space.lever_arm and not unmeasured.any():
             return self._no_var  # the usual case, asked at every epoch and update
         var = self._integrity.variances(self._space)
         east = self._space["pos"].start
         if self._space.lever_arm:
             var[east:east + 3] += self._lever_offset_var()
+        if unmeasured.any():
+            # The fixes place the antenna, and the IMU lies C l from it: an offset nobody
+            # measured is the published position's whole error there, however many fixes
+            # came. Left out of the filter's gains: as consider states (lever_arm_sigma_m)
+            # 0.5 m per horizontal axis doubled the horizontal error of the robustness
+            # matrix's cars, whose antenna is above the IMU (docs/results/product_path.md,
+            # "2026-12-08 (session 48)").
+            C = quat_to_dcm(self._state.nav.q_nb)
+            var[east:east + 3] += (C * C) @ unmeasured
         horizontal, vertical = self._fix_common_var
         var[east:east + 2] += horizontal
         var[east + 2] += vertical

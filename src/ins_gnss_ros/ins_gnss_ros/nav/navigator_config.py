@@ -22,6 +22,9 @@ class NavigatorConfig:
         Extra filter blocks ("td", "mag").
     lever_arm_b : array_like, shape (3,)
         GNSS antenna relative to the IMU, FLU, m.
+    lever_published_var : array_like, shape (3,)
+        Variance of lever_arm_b per FLU axis that only the published position covariance
+        carries (Navigator._published_var), m^2.
     cov_interval : float
         Covariance propagation interval, s.
     gate_prob : float or None
@@ -105,6 +108,7 @@ class NavigatorConfig:
     layout: object = "15"
     extras: dict = field(default_factory=dict)
     lever_arm_b: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    lever_published_var: np.ndarray = field(default_factory=lambda: np.zeros(3))
     cov_interval: float = 0.1
     gate_prob: float | None = DEFAULT_GATE_PROB
     max_reject_time: float = 2.0

@@ -105,7 +105,8 @@ class EkfNode(EkfServices, NavNode):
         self.navigator = Navigator(self.config)
         self.aiding = Aiding(self.navigator, AidingPolicy.from_params(p), self.diag.count)
         self.inputs = EkfInputs(self.aiding, p, self.diag.count)
-        if any(p["lever_arm_sigma_m"]):  # what is missing from the installation, said once
+        # what is missing from the installation, said once
+        if any(p["lever_arm_sigma_m"]) or any(p["lever_arm_published_sigma_m"]):
             self.report_lever_arm("not measured")
         # A lever arm not given is read off /tf_static until the filter starts (module doc).
         self.frames = self.raw_imu = self.imu_frame = None
@@ -247,11 +248,13 @@ class EkfNode(EkfServices, NavNode):
 
     def report_lever_arm(self, source: str) -> None:
         """/diagnostics ``GNSS antenna lever arm``: the one in use, where it comes from, and
-        the uncertainty carried for it (lever_arm_sigma_m)."""
-        sigma = self.p["lever_arm_sigma_m"]
+        the uncertainty carried for it (lever_arm_sigma_m, lever_arm_published_sigma_m)."""
+        sigma, published = self.p["lever_arm_sigma_m"], self.p["lever_arm_published_sigma_m"]
         self.diag.set_value("GNSS antenna lever arm", (
             f"{np.round(self.navigator.lever_arm_b, 4).tolist()} m FLU, {source}") + (
-            f"; within +-{list(sigma)} m assumed (lever_arm_sigma_m)" if any(sigma) else ""))
+            f"; within +-{list(sigma)} m assumed (lever_arm_sigma_m)" if any(sigma) else "") + (
+            f"; +-{list(published)} m in the published covariance "
+            "(lever_arm_published_sigma_m)" if any(published) else ""))
 
     def _report_heading_sources(self) -> None:
         for source, noise in self.aiding.heading_noise.items():

@@ -105,6 +105,10 @@ def _simulate_args(p):
                    help="gnss/fix and gnss/vel stamped when the driver reads them "
                         "(--gnss-latency after their epochs), as a driver stamping on arrival "
                         "does, and logged 0.1-1 ms later")
+    p.add_argument("--antenna-lever-arm", type=float, nargs=3,
+                   default=SimOptions.antenna_lever_arm, metavar=("X", "Y", "Z"),
+                   help="GNSS antenna (with --antennas: the array's centre) from the IMU, "
+                   "base_link FLU, m (default: 1.5 m above it)")
     p.add_argument("--antennas", type=int, choices=range(5), default=0, metavar="N",
                    help="raw GNSS (gnss/observations per antenna, gnss/ephemeris) of N = 1-4 "
                    "antennas from the gnss_simulator node, gnss/fix and gnss/vel from its "
@@ -297,6 +301,7 @@ def cmd_simulate(args) -> int:
                                wheel_slip_interval=args.wheel_slip_interval,
                                gnss_latency=args.gnss_latency,
                                gnss_stamped_on_arrival=args.gnss_stamped_on_arrival,
+                               antenna_lever_arm=tuple(args.antenna_lever_arm),
                                antennas=args.antennas,
                                array=args.array,
                                broadcast_residuals=args.broadcast_residuals))
