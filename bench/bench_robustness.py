@@ -148,7 +148,11 @@ CELLS += [Cell("fix only 1 Hz", ("--gnss-rate", "1", "--no-gnss-vel")),
           # is off by the antenna's offset (the ratio judges that, not the filter), and the
           # published covariance must say so
           Cell("antenna 0.8 m ahead of and 0.4 m left of the IMU, not given, fix + velocity",
-               ("--antenna-lever-arm", "0.8", "0.4", "1.5"))]
+               ("--antenna-lever-arm", "0.8", "0.4", "1.5")),
+          # a consumer unit's gyro bias, which the turn check's raw increments keep, against
+          # courses as clean as 1 Hz fixes make them
+          Cell("consumer MEMS unit, fix + velocity 1 Hz", ("--imu-grade", "consumer_mems",
+                                                          "--gnss-rate", "1"))]
 SHORT = [CELLS[0], CELLS[3], CELLS[10]]
 
 

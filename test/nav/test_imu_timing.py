@@ -9,12 +9,12 @@ from ins_gnss_ros.nav.imu_timing import ImuTimingCheck
 
 
 def _drive(offset, mounting_deg=(0.0, 0.0, 0.0), duration=240.0, seed=0, gyro_unit=1.0,
-           check=None, accel_sign=1.0, fix_noise=0.02, drift=0.0):
+           check=None, accel_sign=1.0, fix_noise=0.02, drift=0.0, gyro_bias=0.0, fix_rate=5.0):
     """A car at 8 m/s weaving and turning (yaw rate up to 0.3 rad/s), IMU at 100 Hz in any
     mounting stamped ``offset`` s early (stamps + offset = GNSS time) by a clock running at
-    1 + ``drift`` of GNSS time's, 5 Hz fixes with ``fix_noise`` m of noise; the gyro
-    increments in ``gyro_unit`` per rad, the accelerometer's times ``accel_sign``. Returns the
-    check after the drive."""
+    1 + ``drift`` of GNSS time's, fixes at ``fix_rate`` Hz with ``fix_noise`` m of noise; the
+    gyro increments in ``gyro_unit`` per rad with ``gyro_bias`` rad/s about the body's z axis,
+    the accelerometer's times ``accel_sign``. Returns the check after the drive."""
     rng = np.random.default_rng(seed)
     dt_imu = 0.01
     t = np.arange(0.0, duration, dt_imu)
@@ -26,10 +26,11 @@ def _drive(offset, mounting_deg=(0.0, 0.0, 0.0), duration=240.0, seed=0, gyro_un
                                              * dt_imu)])
     c_sb = Rotation.from_euler("xyz", mounting_deg, degrees=True).as_matrix()  # body -> sensor
     check = check or ImuTimingCheck()
-    fix_every = 20
+    fix_every = int(round(1.0 / (fix_rate * dt_imu)))
     for k in range(1, len(t)):
         # the sensor's increment: body z rotation and the specific force of gravity
-        dtheta = gyro_unit * c_sb @ np.array([0.0, 0.0, yaw[k] - yaw[k - 1]])
+        dtheta = gyro_unit * c_sb @ np.array([0.0, 0.0, yaw[k] - yaw[k - 1]
+                                              + gyro_bias * dt_imu])
         dv = accel_sign * c_sb @ np.array([0.0, 0.0, 9.81 * dt_imu]) + rng.normal(0.0, 1e-4, 3)
         check.increment(t[k] * (1.0 + drift) - offset, dtheta, dv)
         if k % fix_every == 0:
@@ -72,6 +73,21 @@ def test_gyro_rates_in_degrees_per_second_are_reported_instead_of_an_offset():
     assert verdict.summary.startswith("the gyros turn 5")
     assert "angular_velocity in deg/s (57.3 x)" in verdict.summary
     assert verdict.rates_wrong and not verdict.stamps_off
+
+
+@pytest.mark.parametrize("fix_rate", [5.0, 1.0])
+def test_a_gyro_bias_is_neither_a_scale_nor_an_offset(fix_rate):
+    """A consumer unit's 5 deg/s about the vertical, which nothing here removes, turns the IMU
+    by 0.17 rad over two 1 Hz fix intervals whatever the course does: read as a scale of 1.41
+    from 1 Hz fixes, the rates were flagged wrong (and the solution not valid), the offset's
+    sigma grew 7x. Fitted with the scale and the offset as a term in the pairs' duration."""
+    unbiased = _drive(0.12, fix_rate=fix_rate)
+    check = _drive(0.12, fix_rate=fix_rate, gyro_bias=np.radians(5.0))
+    assert check.scale() == pytest.approx(unbiased.scale(), abs=1e-6)
+    assert check.scale() == pytest.approx(1.0, abs=0.06)  # 1 Hz: the 2 s chords' 1.05
+    assert check.estimate() == pytest.approx(unbiased.estimate(), abs=1e-6)
+    assert check.estimate()[0] == pytest.approx(0.12, abs=0.005)
+    assert not check.verdict().rates_wrong and check.verdict().stamps_off
 
 
 def test_a_straight_or_slow_drive_says_what_it_needs():

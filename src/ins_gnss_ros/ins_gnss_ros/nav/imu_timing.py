@@ -19,6 +19,11 @@ a grid of candidate offsets, the one that fits; its sigma follows from the resid
 the yaw-rate changes that carry the information (linearised least squares:
 sigma^2 = residual variance / sum((w(t_(j+1)) - w(t_(j-1)))^2)).
 
+The gyros' bias about the vertical turns the IMU by b (t_(j+1) - t_(j-1)) over each pair, which
+no course turn has: both fits take it out, as a term in the pair's duration fitted with them
+(a consumer unit's 5 deg/s, uncorrected here, read as a scale of 1.4 from 1 Hz fixes and
+flagged the rates wrong; docs/results/product_path.md, "2026-12-08 (session 48)").
+
 The same pairs give the gyros' scale, 1 for rates in rad/s and 57.3 for a driver publishing deg/s:
 at the offset where the two turn together best (largest correlation of either sign), the IMU
 turns' sum of squares over their products with the course turns (the inverse of the slope of the
@@ -130,17 +135,24 @@ class ImuTimingCheck:
         self._fixes = deque(maxlen=3)       # (t, east, north), m
         self._courses = deque(maxlen=3)     # (t, course rad)
         self._pending = deque()             # (t0, t1, course change) waiting for the IMU
-        self._cost = np.zeros(len(OFFSETS))
+        # Sums over the pairs, per candidate offset where the IMU's turn enters: residual r
+        # (course turn less IMU turn, rad), pair duration T (s), course turn c, IMU turn y.
+        self._cost = np.zeros(len(OFFSETS))           # r^2
+        self._residual_time = np.zeros(len(OFFSETS))  # r T
         self._rate_change_sq = np.zeros(len(OFFSETS))
-        self._turn_products = np.zeros(len(OFFSETS))  # sum of course turn x IMU turn, rad^2
-        self._imu_turn_sq = np.zeros(len(OFFSETS))    # sum of IMU turn^2, rad^2
-        self._course_turn_sq = 0.0                    # sum of course turn^2, rad^2
+        self._turn_products = np.zeros(len(OFFSETS))  # c y
+        self._imu_turn_sq = np.zeros(len(OFFSETS))    # y^2
+        self._imu_turn_time = np.zeros(len(OFFSETS))  # y T
+        self._course_turn_sq = 0.0                    # c^2
+        self._course_turn_time = 0.0                  # c T
+        self._time_sq = 0.0                           # T^2
         self.pairs = 0
-        # The same cost and rate sums forgetting over DRIFT_WINDOW_S: (the latest pair's end
-        # s, cost, rate changes, weight, weighted sum of the pairs' ends s), and the first and
+        # The residual sums forgetting over DRIFT_WINDOW_S: (the latest pair's end s, r^2,
+        # rate changes, r T, T^2, weight, weighted sum of the pairs' ends s), and the first and
         # the latest offset they gave within REPORT_SIGMA: (their pairs' mean time s, offset
         # s, sigma s).
-        self._recent = (-math.inf, np.zeros(len(OFFSETS)), np.zeros(len(OFFSETS)), 0.0, 0.0)
+        self._recent = (-math.inf, np.zeros(len(OFFSETS)), np.zeros(len(OFFSETS)),
+                        np.zeros(len(OFFSETS)), 0.0, 0.0, 0.0)
         self._first_recent = self._latest_recent = None
         self._verdict = (-1, None)  # (pairs, Verdict): the sums change with the pairs only
 
@@ -203,30 +215,38 @@ class ImuTimingCheck:
         t_imu, y_imu = np.array(self._imu).T
         y0 = np.interp(t0 - OFFSETS, t_imu, y_imu)
         y1 = np.interp(t1 - OFFSETS, t_imu, y_imu)
-        self._cost += (turn - (y1 - y0)) ** 2
+        duration = t1 - t0
+        residual = turn - (y1 - y0)
+        self._cost += residual ** 2
+        self._residual_time += residual * duration
         self._turn_products += turn * (y1 - y0)
         self._imu_turn_sq += (y1 - y0) ** 2
+        self._imu_turn_time += (y1 - y0) * duration
         self._course_turn_sq += turn * turn
+        self._course_turn_time += turn * duration
+        self._time_sq += duration * duration
         # d(residual)/ds = w(t1 - s) - w(t0 - s), from the rotation's slope at each end
         w0 = (np.interp(t0 - OFFSETS + RATE_STEP_S, t_imu, y_imu) - y0) / RATE_STEP_S
         w1 = (np.interp(t1 - OFFSETS + RATE_STEP_S, t_imu, y_imu) - y1) / RATE_STEP_S
         self._rate_change_sq += (w1 - w0) ** 2
         self.pairs += 1
-        t_last, cost, rate_change_sq, weight, times = self._recent
+        t_last, cost, rate_change_sq, residual_time, time_sq, weight, times = self._recent
         keep = math.exp(-max(t1 - t_last, 0.0) / DRIFT_WINDOW_S)
-        self._recent = (t1, cost * keep + (turn - (y1 - y0)) ** 2,
-                        rate_change_sq * keep + (w1 - w0) ** 2, weight * keep + 1.0,
+        self._recent = (t1, cost * keep + residual ** 2, rate_change_sq * keep + (w1 - w0) ** 2,
+                        residual_time * keep + residual * duration,
+                        time_sq * keep + duration * duration, weight * keep + 1.0,
                         times * keep + t1)
-        recent = _fit(*self._recent[1:4])
+        recent = _fit(*self._recent[1:6])
         if recent is not None and recent[1] <= REPORT_SIGMA:
-            self._latest_recent = (self._recent[4] / self._recent[3], *recent)
+            self._latest_recent = (self._recent[6] / self._recent[5], *recent)
             if self._first_recent is None:
                 self._first_recent = self._latest_recent
 
     def estimate(self) -> tuple[float, float] | None:
         """(offset s, sigma s): the IMU stamps plus the offset are GNSS time; None before any
         turn was seen."""
-        return _fit(self._cost, self._rate_change_sq, self.pairs)
+        return _fit(self._cost, self._rate_change_sq, self._residual_time, self._time_sq,
+                    self.pairs)
 
     def drift(self) -> tuple[float, float, float] | None:
         """(rate, first offset s, latest offset s) when the recent offset (over the last
@@ -249,19 +269,26 @@ class ImuTimingCheck:
         return None if fit is None else 1.0 / fit[0]
 
     def _slope(self) -> tuple[float, float] | None:
-        """(slope of the course's turns on the IMU's, its sigma) where the two correlate best;
-        None as for :meth:`scale`."""
-        norms = np.sqrt(self._imu_turn_sq * self._course_turn_sq)
+        """(slope of the course's turns on the IMU's, its sigma) where the two correlate best,
+        both with their parts in the pairs' durations taken out (the gyros' bias); None as
+        for :meth:`scale`."""
+        if self._time_sq <= 0.0:
+            return None
+        # sums of the turns less their least-squares fits in the duration
+        imu_sq = self._imu_turn_sq - self._imu_turn_time ** 2 / self._time_sq
+        products = self._turn_products - self._course_turn_time * self._imu_turn_time \
+            / self._time_sq
+        course_sq = self._course_turn_sq - self._course_turn_time ** 2 / self._time_sq
+        norms = np.sqrt(np.maximum(imu_sq, 0.0) * max(course_sq, 0.0))
         if not np.any(norms > 0.0):
             return None
-        correlation = np.abs(self._turn_products) / np.where(norms > 0.0, norms, np.inf)
+        correlation = np.abs(products) / np.where(norms > 0.0, norms, np.inf)
         k = int(np.argmax(correlation))
-        imu_sq = float(self._imu_turn_sq[k])
-        if imu_sq < MIN_TURN_SQ or correlation[k] < MIN_CORRELATION:
+        if imu_sq[k] < MIN_TURN_SQ or correlation[k] < MIN_CORRELATION:
             return None
-        slope = float(self._turn_products[k]) / imu_sq
-        residual = max(self._course_turn_sq - slope * float(self._turn_products[k]), 0.0)
-        return slope, math.sqrt(residual / max(self.pairs - 1, 1) / imu_sq)
+        slope = float(products[k] / imu_sq[k])
+        residual = max(course_sq - slope * float(products[k]), 0.0)
+        return slope, math.sqrt(residual / max(self.pairs - 2, 1) / float(imu_sq[k]))
 
     def _wrong_scale(self) -> float | None:
         """The scale, where the slope lies SCALE_SIGMAS beyond 1 / SCALE_RANGE; else None."""
@@ -326,14 +353,18 @@ class ImuTimingCheck:
                        stamps_off=off)
 
 
-def _fit(cost: np.ndarray, rate_change_sq: np.ndarray, pairs: float):
-    """(offset s, sigma s) of the least cost over OFFSETS, from the summed squared residuals
-    and rate changes of ``pairs`` course changes; None before 3 of them or any turn."""
-    if pairs < 3:
+def _fit(cost: np.ndarray, rate_change_sq: np.ndarray, residual_time: np.ndarray,
+         time_sq: float, pairs: float):
+    """(offset s, sigma s) of the least cost over OFFSETS, from the summed squared residuals,
+    rate changes, residuals times the pairs' durations and squared durations of ``pairs``
+    course changes (the residuals' fit in the duration, the gyros' bias, taken out); None
+    before 3 of them or any turn."""
+    if pairs < 3 or time_sq <= 0.0:
         return None
+    cost = cost - residual_time ** 2 / time_sq
     k = int(np.argmin(cost))
     if rate_change_sq[k] <= 0.0:
         return None
     # Adjacent course changes share a course, so this sigma is somewhat optimistic.
-    residual_var = cost[k] / max(pairs - 1, 1)
+    residual_var = max(float(cost[k]), 0.0) / max(pairs - 2, 1)
     return float(OFFSETS[k]), math.sqrt(residual_var / rate_change_sq[k])
