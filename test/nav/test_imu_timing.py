@@ -80,7 +80,8 @@ def test_a_gyro_bias_is_neither_a_scale_nor_an_offset(fix_rate):
     """A consumer unit's 5 deg/s about the vertical, which nothing here removes, turns the IMU
     by 0.17 rad over two 1 Hz fix intervals whatever the course does: read as a scale of 1.41
     from 1 Hz fixes, the rates were flagged wrong (and the solution not valid), the offset's
-    sigma grew 7x. Fitted with the scale and the offset as a term in the pairs' duration."""
+    sigma grew 2.5x (5 Hz) and 7x (1 Hz). Fitted with the scale and the offset as a term in the
+    pairs' duration."""
     unbiased = _drive(0.12, fix_rate=fix_rate)
     check = _drive(0.12, fix_rate=fix_rate, gyro_bias=np.radians(5.0))
     assert check.scale() == pytest.approx(unbiased.scale(), abs=1e-6)
