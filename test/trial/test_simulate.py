@@ -133,6 +133,22 @@ def test_bad_arguments():
         simulate("car", 1.0, 0, "/nonexistent/x", SimOptions(imu_grade="potato"))
 
 
+def test_the_raw_gnss_of_antennas_honours_fixes_only_and_refuses_the_fix_noise_options(
+        tmp_path):
+    """With antennas, gnss/fix and gnss/vel are the gnss_simulator node's solution: fixes only
+    leave its velocity out (it was written all the same), and the options of the fixes as
+    truth plus noise, which that solution does not take, are refused, not ignored."""
+    path = simulate("car", 3.0, 1, tmp_path / "raw", SimOptions(antennas=1, gnss_rate=1.0,
+                                                               gnss_velocity=False))
+    topics = bagio.bag_topics(path)
+    assert "/gnss/fix" in topics and "/gnss/observations" in topics
+    assert "/gnss/vel" not in topics
+    for wrong in ({"gnss_sigma_h": 2.0}, {"gnss_covariance": False},
+                  {"gnss_latency": 0.1, "gnss_stamped_on_arrival": True}):
+        with pytest.raises(ValueError, match=f"{next(iter(wrong))}.*raw GNSS of antennas"):
+            simulate("car", 3.0, 1, tmp_path / "refused", SimOptions(antennas=2, **wrong))
+
+
 def test_any_sensor_rates_jittered_imu_stamps_and_fix_only_receivers(tmp_path):
     from sensor_msgs.msg import NavSatFix
 

@@ -112,7 +112,9 @@ def _simulate_args(p):
     p.add_argument("--antennas", type=int, choices=range(5), default=0, metavar="N",
                    help="raw GNSS (gnss/observations per antenna, gnss/ephemeris) of N = 1-4 "
                    "antennas from the gnss_simulator node, gnss/fix and gnss/vel from its "
-                   "solution (default 0: fix and velocity as truth plus noise)")
+                   "solution (--no-gnss-vel leaves gnss/vel out; the fixes' noise, covariance "
+                   "and latency options are refused) (default 0: fix and velocity as truth "
+                   "plus noise)")
     p.add_argument("--array", type=_array, default=SimOptions.array, metavar="LxW",
                    help="antenna array length (fore-aft) x width, m, centred 1.5 m above the "
                    "IMU (e.g. 2.7x1.2)")

@@ -114,7 +114,8 @@ class SimOptions:
         GNSS antenna relative to the IMU, m; with ``antennas``, the centre of the array.
     antennas : int
         0: ``gnss/fix`` and ``gnss/vel`` as truth plus noise; 1-4: the raw GNSS of that many
-        antennas from the GNSS simulator node (the fix and velocity from its solution).
+        antennas from the GNSS simulator node (the fix and velocity from its solution, the
+        velocity left out without ``gnss_velocity``; the :data:`FIX_NOISE_OPTIONS` refused).
     array : tuple of 2 float
         Length (fore-aft) and width (athwartship) of the antenna array, m.
     broadcast_residuals : bool
@@ -220,6 +221,11 @@ def simulate(scenario: str, duration: float, seed: int, out, options: SimOptions
         raise ValueError(f"antennas must be 0 to 4, got {options.antennas}")
     if options.broadcast_residuals and not options.antennas:
         raise ValueError("broadcast residuals need the raw GNSS of antennas >= 1")
+    not_raw = [name for name in FIX_NOISE_OPTIONS
+               if getattr(options, name) != getattr(SimOptions, name)]
+    if options.antennas and not_raw:
+        raise ValueError(f"{', '.join(not_raw)}: options of the fixes as truth plus noise, not "
+                         "of the raw GNSS of antennas >= 1 (the gnss_simulator node's errors)")
     if options.gnss_sigma_h_reported is not None and not options.gnss_sigma_h > 0.0:
         raise ValueError("a reported fix sigma needs gnss_sigma_h > 0 (its vertical in "
                          "proportion)")
@@ -356,8 +362,15 @@ def array_antennas(n: int, length: float, width: float, centre=(0.0, 0.0, 0.0)) 
     return tuple((cx + dx, cy + dy, cz) for dx, dy in layouts[n])
 
 
-#: Topics of the GNSS simulator node a simulated trial keeps.
+#: Topics of the GNSS simulator node a simulated trial keeps (gnss/vel unless
+#: SimOptions.gnss_velocity is off).
 RAW_GNSS_TOPICS = ("gnss/observations", "gnss/ephemeris", "gnss/fix", "gnss/vel")
+
+#: SimOptions of the fixes as truth plus noise (antennas 0) that the raw GNSS does not take:
+#: left at their defaults with antennas >= 1, not ignored.
+FIX_NOISE_OPTIONS = ("gnss_covariance", "gnss_sigma_h", "gnss_sigma_v", "gnss_sigma_h_reported",
+                     "gnss_sigma_vel", "gnss_sigma_vel_reported", "gnss_latency",
+                     "gnss_stamped_on_arrival")
 
 
 def _write_raw_gnss(writer, traj, options, seed):
@@ -381,7 +394,8 @@ def _write_raw_gnss(writer, traj, options, seed):
             Parameter("rate_hz", value=float(options.gnss_rate)), Parameter("seed", value=seed),
             Parameter("broadcast_residuals", value=options.broadcast_residuals)])
         for topic in RAW_GNSS_TOPICS:
-            bus.subscribe(topic, lambda msg, topic=topic: writer.write(topic, msg))
+            if topic != "gnss/vel" or options.gnss_velocity:
+                bus.subscribe(topic, lambda msg, topic=topic: writer.write(topic, msg))
         k = _every(traj, options.gnss_rate)
         for t_ns, i in zip(bag.sec_to_ns(traj.t[k], SIM_EPOCH_NS), k):
             bus.publish("sim/truth", msgs.ins_state_msg(
