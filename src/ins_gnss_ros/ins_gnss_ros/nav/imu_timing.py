@@ -135,25 +135,20 @@ class ImuTimingCheck:
         self._fixes = deque(maxlen=3)       # (t, east, north), m
         self._courses = deque(maxlen=3)     # (t, course rad)
         self._pending = deque()             # (t0, t1, course change) waiting for the IMU
-        # Sums over the pairs, per candidate offset where the IMU's turn enters: residual r
-        # (course turn less IMU turn, rad), pair duration T (s), course turn c, IMU turn y.
-        self._cost = np.zeros(len(OFFSETS))           # r^2
-        self._residual_time = np.zeros(len(OFFSETS))  # r T
-        self._rate_change_sq = np.zeros(len(OFFSETS))
+        # The offset's sums over the whole run and forgetting over DRIFT_WINDOW_S, and the
+        # first and the latest offset the latter gave within REPORT_SIGMA: (their pairs' mean
+        # time s, offset s, sigma s).
+        self._run = _OffsetSums()
+        self._recent = _OffsetSums(DRIFT_WINDOW_S)
+        self._first_recent = self._latest_recent = None
+        # The scale's sums over the pairs, per candidate offset where the IMU's turn enters:
+        # pair duration T (s), course turn c, IMU turn y (rad).
         self._turn_products = np.zeros(len(OFFSETS))  # c y
         self._imu_turn_sq = np.zeros(len(OFFSETS))    # y^2
         self._imu_turn_time = np.zeros(len(OFFSETS))  # y T
         self._course_turn_sq = 0.0                    # c^2
         self._course_turn_time = 0.0                  # c T
-        self._time_sq = 0.0                           # T^2
         self.pairs = 0
-        # The residual sums forgetting over DRIFT_WINDOW_S: (the latest pair's end s, r^2,
-        # rate changes, r T, T^2, weight, weighted sum of the pairs' ends s), and the first and
-        # the latest offset they gave within REPORT_SIGMA: (their pairs' mean time s, offset
-        # s, sigma s).
-        self._recent = (-math.inf, np.zeros(len(OFFSETS)), np.zeros(len(OFFSETS)),
-                        np.zeros(len(OFFSETS)), 0.0, 0.0, 0.0)
-        self._first_recent = self._latest_recent = None
         self._verdict = (-1, None)  # (pairs, Verdict): the sums change with the pairs only
 
     def increment(self, t: float, dtheta: np.ndarray, dv: np.ndarray) -> None:
@@ -217,36 +212,27 @@ class ImuTimingCheck:
         y1 = np.interp(t1 - OFFSETS, t_imu, y_imu)
         duration = t1 - t0
         residual = turn - (y1 - y0)
-        self._cost += residual ** 2
-        self._residual_time += residual * duration
+        # d(residual)/ds = w(t1 - s) - w(t0 - s), from the rotation's slope at each end
+        w0 = (np.interp(t0 - OFFSETS + RATE_STEP_S, t_imu, y_imu) - y0) / RATE_STEP_S
+        w1 = (np.interp(t1 - OFFSETS + RATE_STEP_S, t_imu, y_imu) - y1) / RATE_STEP_S
+        for sums in (self._run, self._recent):
+            sums.add(t1, duration, residual, w1 - w0)
         self._turn_products += turn * (y1 - y0)
         self._imu_turn_sq += (y1 - y0) ** 2
         self._imu_turn_time += (y1 - y0) * duration
         self._course_turn_sq += turn * turn
         self._course_turn_time += turn * duration
-        self._time_sq += duration * duration
-        # d(residual)/ds = w(t1 - s) - w(t0 - s), from the rotation's slope at each end
-        w0 = (np.interp(t0 - OFFSETS + RATE_STEP_S, t_imu, y_imu) - y0) / RATE_STEP_S
-        w1 = (np.interp(t1 - OFFSETS + RATE_STEP_S, t_imu, y_imu) - y1) / RATE_STEP_S
-        self._rate_change_sq += (w1 - w0) ** 2
         self.pairs += 1
-        t_last, cost, rate_change_sq, residual_time, time_sq, weight, times = self._recent
-        keep = math.exp(-max(t1 - t_last, 0.0) / DRIFT_WINDOW_S)
-        self._recent = (t1, cost * keep + residual ** 2, rate_change_sq * keep + (w1 - w0) ** 2,
-                        residual_time * keep + residual * duration,
-                        time_sq * keep + duration * duration, weight * keep + 1.0,
-                        times * keep + t1)
-        recent = _fit(*self._recent[1:6])
+        recent = self._recent.fit()
         if recent is not None and recent[1] <= REPORT_SIGMA:
-            self._latest_recent = (self._recent[6] / self._recent[5], *recent)
+            self._latest_recent = (self._recent.times / self._recent.weight, *recent)
             if self._first_recent is None:
                 self._first_recent = self._latest_recent
 
     def estimate(self) -> tuple[float, float] | None:
         """(offset s, sigma s): the IMU stamps plus the offset are GNSS time; None before any
         turn was seen."""
-        return _fit(self._cost, self._rate_change_sq, self._residual_time, self._time_sq,
-                    self.pairs)
+        return self._run.fit()
 
     def drift(self) -> tuple[float, float, float] | None:
         """(rate, first offset s, latest offset s) when the recent offset (over the last
@@ -272,13 +258,13 @@ class ImuTimingCheck:
         """(slope of the course's turns on the IMU's, its sigma) where the two correlate best,
         both with their parts in the pairs' durations taken out (the gyros' bias); None as
         for :meth:`scale`."""
-        if self._time_sq <= 0.0:
+        time_sq = self._run.time_sq
+        if time_sq <= 0.0:
             return None
         # sums of the turns less their least-squares fits in the duration
-        imu_sq = self._imu_turn_sq - self._imu_turn_time ** 2 / self._time_sq
-        products = self._turn_products - self._course_turn_time * self._imu_turn_time \
-            / self._time_sq
-        course_sq = self._course_turn_sq - self._course_turn_time ** 2 / self._time_sq
+        imu_sq = self._imu_turn_sq - self._imu_turn_time ** 2 / time_sq
+        products = self._turn_products - self._course_turn_time * self._imu_turn_time / time_sq
+        course_sq = self._course_turn_sq - self._course_turn_time ** 2 / time_sq
         norms = np.sqrt(np.maximum(imu_sq, 0.0) * max(course_sq, 0.0))
         if not np.any(norms > 0.0):
             return None
@@ -353,18 +339,44 @@ class ImuTimingCheck:
                        stamps_off=off)
 
 
-def _fit(cost: np.ndarray, rate_change_sq: np.ndarray, residual_time: np.ndarray,
-         time_sq: float, pairs: float):
-    """(offset s, sigma s) of the least cost over OFFSETS, from the summed squared residuals,
-    rate changes, residuals times the pairs' durations and squared durations of ``pairs``
-    course changes (the residuals' fit in the duration, the gyros' bias, taken out); None
-    before 3 of them or any turn."""
-    if pairs < 3 or time_sq <= 0.0:
-        return None
-    cost = cost - residual_time ** 2 / time_sq
-    k = int(np.argmin(cost))
-    if rate_change_sq[k] <= 0.0:
-        return None
-    # Adjacent course changes share a course, so this sigma is somewhat optimistic.
-    residual_var = max(float(cost[k]), 0.0) / max(pairs - 2, 1)
-    return float(OFFSETS[k]), math.sqrt(residual_var / rate_change_sq[k])
+class _OffsetSums:
+    """What the offset's fit needs of the course changes, per candidate offset where the IMU's
+    turn enters, each sum forgotten over ``memory`` s (inf: the whole run): the residuals r
+    (course turn less IMU turn, rad) squared and times the pair's duration T, the changes of
+    d r / d s squared, T^2, the pairs' weight and their ends' weighted sum (s)."""
+
+    def __init__(self, memory: float = math.inf):
+        self.memory = memory
+        self.t_last = -math.inf
+        self.cost = np.zeros(len(OFFSETS))           # r^2
+        self.residual_time = np.zeros(len(OFFSETS))  # r T
+        self.rate_change_sq = np.zeros(len(OFFSETS))
+        self.time_sq = 0.0
+        self.weight = 0.0
+        self.times = 0.0
+
+    def add(self, t1: float, duration: float, residual: np.ndarray,
+            rate_change: np.ndarray) -> None:
+        """One course change ending at t1 (s) of ``duration`` s."""
+        keep = 1.0 if math.isinf(self.memory) else \
+            math.exp(-max(t1 - self.t_last, 0.0) / self.memory)
+        self.t_last = t1
+        self.cost = self.cost * keep + residual ** 2
+        self.residual_time = self.residual_time * keep + residual * duration
+        self.rate_change_sq = self.rate_change_sq * keep + rate_change ** 2
+        self.time_sq = self.time_sq * keep + duration * duration
+        self.weight = self.weight * keep + 1.0
+        self.times = self.times * keep + t1
+
+    def fit(self) -> tuple[float, float] | None:
+        """(offset s, sigma s) of the least cost over OFFSETS, the residuals' fit in the
+        duration (the gyros' bias) taken out; None before 3 course changes or any turn."""
+        if self.weight < 3 or self.time_sq <= 0.0:
+            return None
+        cost = self.cost - self.residual_time ** 2 / self.time_sq
+        k = int(np.argmin(cost))
+        if self.rate_change_sq[k] <= 0.0:
+            return None
+        # Adjacent course changes share a course, so this sigma is somewhat optimistic.
+        residual_var = max(float(cost[k]), 0.0) / max(self.weight - 2, 1)
+        return float(OFFSETS[k]), math.sqrt(residual_var / self.rate_change_sq[k])
